@@ -1,0 +1,112 @@
+//! The one error type of the `cps` crate.
+
+use thiserror::Error;
+
+/// Everything that can go wrong in the CPS model. Each variant names the
+/// offending quantity, its value and what was expected.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum CpsError {
+    /// A parent fix needs at least two children.
+    #[error("a parent fix needs at least 2 children, got {got}")]
+    TooFewChildren {
+        /// Number of children given.
+        got: usize,
+    },
+    /// A number that must be finite is NaN or infinite.
+    #[error("{what} must be finite, got {value}")]
+    NonFinite {
+        /// What the number is (e.g. "slope distance of child 1").
+        what: String,
+        /// The value found.
+        value: f64,
+    },
+    /// A number lies outside its allowed range.
+    #[error("{what} = {value} is out of range: expected {expected}")]
+    OutOfRange {
+        /// What the number is.
+        what: String,
+        /// The value found.
+        value: f64,
+        /// Human-readable expected range, e.g. "≥ 0".
+        expected: String,
+    },
+    /// A sight line is outside the instrument's measuring range.
+    #[error(
+        "child {child}: slope distance {range_m:.3} m is outside the instrument's range \
+         [{min_m} m, {max_m} m]"
+    )]
+    BeyondInstrumentRange {
+        /// Child index (team order).
+        child: usize,
+        /// Slope distance of the sight line.
+        range_m: f64,
+        /// Instrument minimum range.
+        min_m: f64,
+        /// Instrument maximum range.
+        max_m: f64,
+    },
+    /// Two points that must be distinct coincide (horizontally for angles).
+    #[error("{what}: points coincide (separation {separation_m:e} m); expected distinct points")]
+    CoincidentPoints {
+        /// Which points.
+        what: String,
+        /// Their separation.
+        separation_m: f64,
+    },
+    /// The child index is not part of the team.
+    #[error("child index {child} is out of range: the team has {team} children")]
+    UnknownChild {
+        /// The index given.
+        child: usize,
+        /// Team size.
+        team: usize,
+    },
+    /// A child is used in a fix before it was ever placed.
+    #[error("child {child} has not been placed yet; place it before the parent uses it")]
+    ChildNotPlaced {
+        /// Child index.
+        child: usize,
+    },
+    /// The same child appears twice in one parent fix.
+    #[error("child {child} appears more than once in one parent fix")]
+    DuplicateChild {
+        /// Child index.
+        child: usize,
+    },
+    /// The geometry does not determine the unknowns (rank deficient or
+    /// numerically singular).
+    #[error("degenerate geometry: {what} (condition estimate {condition:e})")]
+    DegenerateGeometry {
+        /// What is degenerate.
+        what: String,
+        /// Condition estimate of the offending matrix.
+        condition: f64,
+    },
+    /// A covariance matrix that must be positive (semi-)definite is not.
+    #[error("{what} is not a valid covariance (not symmetric positive definite)")]
+    NotPositiveDefinite {
+        /// Which covariance.
+        what: String,
+    },
+    /// The iteration diverged (the estimate left the finite numbers).
+    #[error("{what} diverged after {iterations} iterations")]
+    Diverged {
+        /// Which estimation.
+        what: String,
+        /// Iterations done.
+        iterations: usize,
+    },
+}
+
+/// Result alias of the `cps` crate.
+pub type Result<T, E = CpsError> = std::result::Result<T, E>;
+
+/// Error when `value` is not finite.
+pub(crate) fn ensure_finite(what: impl FnOnce() -> String, value: f64) -> Result<f64> {
+    if value.is_finite() {
+        Ok(value)
+    } else {
+        Err(CpsError::NonFinite { what: what(), value })
+    }
+}

@@ -1,0 +1,87 @@
+//! The one error type of the `planner` crate.
+
+use thiserror::Error;
+
+/// When in a cycle a sight line is taken.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Phase {
+    /// The standing parent measures the child that has just moved.
+    Placement,
+    /// The parent, at its next station, measures the standing child.
+    Fix,
+}
+
+impl std::fmt::Display for Phase {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Phase::Placement => "placing it from the standing parent",
+            Phase::Fix => "the parent's fix from the next station",
+        })
+    }
+}
+
+/// Everything that makes a plan impossible.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum PlanError {
+    /// A route needs at least two waypoints.
+    #[error("route_m has {got} waypoint(s); expected at least 2")]
+    RouteTooShort {
+        /// Waypoints given.
+        got: usize,
+    },
+    /// Two consecutive waypoints coincide.
+    #[error("route_m[{waypoint}] repeats the previous waypoint; expected a segment of non-zero length")]
+    ZeroLengthSegment {
+        /// Index of the second waypoint of the segment.
+        waypoint: usize,
+    },
+    /// The stride must be a positive, finite length.
+    #[error("stride_m = {value}; expected a finite value > 0")]
+    BadStride {
+        /// The stride given.
+        value: f64,
+    },
+    /// A formation needs one offset per child.
+    #[error("formation_m has {got} offsets but the team has {expected} children")]
+    FormationSize {
+        /// Offsets given.
+        got: usize,
+        /// Children in the team.
+        expected: usize,
+    },
+    /// A team needs at least two children for a parent fix.
+    #[error("the team has {got} child(ren); a parent fix needs at least 2")]
+    TooFewChildren {
+        /// Children in the team.
+        got: usize,
+    },
+    /// A sight line is outside the total station's range.
+    #[error(
+        "cycle {cycle}: child {child} is {range_m:.3} m from the parent when {phase}; \
+         expected between min_range_m = {min_m} m and max_range_m = {max_m} m"
+    )]
+    ChildOutOfRange {
+        /// Dance cycle (1-based).
+        cycle: usize,
+        /// Child index (team order).
+        child: usize,
+        /// When the sight line is taken.
+        phase: Phase,
+        /// Slope distance of the sight line.
+        range_m: f64,
+        /// Instrument minimum range.
+        min_m: f64,
+        /// Instrument maximum range.
+        max_m: f64,
+    },
+    /// The CPS model rejected a step (degenerate geometry and the like).
+    #[error("cycle {cycle}: {source}")]
+    Model {
+        /// Dance cycle (1-based, 0 for the start).
+        cycle: usize,
+        /// The model's error.
+        #[source]
+        source: cps::CpsError,
+    },
+}

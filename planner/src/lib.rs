@@ -1,0 +1,19 @@
+//! Route → dance → predicted accuracy.
+//!
+//! A route (a polyline of parent waypoints) becomes [`Station`]s every stride
+//! ([`stations`]); a formation turns them into a leapfrog [`Dance`]
+//! ([`leapfrog`]); [`predict`] runs the CPS equations on the dance's nominal
+//! readings and returns the covariance after every cycle ([`Prediction`]);
+//! [`montecarlo`] executes the dance with noisy readings to check it.
+#![warn(missing_docs)]
+
+pub mod dance;
+pub mod error;
+pub mod montecarlo;
+pub mod predict;
+pub mod route;
+
+pub use dance::{Dance, DanceCycle, Formation, leapfrog};
+pub use error::{Phase, PlanError};
+pub use predict::{CyclePrediction, Prediction, predict};
+pub use route::{Station, stations};
