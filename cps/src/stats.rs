@@ -25,7 +25,10 @@ impl ErrorEllipse {
         let mean = 0.5 * (a + c);
         let radius = (0.25 * (a - c).powi(2) + b * b).sqrt();
         let (l1, l2) = (mean + radius, (mean - radius).max(0.0));
-        let orientation = 0.5 * (2.0 * b).atan2(a - c);
+        let mut orientation = 0.5 * (2.0 * b).atan2(a - c);
+        if orientation <= -std::f64::consts::FRAC_PI_2 {
+            orientation += std::f64::consts::PI; // atan2(−0, −x) = −π
+        }
         Self { semi_major_m: l1.sqrt(), semi_minor_m: l2.sqrt(), orientation_rad: orientation }
     }
 
@@ -59,6 +62,8 @@ mod tests {
         assert!((e.semi_major_m - 3.0).abs() < 1e-12);
         assert!((e.semi_minor_m - 1.0).abs() < 1e-12);
         assert!((e.orientation_rad - t).abs() < 1e-12);
+        let along_y = ErrorEllipse::from_covariance(&Matrix2::new(1.0, -0.0, -0.0, 4.0));
+        assert_eq!(along_y.orientation_rad, std::f64::consts::FRAC_PI_2);
         assert!((e.scaled(CHI2_2D_95_SQRT).semi_major_m - 3.0 * 5.991_464_547_107_979f64.sqrt()).abs() < 1e-12);
     }
 }

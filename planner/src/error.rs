@@ -14,8 +14,8 @@ pub enum Phase {
 impl std::fmt::Display for Phase {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(match self {
-            Phase::Placement => "placing it from the standing parent",
-            Phase::Fix => "the parent's fix from the next station",
+            Phase::Placement => "while being placed from the standing parent",
+            Phase::Fix => "during the parent's fix at its next station",
         })
     }
 }
@@ -58,7 +58,7 @@ pub enum PlanError {
     },
     /// A sight line is outside the total station's range.
     #[error(
-        "cycle {cycle}: child {child} is {range_m:.3} m from the parent when {phase}; \
+        "cycle {cycle}: child {child} is {range_m:.3} m from the parent {phase}; \
          expected between min_range_m = {min_m} m and max_range_m = {max_m} m"
     )]
     ChildOutOfRange {

@@ -1,0 +1,69 @@
+//! The `cps-survey` command line: argument parsing and dispatch.
+#![allow(clippy::print_stdout, clippy::print_stderr)]
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use clap::{Parser, Subcommand};
+
+use crate::mission::Mission;
+
+/// Survey large buildings with a team of robots that position each other.
+#[derive(Debug, Parser)]
+#[command(name = "cps-survey", version, about)]
+pub struct Cli {
+    /// What to do.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Predict the pose covariance after every dance cycle of a mission's plan.
+    Predict {
+        /// The mission file (TOML).
+        mission: PathBuf,
+        /// Print one JSON object instead of the table.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Check a mission file and report every problem with file:line:column.
+    Validate {
+        /// The mission file (TOML).
+        mission: PathBuf,
+    },
+}
+
+/// How a command that ran ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Outcome {
+    /// Everything passed (exit 0).
+    Success,
+    /// Ran, but failed the mission's acceptance tolerances (exit 1).
+    AcceptanceFailed,
+}
+
+/// Runs a parsed command. Errors mean exit 2.
+pub fn run(cli: Cli) -> anyhow::Result<Outcome> {
+    match cli.command {
+        Command::Predict { mission, json } => {
+            let mission = Mission::load(&mission)?;
+            let prediction = crate::predict::prediction(&mission)?;
+            let mut out = std::io::stdout().lock();
+            if json {
+                crate::predict::write_json(&mut out, &mission, &prediction)?;
+            } else {
+                crate::predict::write_table(&mut out, &mission, &prediction)?;
+            }
+            out.flush()?;
+            Ok(if crate::predict::accepted(&mission, &prediction) { Outcome::Success } else { Outcome::AcceptanceFailed })
+        }
+        Command::Validate { mission } => {
+            let m = Mission::load(&mission)?;
+            crate::predict::dance(&m)?;
+            println!("{}: ok (mission \"{}\", {} children)", mission.display(), m.name, m.children.len());
+            Ok(Outcome::Success)
+        }
+    }
+}

@@ -1,0 +1,329 @@
+//! The mission file: raw TOML → validated, unit-converted [`Mission`].
+//!
+//! Keys carry their unit in their name; every problem in a file is reported
+//! at once, each with file:line:column (see the README's mission reference).
+
+use std::ops::Range;
+use std::path::Path;
+
+use cps::{DistanceErrorModel, Instrument, RAD_PER_ARCSEC};
+use nalgebra::{Matrix4, Point3, Vector3, Vector4};
+use toml::de::DeTable;
+
+use crate::diagnostics::{Diagnostic, Diagnostics, Source};
+use crate::reader::{At, Reader, Table};
+
+/// The dance to plan and predict.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plan {
+    /// Parent waypoints, world frame, metres.
+    pub route_m: Vec<Point3<f64>>,
+    /// Distance between parent stations along the route, metres.
+    pub stride_m: f64,
+    /// Child offsets (forward, left, up) in the parent frame, team order, metres.
+    pub formation_m: Vec<Vector3<f64>>,
+    /// Covariance of the start pose (x, y, z, θ), m² and rad²; zero when known.
+    pub start_covariance: Matrix4<f64>,
+}
+
+/// Pass/fail tolerances.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Acceptance {
+    /// Largest acceptable final √(σx² + σy²), metres.
+    pub max_final_sigma_xy_m: Option<f64>,
+}
+
+/// Where in the file each value came from, to point errors found later
+/// (e.g. by the planner) at the right line.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Spans {
+    /// `[plan]` table.
+    pub plan: Range<usize>,
+    /// Each `route_m` waypoint.
+    pub route_m: Vec<Range<usize>>,
+    /// `stride_m`.
+    pub stride_m: Range<usize>,
+    /// Each `formation_m` offset.
+    pub formation_m: Vec<Range<usize>>,
+}
+
+/// A validated mission.
+#[derive(Debug, Clone)]
+pub struct Mission {
+    /// The file it came from.
+    pub source: Source,
+    /// `mission.name`.
+    pub name: String,
+    /// Child names, team order.
+    pub children: Vec<String>,
+    /// The parent's total station.
+    pub total_station: Instrument,
+    /// The dance.
+    pub plan: Plan,
+    /// Tolerances.
+    pub acceptance: Acceptance,
+    /// Spans for later diagnostics.
+    pub spans: Spans,
+}
+
+/// Failure to load a mission.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum MissionError {
+    /// The file could not be read.
+    #[error("cannot read mission file {file}")]
+    Io {
+        /// The path.
+        file: String,
+        /// The cause.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The file has problems.
+    #[error("mission file {file}: {problems}")]
+    Invalid {
+        /// The path.
+        file: String,
+        /// Every problem found.
+        problems: Diagnostics,
+    },
+}
+
+impl MissionError {
+    /// The problems of `mission`'s file found after parsing (e.g. by the planner).
+    pub fn invalid(mission: &Mission, problems: Diagnostics) -> Self {
+        MissionError::Invalid { file: mission.source.file.display().to_string(), problems }
+    }
+
+    /// The diagnostics, if the file was read.
+    pub fn diagnostics(&self) -> &[Diagnostic] {
+        match self {
+            MissionError::Invalid { problems, .. } => &problems.0,
+            MissionError::Io { .. } => &[],
+        }
+    }
+}
+
+impl Mission {
+    /// Reads and validates a mission file.
+    pub fn load(path: &Path) -> Result<Self, MissionError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|source| MissionError::Io { file: path.display().to_string(), source })?;
+        Self::parse(Source::new(path, text))
+    }
+
+    /// Validates a mission from its text.
+    pub fn parse(source: Source) -> Result<Self, MissionError> {
+        let invalid = |source: &Source, problems: Vec<Diagnostic>| MissionError::Invalid {
+            file: source.file.display().to_string(),
+            problems: Diagnostics(problems),
+        };
+        let doc = match DeTable::parse(&source.text) {
+            Ok(doc) => doc,
+            Err(e) => {
+                let span = e.span().unwrap_or(0..0);
+                let message = format!("invalid TOML: {}", e.message());
+                let d = source.diagnostic(&span, "", message);
+                return Err(invalid(&source, vec![d]));
+            }
+        };
+        let mut r = Reader::new(&source);
+        let mut root = Table::root(&doc);
+        let parsed = read_mission(&mut r, &mut root);
+        root.finish(&mut r);
+        match parsed {
+            Some(parts) if r.problems.is_empty() => {
+                let problems = std::mem::take(&mut r.problems);
+                debug_assert!(problems.is_empty());
+                let (name, children, total_station, plan, acceptance, spans) = parts;
+                Ok(Mission { source, name, children, total_station, plan, acceptance, spans })
+            }
+            _ => {
+                let problems = std::mem::take(&mut r.problems);
+                Err(invalid(&source, problems))
+            }
+        }
+    }
+
+    /// A diagnostic at `span` of this mission's file.
+    pub fn diagnostic(&self, span: &Range<usize>, field: &str, message: impl Into<String>) -> Diagnostic {
+        self.source.diagnostic(span, field, message)
+    }
+}
+
+type Parts = (String, Vec<String>, Instrument, Plan, Acceptance, Spans);
+
+fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Parts> {
+    let mut mission = root.table(r, "mission");
+    let name = mission.required(r, "name", "a mission name (string)", |r, v, f| {
+        let s = r.string(v, f)?;
+        if s.get_ref().trim().is_empty() {
+            r.problem(&s.span(), f, "expected a non-empty name");
+            return None;
+        }
+        Some(s.into_inner())
+    });
+    mission.finish(r);
+
+    let mut team = root.table(r, "team");
+    let children = team.required(r, "children", "the child robots' names, e.g. [\"c1\", \"c2\"]", read_children);
+    team.finish(r);
+
+    let mut instruments = root.table(r, "instruments");
+    let mut ts = instruments.table(r, "total_station");
+    let total_station = read_total_station(r, &mut ts);
+    ts.finish(r);
+    instruments.finish(r);
+
+    let mut plan_t = root.table(r, "plan");
+    let plan = read_plan(r, &mut plan_t, children.as_ref().map(Vec::len));
+    plan_t.finish(r);
+
+    let mut acc = root.table(r, "acceptance");
+    let max_xy = acc.optional(r, "max_final_sigma_xy_m", |r, v, f| r.number_in(v, f, 0.0, false, None).map(At::into_inner));
+    acc.finish(r);
+
+    let (plan, spans) = plan?;
+    Some((
+        name?,
+        children?,
+        total_station?,
+        plan,
+        Acceptance { max_final_sigma_xy_m: max_xy? },
+        spans,
+    ))
+}
+
+fn read_children(r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, field: &str) -> Option<Vec<String>> {
+    let names = r.array(v, field, |r, e, f| r.string(e, f))?;
+    if names.len() < 2 {
+        r.problem(&v.span(), field, format!("the team has {} child(ren); a parent fix needs at least 2", names.len()));
+        return None;
+    }
+    let mut ok = true;
+    for (k, n) in names.iter().enumerate() {
+        if n.get_ref().trim().is_empty() {
+            r.problem(&n.span(), &format!("{field}[{k}]"), "expected a non-empty name");
+            ok = false;
+        } else if names[..k].iter().any(|o| o.get_ref() == n.get_ref()) {
+            r.problem(&n.span(), &format!("{field}[{k}]"), format!("duplicate child name \"{}\"", n.get_ref()));
+            ok = false;
+        }
+    }
+    ok.then(|| names.into_iter().map(At::into_inner).collect())
+}
+
+fn read_total_station(r: &mut Reader<'_>, t: &mut Table<'_, '_>) -> Option<Instrument> {
+    let nonneg = |r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, f: &str| {
+        r.number_in(v, f, 0.0, true, None).map(At::into_inner)
+    };
+    let positive = |r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, f: &str| {
+        r.number_in(v, f, 0.0, false, None).map(At::into_inner)
+    };
+    let sigma_distance_mm = t.required(r, "sigma_distance_mm", "the distance error's constant part in mm (> 0)", positive);
+    let ppm = t.optional(r, "sigma_distance_ppm", nonneg);
+    let model = t.optional(r, "distance_error_model", |r, v, f| {
+        let s = r.string(v, f)?;
+        match s.get_ref().as_str() {
+            "quadrature" => Some(DistanceErrorModel::Quadrature),
+            "linear" => Some(DistanceErrorModel::Linear),
+            other => {
+                r.problem(&s.span(), f, format!("unknown model \"{other}\"; expected \"quadrature\" or \"linear\""));
+                None
+            }
+        }
+    });
+    let hz = t.required(r, "sigma_hz_arcsec", "the horizontal-direction error in arc-seconds (> 0)", positive);
+    let v = t.required(r, "sigma_v_arcsec", "the vertical-angle error in arc-seconds (> 0)", positive);
+    let ci = t.optional(r, "centring_instrument_mm", nonneg);
+    let ct = t.optional(r, "centring_target_mm", nonneg);
+    let prism = t.optional(r, "prism_constant_mm", |r, v, f| r.number(v, f).map(At::into_inner));
+    let min_range = t.optional(r, "min_range_m", |r, v, f| r.number_in(v, f, 0.0, true, None).map(|x| (*x.get_ref(), x.span())));
+    let max_range = t.optional(r, "max_range_m", |r, v, f| r.number_in(v, f, 0.0, false, None).map(|x| (*x.get_ref(), x.span())));
+    let (min_range, max_range) = (min_range?, max_range?);
+    if let (Some((lo, _)), Some((hi, span))) = (&min_range, &max_range) {
+        if hi <= lo {
+            let field = "instruments.total_station.max_range_m";
+            r.problem(span, field, format!("value {hi} is out of range; expected > min_range_m = {lo}"));
+            return None;
+        }
+    }
+    Some(Instrument {
+        sigma_distance_m: sigma_distance_mm? * 1e-3,
+        sigma_distance_ppm: ppm?.unwrap_or(0.0),
+        distance_model: model?.unwrap_or_default(),
+        sigma_hz_rad: hz? * RAD_PER_ARCSEC,
+        sigma_v_rad: v? * RAD_PER_ARCSEC,
+        centring_instrument_m: ci?.unwrap_or(0.0) * 1e-3,
+        centring_target_m: ct?.unwrap_or(0.0) * 1e-3,
+        prism_constant_m: prism?.unwrap_or(0.0) * 1e-3,
+        min_range_m: min_range.map_or(0.0, |x| x.0),
+        max_range_m: max_range.map_or(f64::INFINITY, |x| x.0),
+    })
+}
+
+fn read_plan(r: &mut Reader<'_>, t: &mut Table<'_, '_>, n_children: Option<usize>) -> Option<(Plan, Spans)> {
+    let route = t.required(r, "route_m", "parent waypoints [[x, y, z], ...] in metres (at least 2)", |r, v, f| {
+        let pts = r.array(v, f, |r, e, f| r.point3(e, f))?;
+        if pts.len() < 2 {
+            r.problem(&v.span(), f, format!("route_m has {} waypoint(s); expected at least 2", pts.len()));
+            return None;
+        }
+        let mut ok = true;
+        for k in 1..pts.len() {
+            let (a, b) = (pts[k - 1].get_ref(), pts[k].get_ref());
+            if (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt() <= 1e-9 {
+                r.problem(&pts[k].span(), &format!("{f}[{k}]"), "repeats the previous waypoint; expected a segment of non-zero length");
+                ok = false;
+            }
+        }
+        ok.then_some(pts)
+    });
+    let stride = t.required(r, "stride_m", "the distance between parent stations in metres (> 0)", |r, v, f| {
+        r.number_in(v, f, 0.0, false, None).map(|x| (*x.get_ref(), x.span()))
+    });
+    let formation = t.required(r, "formation_m", "one offset [forward, left, up] in metres per child", |r, v, f| {
+        let offsets = r.array(v, f, |r, e, f| r.point3(e, f))?;
+        if let Some(n) = n_children {
+            if offsets.len() != n {
+                r.problem(&v.span(), f, format!("{} offsets given; expected one per child ({n}, as in team.children)", offsets.len()));
+                return None;
+            }
+        }
+        for (k, o) in offsets.iter().enumerate() {
+            if o.get_ref()[0].hypot(o.get_ref()[1]) < 1e-6 {
+                r.problem(&o.span(), &format!("{f}[{k}]"), "the child stands vertically above or below the parent; expected a horizontal offset");
+                return None;
+            }
+        }
+        Some(offsets)
+    });
+    let start_sigma = t.optional(r, "start_sigma_m", |r, v, f| {
+        let p = r.point3(v, f)?;
+        let mut ok = true;
+        for (i, x) in p.get_ref().iter().enumerate() {
+            if *x < 0.0 {
+                r.problem(&p.span(), &format!("{f}[{i}]"), format!("value {x} is out of range; expected ≥ 0"));
+                ok = false;
+            }
+        }
+        ok.then(|| *p.get_ref())
+    });
+    let start_heading = t.optional(r, "start_sigma_heading_arcsec", |r, v, f| r.number_in(v, f, 0.0, true, None).map(At::into_inner));
+    let (route, stride, formation) = (route?, stride?, formation?);
+    let s = start_sigma?.unwrap_or([0.0; 3]);
+    let h = start_heading?.unwrap_or(0.0) * RAD_PER_ARCSEC;
+    let spans = Spans {
+        plan: t.span(),
+        route_m: route.iter().map(|p| p.span()).collect(),
+        stride_m: stride.1.clone(),
+        formation_m: formation.iter().map(|p| p.span()).collect(),
+    };
+    let plan = Plan {
+        route_m: route.iter().map(|p| Point3::from(*p.get_ref())).collect(),
+        stride_m: stride.0,
+        formation_m: formation.iter().map(|p| Vector3::from(*p.get_ref())).collect(),
+        start_covariance: Matrix4::from_diagonal(&Vector4::new(s[0] * s[0], s[1] * s[1], s[2] * s[2], h * h)),
+    };
+    Some((plan, spans))
+}

@@ -1,0 +1,216 @@
+//! `cps-survey predict`: the covariance after every dance cycle of a mission.
+
+use std::io::Write;
+
+use cps::{CHI2_2D_95_SQRT, ErrorEllipse, RAD_PER_ARCSEC};
+use planner::{Dance, PlanError, Prediction};
+use serde::Serialize;
+
+use crate::diagnostics::{Diagnostic, Diagnostics};
+use crate::mission::{Mission, MissionError};
+
+/// Builds the mission's dance; plan errors point at the mission file.
+pub fn dance(mission: &Mission) -> Result<Dance, MissionError> {
+    dance_or_diagnostics(mission).map_err(|d| MissionError::invalid(mission, d))
+}
+
+fn dance_or_diagnostics(mission: &Mission) -> Result<Dance, Diagnostics> {
+    let plan = &mission.plan;
+    let stations = planner::stations(&plan.route_m, plan.stride_m).map_err(|e| plan_diagnostics(mission, vec![e]))?;
+    let dance = planner::leapfrog(stations, &plan.formation_m).map_err(|e| plan_diagnostics(mission, vec![e]))?;
+    let violations = dance.range_violations(&mission.total_station);
+    if !violations.is_empty() {
+        return Err(plan_diagnostics(mission, violations));
+    }
+    Ok(dance)
+}
+
+/// Predicts the mission's accuracy.
+pub fn prediction(mission: &Mission) -> Result<Prediction, MissionError> {
+    let dance = dance(mission)?;
+    planner::predict(&dance, &mission.total_station, &mission.plan.start_covariance)
+        .map_err(|e| MissionError::invalid(mission, plan_diagnostics(mission, vec![e])))
+}
+
+/// Turns planner errors into diagnostics at the responsible field. Range
+/// violations are grouped per child and phase (first cycle and count).
+fn plan_diagnostics(mission: &Mission, errors: Vec<PlanError>) -> Diagnostics {
+    let spans = &mission.spans;
+    let mut out: Vec<Diagnostic> = Vec::new();
+    let mut seen: Vec<(usize, planner::Phase, usize)> = Vec::new();
+    for e in &errors {
+        if let PlanError::ChildOutOfRange { child, phase, .. } = e {
+            match seen.iter_mut().find(|(c, p, _)| c == child && p == phase) {
+                Some(entry) => entry.2 += 1,
+                None => seen.push((*child, *phase, 1)),
+            }
+        }
+    }
+    for e in errors {
+        let (span, field) = match &e {
+            PlanError::ChildOutOfRange { child, phase, .. } => {
+                let Some(entry) = seen.iter().position(|(c, p, _)| c == child && p == phase) else { continue };
+                let count = seen.remove(entry).2;
+                let span = spans.formation_m.get(*child).cloned().unwrap_or(spans.plan.clone());
+                let name = mission.children.get(*child).map_or(String::new(), |n| format!(" (child \"{n}\")"));
+                let more = if count > 1 { format!(" — and in {} more cycle(s)", count - 1) } else { String::new() };
+                out.push(mission.diagnostic(&span, &format!("plan.formation_m[{child}]{name}"), format!("{e}{more}")));
+                continue;
+            }
+            PlanError::ZeroLengthSegment { waypoint } => {
+                (spans.route_m.get(*waypoint).cloned().unwrap_or(spans.plan.clone()), format!("plan.route_m[{waypoint}]"))
+            }
+            PlanError::BadStride { .. } => (spans.stride_m.clone(), "plan.stride_m".to_string()),
+            PlanError::FormationSize { .. } | PlanError::TooFewChildren { .. } => {
+                (spans.formation_m.first().cloned().unwrap_or(spans.plan.clone()), "plan.formation_m".to_string())
+            }
+            _ => (spans.plan.clone(), "plan".to_string()),
+        };
+        out.push(mission.diagnostic(&span, &field, e.to_string()));
+    }
+    Diagnostics(out)
+}
+
+#[derive(Serialize)]
+struct PoseJson {
+    x_m: f64,
+    y_m: f64,
+    z_m: f64,
+    heading_rad: f64,
+}
+
+#[derive(Serialize)]
+struct EllipseJson {
+    semi_major_m: f64,
+    semi_minor_m: f64,
+    orientation_rad: f64,
+}
+
+impl From<ErrorEllipse> for EllipseJson {
+    fn from(e: ErrorEllipse) -> Self {
+        Self { semi_major_m: e.semi_major_m, semi_minor_m: e.semi_minor_m, orientation_rad: e.orientation_rad }
+    }
+}
+
+#[derive(Serialize)]
+struct CycleJson {
+    cycle: usize,
+    distance_m: f64,
+    parent: PoseJson,
+    covariance: [[f64; 4]; 4],
+    ellipse_1sigma_m: EllipseJson,
+    ellipse_95_m: EllipseJson,
+    sigma_xy2_m2: f64,
+    sigma_heading_rad: f64,
+    drift_percent: f64,
+}
+
+#[derive(Serialize)]
+struct FinalJson {
+    distance_m: f64,
+    sigma_xy2_m2: f64,
+    sigma_xy_m: f64,
+    sigma_heading_rad: f64,
+    drift_percent: f64,
+    ellipse_95_m: EllipseJson,
+    max_final_sigma_xy_m: Option<f64>,
+    accepted: bool,
+}
+
+#[derive(Serialize)]
+struct PredictionJson {
+    mission: String,
+    children: Vec<String>,
+    cycles: Vec<CycleJson>,
+    #[serde(rename = "final")]
+    final_: Option<FinalJson>,
+}
+
+/// Whether the prediction meets `[acceptance]`.
+pub fn accepted(mission: &Mission, prediction: &Prediction) -> bool {
+    match (mission.acceptance.max_final_sigma_xy_m, prediction.last()) {
+        (Some(max), Some(last)) => last.sigma_xy2_m2().sqrt() <= max,
+        _ => true,
+    }
+}
+
+/// Writes the prediction as one JSON object.
+pub fn write_json(out: &mut impl Write, mission: &Mission, prediction: &Prediction) -> std::io::Result<()> {
+    let cycles = prediction
+        .cycles
+        .iter()
+        .map(|c| CycleJson {
+            cycle: c.cycle,
+            distance_m: c.distance_m,
+            parent: PoseJson {
+                x_m: c.parent.position.x,
+                y_m: c.parent.position.y,
+                z_m: c.parent.position.z,
+                heading_rad: c.parent.heading_rad,
+            },
+            covariance: std::array::from_fn(|i| std::array::from_fn(|j| c.covariance[(i, j)])),
+            ellipse_1sigma_m: c.ellipse_1sigma().into(),
+            ellipse_95_m: c.ellipse_1sigma().scaled(CHI2_2D_95_SQRT).into(),
+            sigma_xy2_m2: c.sigma_xy2_m2(),
+            sigma_heading_rad: c.sigma_heading_rad(),
+            drift_percent: c.drift_percent(),
+        })
+        .collect();
+    let final_ = prediction.last().map(|l| FinalJson {
+        distance_m: l.distance_m,
+        sigma_xy2_m2: l.sigma_xy2_m2(),
+        sigma_xy_m: l.sigma_xy2_m2().sqrt(),
+        sigma_heading_rad: l.sigma_heading_rad(),
+        drift_percent: l.drift_percent(),
+        ellipse_95_m: l.ellipse_1sigma().scaled(CHI2_2D_95_SQRT).into(),
+        max_final_sigma_xy_m: mission.acceptance.max_final_sigma_xy_m,
+        accepted: accepted(mission, prediction),
+    });
+    let doc = PredictionJson { mission: mission.name.clone(), children: mission.children.clone(), cycles, final_ };
+    serde_json::to_writer(&mut *out, &doc)?;
+    writeln!(out)
+}
+
+/// Writes the per-cycle table and the final summary.
+pub fn write_table(out: &mut impl Write, mission: &Mission, prediction: &Prediction) -> std::io::Result<()> {
+    let n = prediction.cycles.len();
+    let dist = prediction.last().map_or(0.0, |l| l.distance_m);
+    writeln!(out, "mission {}: {n} cycles, {} children, {dist:.1} m of route", mission.name, mission.children.len())?;
+    writeln!(
+        out,
+        "{:>6} {:>9} {:>9} {:>9} {:>9} {:>10} {:>9} {:>9} {:>7} {:>8}",
+        "cycle", "dist_m", "σx_mm", "σy_mm", "σz_mm", "σθ_arcsec", "a95_mm", "b95_mm", "az95_°", "drift_%"
+    )?;
+    for c in &prediction.cycles {
+        let e = c.ellipse_1sigma().scaled(CHI2_2D_95_SQRT);
+        writeln!(
+            out,
+            "{:>6} {:>9.2} {:>9.3} {:>9.3} {:>9.3} {:>10.2} {:>9.3} {:>9.3} {:>7.1} {:>8.4}",
+            c.cycle,
+            c.distance_m,
+            1e3 * c.covariance[(0, 0)].sqrt(),
+            1e3 * c.covariance[(1, 1)].sqrt(),
+            1e3 * c.covariance[(2, 2)].sqrt(),
+            c.sigma_heading_rad() / RAD_PER_ARCSEC,
+            1e3 * e.semi_major_m,
+            1e3 * e.semi_minor_m,
+            e.orientation_rad.to_degrees(),
+            c.drift_percent(),
+        )?;
+    }
+    if let Some(l) = prediction.last() {
+        let e = l.ellipse_1sigma().scaled(CHI2_2D_95_SQRT);
+        writeln!(out)?;
+        writeln!(out, "final after {:.1} m:", l.distance_m)?;
+        writeln!(out, "  σx² + σy²      {:.6} m²  (√ = {:.4} m)", l.sigma_xy2_m2(), l.sigma_xy2_m2().sqrt())?;
+        writeln!(out, "  σz             {:.4} m", l.covariance[(2, 2)].sqrt())?;
+        writeln!(out, "  σθ             {:.2}″", l.sigma_heading_rad() / RAD_PER_ARCSEC)?;
+        writeln!(out, "  95 % ellipse   {:.4} m × {:.4} m, major axis at {:.1}°", e.semi_major_m, e.semi_minor_m, e.orientation_rad.to_degrees())?;
+        writeln!(out, "  drift          {:.4} % of distance", l.drift_percent())?;
+        if let Some(max) = mission.acceptance.max_final_sigma_xy_m {
+            let verdict = if accepted(mission, prediction) { "PASS" } else { "FAIL" };
+            writeln!(out, "  acceptance     {verdict}: √(σx² + σy²) = {:.4} m, limit {max} m", l.sigma_xy2_m2().sqrt())?;
+        }
+    }
+    Ok(())
+}
