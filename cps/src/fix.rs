@@ -8,11 +8,11 @@
 //! other state s is F·cov(C, s) with F = −B·H_c, B = Σ_0 AᵀΣ_L⁻¹ (eq. 16
 //! generalised).
 
-use nalgebra::{DMatrix, DVector, Matrix4, Point3, Vector2, Vector4};
+use nalgebra::{DMatrix, DVector, Matrix3, Matrix4, Point3, Vector2, Vector4};
 
 use crate::error::{CpsError, Result, ensure_finite};
 use crate::instrument::Instrument;
-use crate::observation::{ParentPose, Reading, observation_jacobians, observe, wrap_angle};
+use crate::observation::{ParentPose, Reading, observe_with_jacobians, wrap_angle};
 
 /// One child as the parent sees it during a fix.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -55,7 +55,7 @@ pub const MAX_CONDITION: f64 = 1e10;
 
 /// Everything a parent fix determines. Observations are ordered child by
 /// child as given, (r, φ, ψ) within each child.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub struct ParentFix {
     /// The estimated pose.
     pub pose: ParentPose,
@@ -74,17 +74,26 @@ pub struct ParentFix {
     pub sigma0_squared: f64,
     /// Residuals v = observed − computed (m, rad, rad per child).
     pub residuals: Vec<f64>,
-    /// Redundancy number of each observation, (Q_vv Σ_L⁻¹)_ii ∈ [0, 1].
+    /// Condition estimate of the equilibrated square-root factor.
+    pub condition: f64,
+    /// The last linearisation, kept for [`ParentFix::reliability`].
+    design: DMatrix<f64>,
+    sigma_l_chol: nalgebra::Cholesky<f64, nalgebra::Dyn>,
+}
+
+/// Per-observation reliability of a fix (blunder detection).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Reliability {
+    /// Redundancy number of each observation, (Q_vv Σ_L⁻¹)_ii ∈ [0, 1]; they
+    /// sum to the redundancy.
     pub redundancy_numbers: Vec<f64>,
     /// Baarda's w-statistic per observation (standard normal without a
     /// blunder); `None` for an observation that nothing checks (redundancy
     /// number ≈ 0).
     pub w_statistics: Vec<Option<f64>>,
-    /// Condition estimate of the equilibrated square-root factor.
-    pub condition: f64,
 }
 
-impl ParentFix {
+impl Reliability {
     /// Index of the observation with the largest |w|, if any is checked.
     pub fn largest_w(&self) -> Option<(usize, f64)> {
         self.w_statistics
@@ -92,6 +101,31 @@ impl ParentFix {
             .enumerate()
             .filter_map(|(i, w)| w.map(|w| (i, w)))
             .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
+    }
+}
+
+impl ParentFix {
+    /// Redundancy numbers and Baarda w-statistics of every observation, for
+    /// correlated observations: with M = Σ_L⁻¹ Q_vv Σ_L⁻¹ and
+    /// Q_vv = Σ_L − A Σ_0 Aᵀ, w_i = (Σ_L⁻¹v)_i / √M_ii and r_i = (Σ_L M)_ii.
+    /// Computed on request: prediction never needs it.
+    pub fn reliability(&self) -> Reliability {
+        let n_obs = self.design.nrows();
+        let sigma_l_inv = self.sigma_l_chol.inverse();
+        let p_a = &sigma_l_inv * &self.design; // Σ_L⁻¹ A
+        let cov = DMatrix::from_fn(4, 4, |i, j| self.covariance[(i, j)]);
+        let m = &sigma_l_inv - &p_a * cov * p_a.transpose();
+        let sigma_l = self.sigma_l_chol.l() * self.sigma_l_chol.l().transpose();
+        let p_v = &sigma_l_inv * DVector::from_column_slice(&self.residuals);
+        let mut redundancy_numbers = Vec::with_capacity(n_obs);
+        let mut w_statistics = Vec::with_capacity(n_obs);
+        for i in 0..n_obs {
+            let ri = sigma_l.row(i).dot(&m.column(i).transpose());
+            redundancy_numbers.push(ri);
+            let denom = m[(i, i)];
+            w_statistics.push(if ri > 1e-9 && denom > 0.0 { Some(p_v[i] / denom.sqrt()) } else { None });
+        }
+        Reliability { redundancy_numbers, w_statistics }
     }
 }
 
@@ -156,47 +190,56 @@ fn linearise(
     pose: &ParentPose,
     children: &[SightedChild],
     children_cov: &DMatrix<f64>,
-    reading_cov: &[nalgebra::Matrix3<f64>],
+    instrument: &Instrument,
 ) -> Result<Linearisation> {
-    let m = 3 * children.len();
+    let n = children.len();
+    let m = 3 * n;
     let mut misclosure = DVector::zeros(m);
     let mut a = DMatrix::zeros(m, 4);
     let mut h_c = DMatrix::zeros(m, m);
+    let mut blocks = Vec::with_capacity(n);
     for (k, c) in children.iter().enumerate() {
-        let computed = observe(pose, &c.position)?;
-        let j = observation_jacobians(pose, &c.position)?;
+        let (computed, j) = observe_with_jacobians(pose, &c.position)?;
         misclosure[3 * k] = c.reading.slope_m - computed.slope_m;
         misclosure[3 * k + 1] = wrap_angle(c.reading.azimuth_rad - computed.azimuth_rad);
         misclosure[3 * k + 2] = c.reading.elevation_rad - computed.elevation_rad;
         a.fixed_view_mut::<3, 4>(3 * k, 0).copy_from(&j.wrt_parent);
         h_c.fixed_view_mut::<3, 3>(3 * k, 3 * k).copy_from(&j.wrt_child);
+        blocks.push(j.wrt_child);
     }
-    let mut sigma_l = &h_c * children_cov * h_c.transpose();
-    for (k, s) in reading_cov.iter().enumerate() {
-        let mut block = sigma_l.fixed_view_mut::<3, 3>(3 * k, 3 * k);
-        block += s;
+    // Σ_L = H_c Σ_C H_cᵀ + Σ_m, block by block (H_c is block diagonal):
+    // (Σ_L)_kl = H_k Σ_kl H_lᵀ (+ Σ_m,k on the diagonal). Exactly symmetric.
+    let mut sigma_l = DMatrix::zeros(m, m);
+    for k in 0..n {
+        for l in 0..=k {
+            let s_kl: Matrix3<f64> = children_cov.fixed_view::<3, 3>(3 * k, 3 * l).into_owned();
+            let mut block = blocks[k] * s_kl * blocks[l].transpose();
+            if k == l {
+                block = 0.5 * (block + block.transpose()) + instrument.reading_covariance(&children[k].reading);
+            }
+            sigma_l.fixed_view_mut::<3, 3>(3 * k, 3 * l).copy_from(&block);
+            if k != l {
+                sigma_l.fixed_view_mut::<3, 3>(3 * l, 3 * k).copy_from(&block.transpose());
+            }
+        }
     }
-    symmetrise(&mut sigma_l);
     let sigma_l_chol = nalgebra::Cholesky::new(sigma_l).ok_or_else(|| CpsError::NotPositiveDefinite {
         what: "Σ_L = H_c Σ_C H_cᵀ + Σ_meas of the parent fix".into(),
     })?;
     Ok(Linearisation { misclosure, a, h_c, sigma_l_chol })
 }
 
-/// Replaces `m` by (m + mᵀ)/2.
-pub fn symmetrise(m: &mut DMatrix<f64>) {
-    let n = m.nrows();
-    for i in 0..n {
-        for j in (i + 1)..n {
-            let v = 0.5 * (m[(i, j)] + m[(j, i)]);
-            m[(i, j)] = v;
-            m[(j, i)] = v;
-        }
-    }
+/// One whitened least-squares step: Ã = L⁻¹A, ṽ = L⁻¹(l − f) with Σ_L = LLᵀ.
+struct Step {
+    dx: Vector4<f64>,
+    r: Matrix4<f64>,
+    condition: f64,
+    a_w: DMatrix<f64>,
+    v_w: DVector<f64>,
 }
 
-/// Solves the whitened system Ã dx ≈ ṽ by QR; returns (dx, R, condition).
-fn whitened_step(lin: &Linearisation) -> Result<(Vector4<f64>, Matrix4<f64>, f64)> {
+/// Solves the whitened system Ã dx ≈ ṽ by QR.
+fn whitened_step(lin: &Linearisation) -> Result<Step> {
     let l = lin.sigma_l_chol.l();
     let a_w = l.solve_lower_triangular(&lin.a).ok_or_else(|| CpsError::NotPositiveDefinite {
         what: "Σ_L of the parent fix".into(),
@@ -205,7 +248,7 @@ fn whitened_step(lin: &Linearisation) -> Result<(Vector4<f64>, Matrix4<f64>, f64
         what: "Σ_L of the parent fix".into(),
     })?;
     let col_norms: Vec<f64> = (0..4).map(|k| a_w.column(k).norm()).collect();
-    let qr = a_w.qr();
+    let qr = a_w.clone().qr();
     let r_dyn = qr.r();
     let r = Matrix4::from_fn(|i, j| r_dyn[(i, j)]);
     let diag: Vec<f64> = (0..4).map(|k| (r[(k, k)] / col_norms[k].max(f64::MIN_POSITIVE)).abs()).collect();
@@ -217,13 +260,14 @@ fn whitened_step(lin: &Linearisation) -> Result<(Vector4<f64>, Matrix4<f64>, f64
             condition,
         });
     }
-    let qtv = qr.q().transpose() * v_w;
+    let mut qtv = v_w.clone();
+    qr.q_tr_mul(&mut qtv);
     let rhs = Vector4::new(qtv[0], qtv[1], qtv[2], qtv[3]);
     let dx = r.solve_upper_triangular(&rhs).ok_or_else(|| CpsError::DegenerateGeometry {
         what: "singular square-root factor in the parent fix".into(),
         condition,
     })?;
-    Ok((dx, r, condition))
+    Ok(Step { dx, r, condition, a_w, v_w })
 }
 
 /// Fixes the parent from N ≥ 2 sighted children whose stacked positions have
@@ -258,16 +302,16 @@ pub fn fix_parent(
             return Err(CpsError::DuplicateChild { child: c.child });
         }
     }
-    let reading_cov: Vec<_> = children.iter().map(|c| instrument.reading_covariance(&c.reading)).collect();
 
     let mut pose = match options.initial {
         Some(p) => p,
         None => closed_form_start(children)?,
     };
     let mut iterations = 0;
-    let (lin, dx, r, condition, converged) = loop {
-        let lin = linearise(&pose, children, children_cov, &reading_cov)?;
-        let (dx, r, condition) = whitened_step(&lin)?;
+    let (lin, step, converged) = loop {
+        let lin = linearise(&pose, children, children_cov, instrument)?;
+        let step = whitened_step(&lin)?;
+        let dx = step.dx;
         iterations += 1;
         pose = ParentPose::from_vector(&(pose.to_vector() + dx));
         if !pose.to_vector().iter().all(|v| v.is_finite()) {
@@ -276,22 +320,15 @@ pub fn fix_parent(
         let converged = dx.fixed_rows::<3>(0).amax() < options.position_tolerance_m
             && dx[3].abs() < options.heading_tolerance_rad;
         if converged || iterations >= options.max_iterations {
-            break (lin, dx, r, condition, converged);
+            break (lin, step, converged);
         }
     };
-    statistics(pose, lin, &dx, &r, condition, iterations, converged)
+    statistics(pose, lin, step, iterations, converged)
 }
 
-/// Covariance, F map and residual statistics from the last linearisation.
-fn statistics(
-    pose: ParentPose,
-    lin: Linearisation,
-    dx: &Vector4<f64>,
-    r: &Matrix4<f64>,
-    condition: f64,
-    iterations: usize,
-    converged: bool,
-) -> Result<ParentFix> {
+/// Covariance, F map and σ0² from the last linearisation.
+fn statistics(pose: ParentPose, lin: Linearisation, step: Step, iterations: usize, converged: bool) -> Result<ParentFix> {
+    let Step { dx, r, condition, a_w, v_w } = step;
     let n_obs = lin.a.nrows();
     // Σ_0 = (RᵀR)⁻¹ = R⁻¹R⁻ᵀ (eq. 15).
     let r_inv = r
@@ -299,31 +336,17 @@ fn statistics(
         .ok_or_else(|| CpsError::DegenerateGeometry { what: "singular R".into(), condition })?;
     let mut covariance = r_inv * r_inv.transpose();
     covariance = 0.5 * (covariance + covariance.transpose());
-    // B = Σ_0 Aᵀ Σ_L⁻¹ (eq. 14), F = −B H_c (eq. 16).
-    let sigma_l_inv_a = lin.sigma_l_chol.solve(&lin.a);
-    let b = covariance * sigma_l_inv_a.transpose();
-    let b = DMatrix::from_fn(4, n_obs, |i, j| b[(i, j)]);
+    // B = Σ_0 Aᵀ Σ_L⁻¹ (eq. 14), F = −B H_c (eq. 16); Σ_L⁻¹A = L⁻ᵀ Ã.
+    let sigma_l_inv_a = lin.sigma_l_chol.l_dirty().tr_solve_lower_triangular(&a_w).ok_or_else(|| {
+        CpsError::NotPositiveDefinite { what: "Σ_L of the parent fix".into() }
+    })?;
+    let b = DMatrix::from_fn(4, n_obs, |i, j| (0..4).map(|k| covariance[(i, k)] * sigma_l_inv_a[(j, k)]).sum());
     let f_map = -(&b * &lin.h_c);
-    // Residuals after the last step, v = l − f(p) − A dx.
-    let v = &lin.misclosure - &lin.a * DVector::from_column_slice(dx.as_slice());
-    let p_v = lin.sigma_l_chol.solve(&v); // Σ_L⁻¹ v
+    // Residuals after the last step, v = l − f(p) − A dx; vᵀΣ_L⁻¹v = |ṽ − Ã dx|².
+    let dx_dyn = DVector::from_column_slice(dx.as_slice());
+    let v = &lin.misclosure - &lin.a * &dx_dyn;
     let redundancy = n_obs - 4;
-    let sigma0_squared = if redundancy > 0 { v.dot(&p_v) / redundancy as f64 } else { 0.0 };
-    // Q_vv = Σ_L − A Σ_0 Aᵀ; w_i = (Σ_L⁻¹v)_i / √(Σ_L⁻¹ Q_vv Σ_L⁻¹)_ii.
-    // Σ_L⁻¹ Q_vv Σ_L⁻¹ = Σ_L⁻¹ − Σ_L⁻¹ A Σ_0 Aᵀ Σ_L⁻¹.
-    let sigma_l_inv = lin.sigma_l_chol.inverse();
-    let pa_cov = &sigma_l_inv_a * DMatrix::from_fn(4, 4, |i, j| covariance[(i, j)]);
-    let m_matrix = &sigma_l_inv - &pa_cov * sigma_l_inv_a.transpose();
-    let sigma_l = lin.sigma_l_chol.l() * lin.sigma_l_chol.l().transpose();
-    let mut redundancy_numbers = Vec::with_capacity(n_obs);
-    let mut w_statistics = Vec::with_capacity(n_obs);
-    for i in 0..n_obs {
-        // (Q_vv Σ_L⁻¹)_ii = (Σ_L · M)_ii with M = Σ_L⁻¹ Q_vv Σ_L⁻¹.
-        let ri = sigma_l.row(i).dot(&m_matrix.column(i).transpose());
-        redundancy_numbers.push(ri);
-        let denom = m_matrix[(i, i)];
-        w_statistics.push(if ri > 1e-9 && denom > 0.0 { Some(p_v[i] / denom.sqrt()) } else { None });
-    }
+    let sigma0_squared = if redundancy > 0 { (v_w - a_w * dx_dyn).norm_squared() / redundancy as f64 } else { 0.0 };
     let fix = ParentFix {
         pose,
         covariance,
@@ -333,9 +356,9 @@ fn statistics(
         redundancy,
         sigma0_squared,
         residuals: v.iter().copied().collect(),
-        redundancy_numbers,
-        w_statistics,
         condition,
+        design: lin.a,
+        sigma_l_chol: lin.sigma_l_chol,
     };
     if !fix.covariance.iter().chain(fix.f_map.iter()).all(|x| x.is_finite()) {
         return Err(CpsError::Diverged { what: "parent fix covariance".into(), iterations });
@@ -346,6 +369,7 @@ fn statistics(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::observation::observe;
 
     fn sighted(parent: &ParentPose, children: &[Point3<f64>]) -> Vec<SightedChild> {
         children
@@ -409,10 +433,11 @@ mod tests {
             let mut s = sighted(&truth, &children);
             s[blundered].reading.slope_m += 0.020;
             let fix = fix_parent(&s, &cov, &instrument(), &FixOptions::default()).expect("fix");
-            let (idx, w) = fix.largest_w().expect("checked observations");
-            assert_eq!(idx, 3 * blundered, "w = {:?}", fix.w_statistics);
+            let rel = fix.reliability();
+            let (idx, w) = rel.largest_w().expect("checked observations");
+            assert_eq!(idx, 3 * blundered, "w = {:?}", rel.w_statistics);
             assert!(w.abs() > 3.29, "a 20 mm blunder against 3 mm noise is significant: w = {w}");
-            let total: f64 = fix.redundancy_numbers.iter().sum();
+            let total: f64 = rel.redundancy_numbers.iter().sum();
             assert!((total - fix.redundancy as f64).abs() < 1e-9, "Σ r_i = {total}");
         }
     }
@@ -439,7 +464,7 @@ mod tests {
             }
             let fix = fix_parent(&s, &cov, &inst, &FixOptions::default()).expect("fix");
             sum_s0 += fix.sigma0_squared;
-            for w in fix.w_statistics.iter().flatten() {
+            for w in fix.reliability().w_statistics.iter().flatten() {
                 sum_w2 += w * w;
                 count += 1;
             }

@@ -12,8 +12,8 @@
 //! - [`Instrument`] — the total station's noise model and limits;
 //! - [`TeamState`] — means and joint covariance, order (x, y, z, θ) then each
 //!   child's (x, y, z);
-//! - [`ParentFix`] — a fix's pose, Σ_0, the F map, σ0², redundancy numbers and
-//!   Baarda w-statistics;
+//! - [`ParentFix`] — a fix's pose, Σ_0, the F map, σ0² and, on request,
+//!   redundancy numbers and Baarda w-statistics ([`Reliability`]);
 //! - [`batch::Network`] / [`batch::adjust`] — the whole dance as one
 //!   least-squares adjustment.
 //!
@@ -30,7 +30,7 @@ pub mod state;
 pub mod stats;
 
 pub use error::{CpsError, Result};
-pub use fix::{FixOptions, ParentFix, SightedChild, closed_form_start, fix_parent};
+pub use fix::{FixOptions, ParentFix, Reliability, SightedChild, closed_form_start, fix_parent};
 pub use instrument::{DistanceErrorModel, Instrument, RAD_PER_ARCSEC};
 pub use observation::{ParentPose, Reading, observe, wrap_angle};
 pub use placement::{Placement, place};

@@ -92,7 +92,8 @@ pub const MIN_HORIZONTAL_M: f64 = 1e-6;
 /// Fails when the two are horizontally coincident (azimuth undefined).
 pub fn observe(parent: &ParentPose, child: &Point3<f64>) -> Result<Reading> {
     let d = child - parent.position;
-    let h = d.x.hypot(d.y);
+    let h2 = d.x * d.x + d.y * d.y;
+    let h = h2.sqrt();
     if h < MIN_HORIZONTAL_M {
         return Err(CpsError::CoincidentPoints {
             what: "parent and child (horizontally)".into(),
@@ -100,7 +101,7 @@ pub fn observe(parent: &ParentPose, child: &Point3<f64>) -> Result<Reading> {
         });
     }
     Ok(Reading {
-        slope_m: d.norm(),
+        slope_m: (h2 + d.z * d.z).sqrt(),
         azimuth_rad: wrap_angle(d.y.atan2(d.x) - parent.heading_rad),
         elevation_rad: d.z.atan2(h),
     })
@@ -118,6 +119,11 @@ pub struct ObservationJacobians {
 
 /// Analytic Jacobians of [`observe`]. Fails where `observe` fails.
 pub fn observation_jacobians(parent: &ParentPose, child: &Point3<f64>) -> Result<ObservationJacobians> {
+    observe_with_jacobians(parent, child).map(|(_, j)| j)
+}
+
+/// [`observe`] and [`observation_jacobians`] in one pass.
+pub fn observe_with_jacobians(parent: &ParentPose, child: &Point3<f64>) -> Result<(Reading, ObservationJacobians)> {
     let d = child - parent.position;
     let h2 = d.x * d.x + d.y * d.y;
     let h = h2.sqrt();
@@ -138,7 +144,12 @@ pub fn observation_jacobians(parent: &ParentPose, child: &Point3<f64>) -> Result
     let mut wrt_parent = Matrix3x4::zeros();
     wrt_parent.fixed_view_mut::<3, 3>(0, 0).copy_from(&(-wrt_child));
     wrt_parent[(1, 3)] = -1.0;
-    Ok(ObservationJacobians { wrt_parent, wrt_child })
+    let reading = Reading {
+        slope_m: r,
+        azimuth_rad: wrap_angle(d.y.atan2(d.x) - parent.heading_rad),
+        elevation_rad: d.z.atan2(h),
+    };
+    Ok((reading, ObservationJacobians { wrt_parent, wrt_child }))
 }
 
 #[cfg(test)]
@@ -186,6 +197,8 @@ mod tests {
                 let rm = observe(&ParentPose::from_vector(&minus), &child).expect("obs");
                 let fd = reading_diff(&rp, &rm) / (2.0 * eps);
                 let an = j.wrt_parent.column(k);
+                let (joint, _) = observe_with_jacobians(&parent, &child).expect("obs");
+                assert_eq!(joint, observe(&parent, &child).expect("obs"));
                 assert!((fd - an).norm() <= 1e-6 * (1.0 + an.norm()), "parent col {k}: fd {fd} an {an}");
             }
             for k in 0..3 {

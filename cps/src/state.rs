@@ -7,7 +7,7 @@
 use nalgebra::{DMatrix, Matrix3, Matrix4, Point3};
 
 use crate::error::{CpsError, Result};
-use crate::fix::{FixOptions, ParentFix, SightedChild, fix_parent, symmetrise};
+use crate::fix::{FixOptions, ParentFix, SightedChild, fix_parent};
 use crate::instrument::Instrument;
 use crate::observation::{ParentPose, Reading};
 use crate::placement::{Placement, place};
@@ -146,8 +146,9 @@ impl TeamState {
                 self.covariance[(s, PARENT + k)] = cross[(k, s)];
             }
         }
+        // Every write above mirrors itself and Σ_0 is symmetric, so the joint
+        // covariance stays exactly symmetric.
         self.covariance.fixed_view_mut::<4, 4>(PARENT, PARENT).copy_from(&fix.covariance);
-        symmetrise(&mut self.covariance);
         self.parent = fix.pose;
         Ok(fix)
     }
@@ -166,4 +167,177 @@ fn check_covariance(what: &str, m: &Matrix4<f64>) -> Result<()> {
         return Err(CpsError::NotPositiveDefinite { what: format!("{what} (eigenvalue {min_eig:e})") });
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::observation::observe;
+    use nalgebra::{DVector, Vector4};
+
+    fn instrument() -> Instrument {
+        Instrument { centring_target_m: 0.001, min_range_m: 0.5, ..Instrument::default() }
+    }
+
+    fn children_truth() -> Vec<Point3<f64>> {
+        vec![Point3::new(8.0, 9.0, 0.3), Point3::new(9.0, -7.0, -0.2), Point3::new(20.0, 1.0, 0.5)]
+    }
+
+    /// A team after one full cycle (so every block and cross-term is non-zero).
+    fn warmed_up() -> (TeamState, ParentPose) {
+        let inst = instrument();
+        let start = ParentPose::new(0.0, 0.0, 0.0, 0.1);
+        let cov0 = Matrix4::from_diagonal(&Vector4::new(1e-4, 2e-4, 5e-5, 1e-7));
+        let mut team = TeamState::new(start, cov0, 3).expect("valid");
+        for (j, c) in children_truth().iter().enumerate() {
+            team.place_child(j, &observe(&start, c).expect("obs"), &inst).expect("place");
+        }
+        let next = ParentPose::new(12.0, 1.0, 0.2, -0.2);
+        let readings: Vec<_> =
+            children_truth().iter().enumerate().map(|(j, c)| (j, observe(&next, c).expect("obs"))).collect();
+        team.fix_parent(&readings, &inst, &FixOptions::default()).expect("fix");
+        (team, next)
+    }
+
+    /// Central-difference Jacobian of `f` at `x`.
+    fn jacobian(f: impl Fn(&DVector<f64>) -> DVector<f64>, x: &DVector<f64>, eps: &[f64]) -> DMatrix<f64> {
+        let y0 = f(x);
+        let mut j = DMatrix::zeros(y0.len(), x.len());
+        for k in 0..x.len() {
+            let (mut a, mut b) = (x.clone(), x.clone());
+            a[k] += eps[k];
+            b[k] -= eps[k];
+            j.set_column(k, &((f(&a) - f(&b)) / (2.0 * eps[k])));
+        }
+        j
+    }
+
+    fn state_vector(team: &TeamState) -> DVector<f64> {
+        let mut v = DVector::zeros(child_offset(team.n_children()));
+        v.fixed_rows_mut::<4>(0).copy_from(&team.parent().to_vector());
+        for j in 0..team.n_children() {
+            v.fixed_rows_mut::<3>(child_offset(j)).copy_from(&team.child(j).expect("placed").coords);
+        }
+        v
+    }
+
+    fn relative_error(a: &DMatrix<f64>, b: &DMatrix<f64>) -> f64 {
+        (a - b).norm() / b.norm()
+    }
+
+    #[test]
+    fn placement_propagates_the_joint_covariance_like_j_p_jt() {
+        let (team, parent) = warmed_up();
+        let inst = instrument();
+        let target = Point3::new(30.0, 15.0, 1.0);
+        let reading = observe(&parent, &target).expect("obs");
+        // Augmented input (state, reading) → new state; independent of TeamState's algebra.
+        let n = child_offset(3);
+        let mut x = DVector::zeros(n + 3);
+        x.rows_mut(0, n).copy_from(&state_vector(&team));
+        x.fixed_rows_mut::<3>(n).copy_from(&reading.to_vector());
+        let f = |x: &DVector<f64>| {
+            let mut y = x.rows(0, n).into_owned();
+            let p = ParentPose::from_vector(&x.fixed_rows::<4>(0).into_owned());
+            let r = Reading { slope_m: x[n], azimuth_rad: x[n + 1], elevation_rad: x[n + 2] };
+            let c = crate::placement::place(&p, &r, 1).expect("place").position;
+            y.fixed_rows_mut::<3>(child_offset(1)).copy_from(&c.coords);
+            y
+        };
+        let j = jacobian(f, &x, &vec![1e-5; n + 3]);
+        let mut p_aug = DMatrix::zeros(n + 3, n + 3);
+        p_aug.view_mut((0, 0), (n, n)).copy_from(team.covariance());
+        p_aug.view_mut((n, n), (3, 3)).copy_from(&inst.reading_covariance(&reading));
+        let expected = &j * p_aug * j.transpose();
+        let mut placed = team.clone();
+        placed.place_child(1, &reading, &inst).expect("place");
+        let err = relative_error(placed.covariance(), &expected);
+        assert!(err < 1e-7, "relative error {err:e}");
+    }
+
+    #[test]
+    fn parent_fix_propagates_the_joint_covariance_like_j_p_jt() {
+        let (team, _) = warmed_up();
+        let inst = instrument();
+        // Re-place children around the current parent, then move and fix.
+        let mut team = team;
+        let here = team.parent();
+        let targets = [Point3::new(25.0, 10.0, 0.0), Point3::new(24.0, -9.0, 0.4), Point3::new(35.0, 2.0, -0.3)];
+        for (j, c) in targets.iter().enumerate() {
+            team.place_child(j, &observe(&here, c).expect("obs"), &inst).expect("place");
+        }
+        let next = ParentPose::new(27.0, 1.0, 0.1, 0.3);
+        let readings: Vec<Reading> = targets.iter().map(|c| observe(&next, c).expect("obs")).collect();
+        let n = child_offset(3);
+        let mut x = DVector::zeros(n + 9);
+        x.rows_mut(0, n).copy_from(&state_vector(&team));
+        for (k, r) in readings.iter().enumerate() {
+            x.fixed_rows_mut::<3>(n + 3 * k).copy_from(&r.to_vector());
+        }
+        // The filter's weights: the children's joint covariance Σ_C. At exact
+        // readings the residuals vanish, so only the gain (not the weights'
+        // own derivative) enters ∂p/∂(C, readings).
+        let sigma_c = team.covariance().view((4, 4), (9, 9)).into_owned();
+        // The black box: Gauss–Newton on perturbed children and readings.
+        let f = |x: &DVector<f64>| {
+            let sighted: Vec<SightedChild> = (0..3)
+                .map(|k| SightedChild {
+                    child: k,
+                    position: Point3::from(x.fixed_rows::<3>(child_offset(k)).into_owned()),
+                    reading: Reading {
+                        slope_m: x[n + 3 * k],
+                        azimuth_rad: x[n + 3 * k + 1],
+                        elevation_rad: x[n + 3 * k + 2],
+                    },
+                })
+                .collect();
+            let opts = FixOptions { position_tolerance_m: 1e-13, heading_tolerance_rad: 1e-15, ..FixOptions::default() };
+            let fix = fix_parent(&sighted, &sigma_c, &inst, &opts).expect("fix");
+            let mut y = x.rows(0, n).into_owned();
+            y.fixed_rows_mut::<4>(0).copy_from(&fix.pose.to_vector());
+            y
+        };
+        let j = jacobian(f, &x, &vec![1e-6; n + 9]);
+        let mut p_aug = DMatrix::zeros(n + 9, n + 9);
+        p_aug.view_mut((0, 0), (n, n)).copy_from(team.covariance());
+        for (k, r) in readings.iter().enumerate() {
+            p_aug.view_mut((n + 3 * k, n + 3 * k), (3, 3)).copy_from(&inst.reading_covariance(r));
+        }
+        let expected = &j * p_aug * j.transpose();
+        let mut fixed = team.clone();
+        let sighted: Vec<(usize, Reading)> = readings.iter().copied().enumerate().collect();
+        fixed.fix_parent(&sighted, &inst, &FixOptions::default()).expect("fix");
+        let err = relative_error(fixed.covariance(), &expected);
+        assert!(err < 1e-6, "relative error {err:e}");
+        // The parent block alone (Σ_0) and its cross-terms (F·cov(C, s)).
+        let err_parent = relative_error(
+            &fixed.covariance().rows(0, 4).into_owned(),
+            &expected.rows(0, 4).into_owned(),
+        );
+        assert!(err_parent < 1e-6, "parent rows: relative error {err_parent:e}");
+    }
+
+    #[test]
+    fn errors_leave_the_state_unchanged() {
+        let (mut team, _) = warmed_up();
+        let before = team.clone();
+        let inst = instrument();
+        let bad = Reading { slope_m: f64::NAN, azimuth_rad: 0.0, elevation_rad: 0.0 };
+        assert!(team.place_child(0, &bad, &inst).is_err());
+        assert!(matches!(team.place_child(7, &bad, &inst), Err(CpsError::UnknownChild { child: 7, team: 3 })));
+        let r = Reading { slope_m: 10.0, azimuth_rad: 0.0, elevation_rad: 0.0 };
+        assert!(matches!(team.fix_parent(&[(0, r)], &inst, &FixOptions::default()), Err(CpsError::TooFewChildren { got: 1 })));
+        assert!(matches!(
+            team.fix_parent(&[(0, r), (0, r)], &inst, &FixOptions::default()),
+            Err(CpsError::DuplicateChild { child: 0 })
+        ));
+        assert_eq!(team, before);
+        let mut fresh = TeamState::new(ParentPose::new(0.0, 0.0, 0.0, 0.0), Matrix4::zeros(), 2).expect("new");
+        assert!(matches!(
+            fresh.fix_parent(&[(0, r), (1, r)], &inst, &FixOptions::default()),
+            Err(CpsError::ChildNotPlaced { child: 0 })
+        ));
+        let asym = Matrix4::new(1.0, 0.5, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0);
+        assert!(TeamState::new(ParentPose::new(0.0, 0.0, 0.0, 0.0), asym, 2).is_err());
+    }
 }

@@ -68,3 +68,20 @@ fn filter_equals_batch_with_three_children_a_corner_and_an_uncertain_start() {
     let start = Matrix4::from_diagonal(&Vector4::new(1e-6, 4e-6, 1e-6, (10.0 * RAD_PER_ARCSEC).powi(2)));
     compare(&common::l_shaped_dance(4.0, &formation), &inst, start);
 }
+
+#[test]
+fn filter_equals_batch_over_150_compact_cycles_where_the_normal_matrix_is_ill_conditioned() {
+    let inst = Instrument { min_range_m: 1.0, ..Instrument::default() };
+    let dance = common::straight_dance(150, 4.0, &common::symmetric(2.0, 4.0));
+    let net = network(&dance, Matrix4::zeros());
+    // Show the premise: the batch normal matrix (whitened JᵀJ) is beyond 1e12.
+    let batch = adjust(&net, &inst, 3).expect("adjust");
+    let eig = batch.covariance.clone().symmetric_eigenvalues();
+    let (lo, hi) = (eig.min(), eig.max());
+    assert!(hi / lo > 1e12, "condition {:e}", hi / lo);
+    let filter = predict(&dance, &inst, &Matrix4::zeros()).expect("predict");
+    let f = filter.last().expect("cycles").covariance;
+    let b = batch.station_covariance(dance.stations.len() - 1);
+    let rel = (f - b).norm() / b.norm();
+    assert!(rel < 1e-6, "relative difference {rel:e}");
+}
