@@ -74,11 +74,7 @@ impl Adjustment {
     }
 
     fn station_offset(&self, k: usize) -> Option<usize> {
-        if self.start_free {
-            Some(4 * k)
-        } else {
-            k.checked_sub(1).map(|k| 4 * k)
-        }
+        if self.start_free { Some(4 * k) } else { k.checked_sub(1).map(|k| 4 * k) }
     }
 }
 
@@ -104,10 +100,11 @@ pub fn adjust(network: &Network, instrument: &Instrument, max_iterations: usize)
     } else {
         None
     };
-    let prior = network.stations.first().copied().ok_or(CpsError::DegenerateGeometry {
-        what: "network without stations".into(),
-        condition: f64::INFINITY,
-    })?;
+    let prior = network
+        .stations
+        .first()
+        .copied()
+        .ok_or(CpsError::DegenerateGeometry { what: "network without stations".into(), condition: f64::INFINITY })?;
 
     let mut stations = network.stations.clone();
     let mut points = network.points.clone();
@@ -184,7 +181,7 @@ pub fn adjust(network: &Network, instrument: &Instrument, max_iterations: usize)
             let vtv: f64 = (0..n_obs).map(|i| v[(i, 0)].powi(2)).sum();
             let r = qr.thin_R();
             let condition = equilibrated_condition(jac.as_ref(), r);
-            if !(condition <= 1e14) {
+            if condition.is_nan() || condition > 1e14 {
                 return Err(CpsError::DegenerateGeometry {
                     what: "the readings do not determine every station and point".into(),
                     condition,

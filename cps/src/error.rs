@@ -104,9 +104,5 @@ pub type Result<T, E = CpsError> = std::result::Result<T, E>;
 
 /// Error when `value` is not finite.
 pub(crate) fn ensure_finite(what: impl FnOnce() -> String, value: f64) -> Result<f64> {
-    if value.is_finite() {
-        Ok(value)
-    } else {
-        Err(CpsError::NonFinite { what: what(), value })
-    }
+    if value.is_finite() { Ok(value) } else { Err(CpsError::NonFinite { what: what(), value }) }
 }

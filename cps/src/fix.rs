@@ -40,12 +40,7 @@ pub struct FixOptions {
 
 impl Default for FixOptions {
     fn default() -> Self {
-        Self {
-            max_iterations: 20,
-            position_tolerance_m: 1e-10,
-            heading_tolerance_rad: 1e-12,
-            initial: None,
-        }
+        Self { max_iterations: 20, position_tolerance_m: 1e-10, heading_tolerance_rad: 1e-12, initial: None }
     }
 }
 
@@ -166,11 +161,7 @@ pub fn closed_form_start(children: &[SightedChild]) -> Result<ParentPose> {
     let (s, c) = heading.sin_cos();
     let rotated = Vector2::new(c * local_mean.x - s * local_mean.y, s * local_mean.x + c * local_mean.y);
     let xy = world_mean - rotated;
-    let z = children
-        .iter()
-        .map(|c| c.position.z - c.reading.slope_m * c.reading.elevation_rad.sin())
-        .sum::<f64>()
-        / n;
+    let z = children.iter().map(|c| c.position.z - c.reading.slope_m * c.reading.elevation_rad.sin()).sum::<f64>() / n;
     Ok(ParentPose::new(xy.x, xy.y, z, heading))
 }
 
@@ -241,12 +232,12 @@ struct Step {
 /// Solves the whitened system Ã dx ≈ ṽ by QR.
 fn whitened_step(lin: &Linearisation) -> Result<Step> {
     let l = lin.sigma_l_chol.l();
-    let a_w = l.solve_lower_triangular(&lin.a).ok_or_else(|| CpsError::NotPositiveDefinite {
-        what: "Σ_L of the parent fix".into(),
-    })?;
-    let v_w = l.solve_lower_triangular(&lin.misclosure).ok_or_else(|| CpsError::NotPositiveDefinite {
-        what: "Σ_L of the parent fix".into(),
-    })?;
+    let a_w = l
+        .solve_lower_triangular(&lin.a)
+        .ok_or_else(|| CpsError::NotPositiveDefinite { what: "Σ_L of the parent fix".into() })?;
+    let v_w = l
+        .solve_lower_triangular(&lin.misclosure)
+        .ok_or_else(|| CpsError::NotPositiveDefinite { what: "Σ_L of the parent fix".into() })?;
     let col_norms: Vec<f64> = (0..4).map(|k| a_w.column(k).norm()).collect();
     let qr = a_w.clone().qr();
     let r_dyn = qr.r();
@@ -254,7 +245,7 @@ fn whitened_step(lin: &Linearisation) -> Result<Step> {
     let diag: Vec<f64> = (0..4).map(|k| (r[(k, k)] / col_norms[k].max(f64::MIN_POSITIVE)).abs()).collect();
     let (dmin, dmax) = diag.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &d| (lo.min(d), hi.max(d)));
     let condition = if dmin > 0.0 { dmax / dmin } else { f64::INFINITY };
-    if !(condition <= MAX_CONDITION) {
+    if condition.is_nan() || condition > MAX_CONDITION {
         return Err(CpsError::DegenerateGeometry {
             what: "the children do not determine the parent's x, y, z and heading".into(),
             condition,
@@ -317,8 +308,8 @@ pub fn fix_parent(
         if !pose.to_vector().iter().all(|v| v.is_finite()) {
             return Err(CpsError::Diverged { what: "parent fix".into(), iterations });
         }
-        let converged = dx.fixed_rows::<3>(0).amax() < options.position_tolerance_m
-            && dx[3].abs() < options.heading_tolerance_rad;
+        let converged =
+            dx.fixed_rows::<3>(0).amax() < options.position_tolerance_m && dx[3].abs() < options.heading_tolerance_rad;
         if converged || iterations >= options.max_iterations {
             break (lin, step, converged);
         }
@@ -327,7 +318,13 @@ pub fn fix_parent(
 }
 
 /// Covariance, F map and σ0² from the last linearisation.
-fn statistics(pose: ParentPose, lin: Linearisation, step: Step, iterations: usize, converged: bool) -> Result<ParentFix> {
+fn statistics(
+    pose: ParentPose,
+    lin: Linearisation,
+    step: Step,
+    iterations: usize,
+    converged: bool,
+) -> Result<ParentFix> {
     let Step { dx, r, condition, a_w, v_w } = step;
     let n_obs = lin.a.nrows();
     // Σ_0 = (RᵀR)⁻¹ = R⁻¹R⁻ᵀ (eq. 15).
@@ -337,9 +334,11 @@ fn statistics(pose: ParentPose, lin: Linearisation, step: Step, iterations: usiz
     let mut covariance = r_inv * r_inv.transpose();
     covariance = 0.5 * (covariance + covariance.transpose());
     // B = Σ_0 Aᵀ Σ_L⁻¹ (eq. 14), F = −B H_c (eq. 16); Σ_L⁻¹A = L⁻ᵀ Ã.
-    let sigma_l_inv_a = lin.sigma_l_chol.l_dirty().tr_solve_lower_triangular(&a_w).ok_or_else(|| {
-        CpsError::NotPositiveDefinite { what: "Σ_L of the parent fix".into() }
-    })?;
+    let sigma_l_inv_a = lin
+        .sigma_l_chol
+        .l_dirty()
+        .tr_solve_lower_triangular(&a_w)
+        .ok_or_else(|| CpsError::NotPositiveDefinite { what: "Σ_L of the parent fix".into() })?;
     let b = DMatrix::from_fn(4, n_obs, |i, j| (0..4).map(|k| covariance[(i, k)] * sigma_l_inv_a[(j, k)]).sum());
     let f_map = -(&b * &lin.h_c);
     // Residuals after the last step, v = l − f(p) − A dx; vᵀΣ_L⁻¹v = |ṽ − Ã dx|².

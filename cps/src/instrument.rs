@@ -88,11 +88,7 @@ impl Instrument {
         for (name, value) in fields {
             ensure_finite(|| name.to_string(), value)?;
             if value < 0.0 {
-                return Err(CpsError::OutOfRange {
-                    what: name.to_string(),
-                    value,
-                    expected: "≥ 0".into(),
-                });
+                return Err(CpsError::OutOfRange { what: name.to_string(), value, expected: "≥ 0".into() });
             }
         }
         ensure_finite(|| "prism_constant_m".into(), self.prism_constant_m)?;
@@ -169,11 +165,7 @@ mod tests {
 
     #[test]
     fn distance_error_models() {
-        let mut i = Instrument {
-            sigma_distance_m: 0.003,
-            sigma_distance_ppm: 2.0,
-            ..Instrument::default()
-        };
+        let mut i = Instrument { sigma_distance_m: 0.003, sigma_distance_ppm: 2.0, ..Instrument::default() };
         // 3 mm ⊕ 2 ppm of 2 km (4 mm) = 5 mm; linear: 7 mm.
         assert!((i.sigma_distance_at(2000.0) - 0.005).abs() < 1e-15);
         i.distance_model = DistanceErrorModel::Linear;
@@ -182,11 +174,7 @@ mod tests {
 
     #[test]
     fn centring_adds_c2_over_h2_to_direction_variance() {
-        let i = Instrument {
-            centring_instrument_m: 0.001,
-            centring_target_m: 0.002,
-            ..Instrument::default()
-        };
+        let i = Instrument { centring_instrument_m: 0.001, centring_target_m: 0.002, ..Instrument::default() };
         let reading = Reading { slope_m: 20.0, azimuth_rad: 0.3, elevation_rad: (0.6f64).asin() };
         let h = 16.0; // 20 · cos(asin 0.6) = 20 · 0.8
         let [_, var_phi, var_psi] = i.reading_variances(&reading);

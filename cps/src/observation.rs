@@ -95,10 +95,7 @@ pub fn observe(parent: &ParentPose, child: &Point3<f64>) -> Result<Reading> {
     let h2 = d.x * d.x + d.y * d.y;
     let h = h2.sqrt();
     if h < MIN_HORIZONTAL_M {
-        return Err(CpsError::CoincidentPoints {
-            what: "parent and child (horizontally)".into(),
-            separation_m: h,
-        });
+        return Err(CpsError::CoincidentPoints { what: "parent and child (horizontally)".into(), separation_m: h });
     }
     Ok(Reading {
         slope_m: (h2 + d.z * d.z).sqrt(),
@@ -128,10 +125,7 @@ pub fn observe_with_jacobians(parent: &ParentPose, child: &Point3<f64>) -> Resul
     let h2 = d.x * d.x + d.y * d.y;
     let h = h2.sqrt();
     if h < MIN_HORIZONTAL_M {
-        return Err(CpsError::CoincidentPoints {
-            what: "parent and child (horizontally)".into(),
-            separation_m: h,
-        });
+        return Err(CpsError::CoincidentPoints { what: "parent and child (horizontally)".into(), separation_m: h });
     }
     let r2 = h2 + d.z * d.z;
     let r = r2.sqrt();
@@ -168,8 +162,7 @@ mod tests {
         let dist = rng.random_range(2.0..300.0);
         let az = rng.random_range(-3.1..3.1f64);
         let el = rng.random_range(-0.6..0.6f64);
-        let child = parent.position
-            + dist * Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
+        let child = parent.position + dist * Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
         (parent, child)
     }
 
@@ -228,10 +221,7 @@ mod tests {
     #[test]
     fn vertical_sight_line_is_an_error_not_nan() {
         let parent = ParentPose::new(0.0, 0.0, 0.0, 0.0);
-        assert!(matches!(
-            observe(&parent, &Point3::new(0.0, 0.0, 5.0)),
-            Err(CpsError::CoincidentPoints { .. })
-        ));
+        assert!(matches!(observe(&parent, &Point3::new(0.0, 0.0, 5.0)), Err(CpsError::CoincidentPoints { .. })));
         assert!(observation_jacobians(&parent, &Point3::new(0.0, 0.0, 5.0)).is_err());
     }
 

@@ -60,11 +60,8 @@ mod tests {
                 rng.random_range(-2.0..2.0),
                 rng.random_range(-3.0..3.0),
             );
-            let child = Point3::new(
-                rng.random_range(-50.0..50.0),
-                rng.random_range(-50.0..50.0),
-                rng.random_range(-2.0..2.0),
-            );
+            let child =
+                Point3::new(rng.random_range(-50.0..50.0), rng.random_range(-50.0..50.0), rng.random_range(-2.0..2.0));
             let reading = observe(&parent, &child).expect("regular");
             let p = place(&parent, &reading, 0).expect("valid");
             assert!((p.position - child).norm() < 1e-10);

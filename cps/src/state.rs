@@ -291,7 +291,8 @@ mod tests {
                     },
                 })
                 .collect();
-            let opts = FixOptions { position_tolerance_m: 1e-13, heading_tolerance_rad: 1e-15, ..FixOptions::default() };
+            let opts =
+                FixOptions { position_tolerance_m: 1e-13, heading_tolerance_rad: 1e-15, ..FixOptions::default() };
             let fix = fix_parent(&sighted, &sigma_c, &inst, &opts).expect("fix");
             let mut y = x.rows(0, n).into_owned();
             y.fixed_rows_mut::<4>(0).copy_from(&fix.pose.to_vector());
@@ -310,10 +311,7 @@ mod tests {
         let err = relative_error(fixed.covariance(), &expected);
         assert!(err < 1e-6, "relative error {err:e}");
         // The parent block alone (Σ_0) and its cross-terms (F·cov(C, s)).
-        let err_parent = relative_error(
-            &fixed.covariance().rows(0, 4).into_owned(),
-            &expected.rows(0, 4).into_owned(),
-        );
+        let err_parent = relative_error(&fixed.covariance().rows(0, 4).into_owned(), &expected.rows(0, 4).into_owned());
         assert!(err_parent < 1e-6, "parent rows: relative error {err_parent:e}");
     }
 
@@ -326,7 +324,10 @@ mod tests {
         assert!(team.place_child(0, &bad, &inst).is_err());
         assert!(matches!(team.place_child(7, &bad, &inst), Err(CpsError::UnknownChild { child: 7, team: 3 })));
         let r = Reading { slope_m: 10.0, azimuth_rad: 0.0, elevation_rad: 0.0 };
-        assert!(matches!(team.fix_parent(&[(0, r)], &inst, &FixOptions::default()), Err(CpsError::TooFewChildren { got: 1 })));
+        assert!(matches!(
+            team.fix_parent(&[(0, r)], &inst, &FixOptions::default()),
+            Err(CpsError::TooFewChildren { got: 1 })
+        ));
         assert!(matches!(
             team.fix_parent(&[(0, r), (0, r)], &inst, &FixOptions::default()),
             Err(CpsError::DuplicateChild { child: 0 })

@@ -1,5 +1,4 @@
 //! The `cps-survey` command line: argument parsing and dispatch.
-#![allow(clippy::print_stdout, clippy::print_stderr)]
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -44,25 +43,38 @@ pub enum Outcome {
     AcceptanceFailed,
 }
 
-/// Runs a parsed command. Errors mean exit 2.
-pub fn run(cli: Cli) -> anyhow::Result<Outcome> {
+/// The process exit code of a command's result: 0 success, 1 acceptance
+/// failed, 2 error.
+pub fn exit_code(result: &anyhow::Result<Outcome>) -> u8 {
+    match result {
+        Ok(Outcome::Success) => 0,
+        Ok(Outcome::AcceptanceFailed) => 1,
+        Err(_) => 2,
+    }
+}
+
+/// Runs a parsed command, writing its report to `out`. Errors mean exit 2.
+pub fn run(cli: Cli, out: &mut dyn Write) -> anyhow::Result<Outcome> {
     match cli.command {
         Command::Predict { mission, json } => {
             let mission = Mission::load(&mission)?;
             let prediction = crate::predict::prediction(&mission)?;
-            let mut out = std::io::stdout().lock();
             if json {
-                crate::predict::write_json(&mut out, &mission, &prediction)?;
+                crate::predict::write_json(out, &mission, &prediction)?;
             } else {
-                crate::predict::write_table(&mut out, &mission, &prediction)?;
+                crate::predict::write_table(out, &mission, &prediction)?;
             }
             out.flush()?;
-            Ok(if crate::predict::accepted(&mission, &prediction) { Outcome::Success } else { Outcome::AcceptanceFailed })
+            Ok(if crate::predict::accepted(&mission, &prediction) {
+                Outcome::Success
+            } else {
+                Outcome::AcceptanceFailed
+            })
         }
         Command::Validate { mission } => {
             let m = Mission::load(&mission)?;
             crate::predict::dance(&m)?;
-            println!("{}: ok (mission \"{}\", {} children)", mission.display(), m.name, m.children.len());
+            writeln!(out, "{}: ok (mission \"{}\", {} children)", mission.display(), m.name, m.children.len())?;
             Ok(Outcome::Success)
         }
     }

@@ -180,18 +180,12 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Parts> {
     plan_t.finish(r);
 
     let mut acc = root.table(r, "acceptance");
-    let max_xy = acc.optional(r, "max_final_sigma_xy_m", |r, v, f| r.number_in(v, f, 0.0, false, None).map(At::into_inner));
+    let max_xy =
+        acc.optional(r, "max_final_sigma_xy_m", |r, v, f| r.number_in(v, f, 0.0, false, None).map(At::into_inner));
     acc.finish(r);
 
     let (plan, spans) = plan?;
-    Some((
-        name?,
-        children?,
-        total_station?,
-        plan,
-        Acceptance { max_final_sigma_xy_m: max_xy? },
-        spans,
-    ))
+    Some((name?, children?, total_station?, plan, Acceptance { max_final_sigma_xy_m: max_xy? }, spans))
 }
 
 fn read_children(r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, field: &str) -> Option<Vec<String>> {
@@ -220,7 +214,8 @@ fn read_total_station(r: &mut Reader<'_>, t: &mut Table<'_, '_>) -> Option<Instr
     let positive = |r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, f: &str| {
         r.number_in(v, f, 0.0, false, None).map(At::into_inner)
     };
-    let sigma_distance_mm = t.required(r, "sigma_distance_mm", "the distance error's constant part in mm (> 0)", positive);
+    let sigma_distance_mm =
+        t.required(r, "sigma_distance_mm", "the distance error's constant part in mm (> 0)", positive);
     let ppm = t.optional(r, "sigma_distance_ppm", nonneg);
     let model = t.optional(r, "distance_error_model", |r, v, f| {
         let s = r.string(v, f)?;
@@ -238,15 +233,17 @@ fn read_total_station(r: &mut Reader<'_>, t: &mut Table<'_, '_>) -> Option<Instr
     let ci = t.optional(r, "centring_instrument_mm", nonneg);
     let ct = t.optional(r, "centring_target_mm", nonneg);
     let prism = t.optional(r, "prism_constant_mm", |r, v, f| r.number(v, f).map(At::into_inner));
-    let min_range = t.optional(r, "min_range_m", |r, v, f| r.number_in(v, f, 0.0, true, None).map(|x| (*x.get_ref(), x.span())));
-    let max_range = t.optional(r, "max_range_m", |r, v, f| r.number_in(v, f, 0.0, false, None).map(|x| (*x.get_ref(), x.span())));
+    let min_range =
+        t.optional(r, "min_range_m", |r, v, f| r.number_in(v, f, 0.0, true, None).map(|x| (*x.get_ref(), x.span())));
+    let max_range =
+        t.optional(r, "max_range_m", |r, v, f| r.number_in(v, f, 0.0, false, None).map(|x| (*x.get_ref(), x.span())));
     let (min_range, max_range) = (min_range?, max_range?);
-    if let (Some((lo, _)), Some((hi, span))) = (&min_range, &max_range) {
-        if hi <= lo {
-            let field = "instruments.total_station.max_range_m";
-            r.problem(span, field, format!("value {hi} is out of range; expected > min_range_m = {lo}"));
-            return None;
-        }
+    if let (Some((lo, _)), Some((hi, span))) = (&min_range, &max_range)
+        && hi <= lo
+    {
+        let field = "instruments.total_station.max_range_m";
+        r.problem(span, field, format!("value {hi} is out of range; expected > min_range_m = {lo}"));
+        return None;
     }
     Some(Instrument {
         sigma_distance_m: sigma_distance_mm? * 1e-3,
@@ -273,7 +270,11 @@ fn read_plan(r: &mut Reader<'_>, t: &mut Table<'_, '_>, n_children: Option<usize
         for k in 1..pts.len() {
             let (a, b) = (pts[k - 1].get_ref(), pts[k].get_ref());
             if (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt() <= 1e-9 {
-                r.problem(&pts[k].span(), &format!("{f}[{k}]"), "repeats the previous waypoint; expected a segment of non-zero length");
+                r.problem(
+                    &pts[k].span(),
+                    &format!("{f}[{k}]"),
+                    "repeats the previous waypoint; expected a segment of non-zero length",
+                );
                 ok = false;
             }
         }
@@ -284,15 +285,23 @@ fn read_plan(r: &mut Reader<'_>, t: &mut Table<'_, '_>, n_children: Option<usize
     });
     let formation = t.required(r, "formation_m", "one offset [forward, left, up] in metres per child", |r, v, f| {
         let offsets = r.array(v, f, |r, e, f| r.point3(e, f))?;
-        if let Some(n) = n_children {
-            if offsets.len() != n {
-                r.problem(&v.span(), f, format!("{} offsets given; expected one per child ({n}, as in team.children)", offsets.len()));
-                return None;
-            }
+        if let Some(n) = n_children
+            && offsets.len() != n
+        {
+            r.problem(
+                &v.span(),
+                f,
+                format!("{} offsets given; expected one per child ({n}, as in team.children)", offsets.len()),
+            );
+            return None;
         }
         for (k, o) in offsets.iter().enumerate() {
             if o.get_ref()[0].hypot(o.get_ref()[1]) < 1e-6 {
-                r.problem(&o.span(), &format!("{f}[{k}]"), "the child stands vertically above or below the parent; expected a horizontal offset");
+                r.problem(
+                    &o.span(),
+                    &format!("{f}[{k}]"),
+                    "the child stands vertically above or below the parent; expected a horizontal offset",
+                );
                 return None;
             }
         }
@@ -309,7 +318,8 @@ fn read_plan(r: &mut Reader<'_>, t: &mut Table<'_, '_>, n_children: Option<usize
         }
         ok.then(|| *p.get_ref())
     });
-    let start_heading = t.optional(r, "start_sigma_heading_arcsec", |r, v, f| r.number_in(v, f, 0.0, true, None).map(At::into_inner));
+    let start_heading =
+        t.optional(r, "start_sigma_heading_arcsec", |r, v, f| r.number_in(v, f, 0.0, true, None).map(At::into_inner));
     let (route, stride, formation) = (route?, stride?, formation?);
     let s = start_sigma?.unwrap_or([0.0; 3]);
     let h = start_heading?.unwrap_or(0.0) * RAD_PER_ARCSEC;

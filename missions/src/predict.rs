@@ -52,14 +52,15 @@ fn plan_diagnostics(mission: &Mission, errors: Vec<PlanError>) -> Diagnostics {
                 let Some(entry) = seen.iter().position(|(c, p, _)| c == child && p == phase) else { continue };
                 let count = seen.remove(entry).2;
                 let span = spans.formation_m.get(*child).cloned().unwrap_or(spans.plan.clone());
-                let name = mission.children.get(*child).map_or(String::new(), |n| format!(" (child \"{n}\")"));
+                let name = mission.children.get(*child).map_or(String::new(), |n| format!("child \"{n}\": "));
                 let more = if count > 1 { format!(" — and in {} more cycle(s)", count - 1) } else { String::new() };
-                out.push(mission.diagnostic(&span, &format!("plan.formation_m[{child}]{name}"), format!("{e}{more}")));
+                out.push(mission.diagnostic(&span, &format!("plan.formation_m[{child}]"), format!("{name}{e}{more}")));
                 continue;
             }
-            PlanError::ZeroLengthSegment { waypoint } => {
-                (spans.route_m.get(*waypoint).cloned().unwrap_or(spans.plan.clone()), format!("plan.route_m[{waypoint}]"))
-            }
+            PlanError::ZeroLengthSegment { waypoint } => (
+                spans.route_m.get(*waypoint).cloned().unwrap_or(spans.plan.clone()),
+                format!("plan.route_m[{waypoint}]"),
+            ),
             PlanError::BadStride { .. } => (spans.stride_m.clone(), "plan.stride_m".to_string()),
             PlanError::FormationSize { .. } | PlanError::TooFewChildren { .. } => {
                 (spans.formation_m.first().cloned().unwrap_or(spans.plan.clone()), "plan.formation_m".to_string())
@@ -135,7 +136,7 @@ pub fn accepted(mission: &Mission, prediction: &Prediction) -> bool {
 }
 
 /// Writes the prediction as one JSON object.
-pub fn write_json(out: &mut impl Write, mission: &Mission, prediction: &Prediction) -> std::io::Result<()> {
+pub fn write_json(out: &mut dyn Write, mission: &Mission, prediction: &Prediction) -> std::io::Result<()> {
     let cycles = prediction
         .cycles
         .iter()
@@ -172,7 +173,7 @@ pub fn write_json(out: &mut impl Write, mission: &Mission, prediction: &Predicti
 }
 
 /// Writes the per-cycle table and the final summary.
-pub fn write_table(out: &mut impl Write, mission: &Mission, prediction: &Prediction) -> std::io::Result<()> {
+pub fn write_table(out: &mut dyn Write, mission: &Mission, prediction: &Prediction) -> std::io::Result<()> {
     let n = prediction.cycles.len();
     let dist = prediction.last().map_or(0.0, |l| l.distance_m);
     writeln!(out, "mission {}: {n} cycles, {} children, {dist:.1} m of route", mission.name, mission.children.len())?;
@@ -205,11 +206,21 @@ pub fn write_table(out: &mut impl Write, mission: &Mission, prediction: &Predict
         writeln!(out, "  σx² + σy²      {:.6} m²  (√ = {:.4} m)", l.sigma_xy2_m2(), l.sigma_xy2_m2().sqrt())?;
         writeln!(out, "  σz             {:.4} m", l.covariance[(2, 2)].sqrt())?;
         writeln!(out, "  σθ             {:.2}″", l.sigma_heading_rad() / RAD_PER_ARCSEC)?;
-        writeln!(out, "  95 % ellipse   {:.4} m × {:.4} m, major axis at {:.1}°", e.semi_major_m, e.semi_minor_m, e.orientation_rad.to_degrees())?;
+        writeln!(
+            out,
+            "  95 % ellipse   {:.4} m × {:.4} m, major axis at {:.1}°",
+            e.semi_major_m,
+            e.semi_minor_m,
+            e.orientation_rad.to_degrees()
+        )?;
         writeln!(out, "  drift          {:.4} % of distance", l.drift_percent())?;
         if let Some(max) = mission.acceptance.max_final_sigma_xy_m {
             let verdict = if accepted(mission, prediction) { "PASS" } else { "FAIL" };
-            writeln!(out, "  acceptance     {verdict}: √(σx² + σy²) = {:.4} m, limit {max} m", l.sigma_xy2_m2().sqrt())?;
+            writeln!(
+                out,
+                "  acceptance     {verdict}: √(σx² + σy²) = {:.4} m, limit {max} m",
+                l.sigma_xy2_m2().sqrt()
+            )?;
         }
     }
     Ok(())

@@ -27,6 +27,8 @@ pub struct Table<'d, 'i> {
     span: Range<usize>,
     path: String,
     read: Vec<&'static str>,
+    /// The value under this name is not a table (already reported).
+    broken: bool,
 }
 
 fn kind(v: &DeValue<'_>) -> &'static str {
@@ -134,7 +136,7 @@ impl<'s> Reader<'s> {
 impl<'d, 'i> Table<'d, 'i> {
     /// The document's root table.
     pub fn root(doc: &'d Spanned<DeTable<'i>>) -> Self {
-        Self { table: Some(doc.get_ref()), span: doc.span(), path: String::new(), read: Vec::new() }
+        Self { table: Some(doc.get_ref()), span: doc.span(), path: String::new(), read: Vec::new(), broken: false }
     }
 
     fn field(&self, key: &str) -> String {
@@ -157,13 +159,13 @@ impl<'d, 'i> Table<'d, 'i> {
         let path = self.field(key);
         match self.get(key) {
             Some(v) => match v.get_ref() {
-                DeValue::Table(t) => Table { table: Some(t), span: v.span(), path, read: Vec::new() },
+                DeValue::Table(t) => Table { table: Some(t), span: v.span(), path, read: Vec::new(), broken: false },
                 other => {
                     r.problem(&v.span(), &path, format!("expected a table, found {}", kind(other)));
-                    Table { table: None, span: v.span(), path, read: vec![] }
+                    Table { table: None, span: v.span(), path, read: vec![], broken: true }
                 }
             },
-            None => Table { table: None, span: self.span.clone(), path, read: vec![] },
+            None => Table { table: None, span: self.span.clone(), path, read: vec![], broken: self.broken },
         }
     }
 
@@ -183,6 +185,7 @@ impl<'d, 'i> Table<'d, 'i> {
         let field = self.field(key);
         match self.get(key) {
             Some(v) => f(r, v, &field),
+            None if self.broken => None,
             None => {
                 let what = if self.path.is_empty() { "the file".to_string() } else { format!("[{}]", self.path) };
                 r.problem(&self.span, &field, format!("missing key `{key}` in {what}; expected {expected}"));
@@ -214,7 +217,11 @@ impl<'d, 'i> Table<'d, 'i> {
                 known.sort_unstable();
                 known.dedup();
                 let field = self.field(k.get_ref());
-                r.problem(&k.span(), &field, format!("unknown key `{}`; expected one of: {}", k.get_ref(), known.join(", ")));
+                r.problem(
+                    &k.span(),
+                    &field,
+                    format!("unknown key `{}`; expected one of: {}", k.get_ref(), known.join(", ")),
+                );
             }
         }
     }

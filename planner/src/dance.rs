@@ -47,7 +47,12 @@ pub fn leapfrog(stations: Vec<Station>, formation_m: &Formation) -> Result<Dance
         .map(|to| {
             let s = &stations[to - 1];
             let rot = Rotation3::from_axis_angle(&Vector3::z_axis(), s.heading_rad);
-            DanceCycle { cycle: to, from: to - 1, to, children: formation_m.iter().map(|o| s.position + rot * o).collect() }
+            DanceCycle {
+                cycle: to,
+                from: to - 1,
+                to,
+                children: formation_m.iter().map(|o| s.position + rot * o).collect(),
+            }
         })
         .collect();
     Ok(Dance { stations, cycles })

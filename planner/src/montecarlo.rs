@@ -107,11 +107,8 @@ pub fn monte_carlo(
     let k = dance.cycles.len();
     let mut second = vec![Matrix4::<f64>::zeros(); k];
     let mut nees = vec![0.0; k];
-    let inverses: Vec<Option<Matrix4<f64>>> = prediction
-        .cycles
-        .iter()
-        .map(|c| c.covariance.cholesky().map(|ch| ch.inverse()))
-        .collect();
+    let inverses: Vec<Option<Matrix4<f64>>> =
+        prediction.cycles.iter().map(|c| c.covariance.cholesky().map(|ch| ch.inverse())).collect();
     for t in 0..trials {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         rng.set_stream(t as u64);

@@ -62,7 +62,11 @@ impl Prediction {
 /// Runs the dance's nominal readings through [`TeamState`]. The start pose is
 /// station 0 with `start_covariance` (zero: known exactly). Fails on the first
 /// sight line outside the instrument's range or degenerate geometry.
-pub fn predict(dance: &Dance, instrument: &Instrument, start_covariance: &Matrix4<f64>) -> Result<Prediction, PlanError> {
+pub fn predict(
+    dance: &Dance,
+    instrument: &Instrument,
+    start_covariance: &Matrix4<f64>,
+) -> Result<Prediction, PlanError> {
     if let Some(first) = dance.range_violations(instrument).into_iter().next() {
         return Err(first);
     }

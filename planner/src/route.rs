@@ -33,7 +33,7 @@ pub fn stations(route_m: &[Point3<f64>], stride_m: f64) -> Result<Vec<Station>, 
     for (k, pair) in route_m.windows(2).enumerate() {
         let (a, b) = (pair[0], pair[1]);
         let length = (b - a).norm();
-        if !(length > 1e-9) {
+        if length.is_nan() || length <= 1e-9 {
             return Err(PlanError::ZeroLengthSegment { waypoint: k + 1 });
         }
         let dir = (b - a) / length;

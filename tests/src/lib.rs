@@ -1,1 +1,51 @@
-//! placeholder
+//! Helpers for the end-to-end tests of `cps-survey`: paths to the example
+//! missions and an in-process runner of the command line that captures its
+//! output and exit code.
+#![warn(missing_docs)]
+
+use std::path::{Path, PathBuf};
+
+use clap::Parser;
+use missions::cli::{Cli, exit_code, run};
+
+/// The workspace root.
+pub fn workspace() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().map(Path::to_path_buf).unwrap_or_default()
+}
+
+/// An example mission by file name (`missions/examples/NAME`).
+pub fn example(name: &str) -> PathBuf {
+    workspace().join("missions/examples").join(name)
+}
+
+/// What one command produced.
+#[derive(Debug)]
+pub struct Run {
+    /// 0 success, 1 acceptance failed, 2 error.
+    pub code: u8,
+    /// The report written to standard output.
+    pub stdout: String,
+    /// The error chain, as `main` prints it (empty on success).
+    pub stderr: String,
+}
+
+/// Runs `cps-survey ARGS…` in-process.
+pub fn cps_survey<I, S>(args: I) -> Run
+where
+    I: IntoIterator<Item = S>,
+    S: Into<std::ffi::OsString> + Clone,
+{
+    let argv: Vec<std::ffi::OsString> =
+        std::iter::once("cps-survey".into()).chain(args.into_iter().map(Into::into)).collect();
+    let cli = match Cli::try_parse_from(argv) {
+        Ok(cli) => cli,
+        Err(e) => return Run { code: 2, stdout: String::new(), stderr: e.to_string() },
+    };
+    let mut out = Vec::new();
+    let result = run(cli, &mut out);
+    let stderr = match &result {
+        Ok(_) => String::new(),
+        Err(e) => e.chain().map(ToString::to_string).collect::<Vec<_>>().join("\n"),
+    };
+    Run { code: exit_code(&result), stdout: String::from_utf8_lossy(&out).into_owned(), stderr }
+}

@@ -1,0 +1,80 @@
+//! `cps-survey predict` and `validate` end to end.
+
+use serde_json::Value;
+use tests::{cps_survey, example};
+
+fn json(run: &tests::Run) -> Value {
+    serde_json::from_str(&run.stdout).expect("predict --json prints one JSON object")
+}
+
+#[test]
+fn paper_1km_predicts_100_cycles_near_the_model_floor() {
+    let run = cps_survey(["predict".into(), example("paper-1km.toml").into_os_string(), "--json".into()]);
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    let v = json(&run);
+    let cycles = v["cycles"].as_array().expect("cycles");
+    assert_eq!(cycles.len(), 100);
+    assert_eq!(cycles[0]["cycle"], 1);
+    assert_eq!(cycles[0]["distance_m"], 10.0);
+    let last = &cycles[99];
+    assert_eq!(last["parent"]["x_m"], 1000.0);
+    let cov = last["covariance"].as_array().expect("4×4");
+    assert_eq!(cov.len(), 4);
+    let c = |i: usize, j: usize| cov[i][j].as_f64().expect("number");
+    for i in 0..4 {
+        for j in 0..4 {
+            assert_eq!(c(i, j), c(j, i), "symmetric");
+        }
+    }
+    let sxy2 = v["final"]["sigma_xy2_m2"].as_f64().expect("final");
+    assert!((sxy2 - (c(0, 0) + c(1, 1))).abs() < 1e-15);
+    // The floor of the model for 3 mm / 5″ is ≈ 0.0204 m²; (10, ±50) m is within 5 % of it.
+    assert!((0.0204..0.0215).contains(&sxy2), "σx²+σy² = {sxy2}");
+    assert!(v["final"]["accepted"].as_bool().expect("bool"));
+    let e = &last["ellipse_95_m"];
+    assert!(e["semi_major_m"].as_f64().expect("a") >= e["semi_minor_m"].as_f64().expect("b"));
+}
+
+#[test]
+fn the_table_has_one_row_per_cycle_and_a_summary() {
+    let run = cps_survey(["predict".into(), example("indoor-compact.toml").into_os_string()]);
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    let is_row = |l: &str| {
+        let cols: Vec<&str> = l.split_whitespace().collect();
+        cols.len() == 10 && cols.iter().all(|c| c.parse::<f64>().is_ok())
+    };
+    let rows = run.stdout.lines().filter(|l| is_row(l)).count();
+    assert_eq!(rows, 12, "{}", run.stdout);
+    assert!(run.stdout.contains("σx² + σy²"));
+    assert!(run.stdout.contains("acceptance     PASS"));
+}
+
+#[test]
+fn failing_acceptance_exits_1() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let text = std::fs::read_to_string(example("paper-1km.toml")).expect("read");
+    let strict = text.replace("max_final_sigma_xy_m = 0.25", "max_final_sigma_xy_m = 0.01");
+    let path = dir.path().join("strict.toml");
+    std::fs::write(&path, strict).expect("write");
+    let run = cps_survey(["predict".into(), path.into_os_string()]);
+    assert_eq!(run.code, 1);
+    assert!(run.stdout.contains("FAIL"));
+}
+
+#[test]
+fn every_example_validates() {
+    for entry in std::fs::read_dir(tests::workspace().join("missions/examples")).expect("dir") {
+        let path = entry.expect("entry").path();
+        if path.extension().is_some_and(|e| e == "toml") {
+            let run = cps_survey(["validate".into(), path.clone().into_os_string()]);
+            assert_eq!(run.code, 0, "{}: {}", path.display(), run.stderr);
+        }
+    }
+}
+
+#[test]
+fn a_missing_file_is_exit_2_naming_it() {
+    let run = cps_survey(["predict", "/nonexistent/mission.toml"]);
+    assert_eq!(run.code, 2);
+    assert!(run.stderr.contains("/nonexistent/mission.toml"), "{}", run.stderr);
+}

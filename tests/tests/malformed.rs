@@ -1,0 +1,271 @@
+//! A corpus of malformed missions: each must exit 2 with a diagnostic at the
+//! right file:line:column naming the field.
+
+use tests::cps_survey;
+
+const GOOD: &str = r#"[mission]
+name = "ok"
+
+[team]
+children = ["c1", "c2"]
+
+[instruments.total_station]
+sigma_distance_mm = 3.0
+sigma_hz_arcsec = 5.0
+sigma_v_arcsec = 5.0
+min_range_m = 4.0
+max_range_m = 400.0
+
+[plan]
+route_m = [[0.0, 0.0, 0.0], [100.0, 0.0, 0.0]]
+stride_m = 10.0
+formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]
+"#;
+
+/// (name, edit of GOOD: (from, to), expected "line:column", expected field, expected text in the message)
+type Case = (&'static str, (&'static str, &'static str), &'static str, &'static str, &'static str);
+
+const CASES: &[Case] = &[
+    ("unknown top-level table", ("[plan]", "[plann]\nx = 1\n[plan]"), "14:2", "plann", "unknown key"),
+    ("unknown key in mission", ("name = \"ok\"", "name = \"ok\"\nnmae = 1"), "3:1", "mission.nmae", "unknown key"),
+    ("missing name", ("name = \"ok\"", ""), "1:1", "mission.name", "missing key"),
+    ("empty name", ("name = \"ok\"", "name = \" \""), "2:8", "mission.name", "non-empty"),
+    ("name not a string", ("name = \"ok\"", "name = 5"), "2:8", "mission.name", "expected a string"),
+    ("missing team", ("[team]\nchildren = [\"c1\", \"c2\"]", ""), "1:1", "team.children", "missing key"),
+    ("one child", ("children = [\"c1\", \"c2\"]", "children = [\"c1\"]"), "5:12", "team.children", "at least 2"),
+    (
+        "duplicate child",
+        ("children = [\"c1\", \"c2\"]", "children = [\"c1\", \"c1\"]"),
+        "5:19",
+        "team.children[1]",
+        "duplicate",
+    ),
+    (
+        "child not a string",
+        ("children = [\"c1\", \"c2\"]", "children = [\"c1\", 2]"),
+        "5:19",
+        "team.children[1]",
+        "expected a string",
+    ),
+    (
+        "children not an array",
+        ("children = [\"c1\", \"c2\"]", "children = \"c1\""),
+        "5:12",
+        "team.children",
+        "expected an array",
+    ),
+    (
+        "missing sigma_distance_mm",
+        ("sigma_distance_mm = 3.0\n", ""),
+        "7:1",
+        "instruments.total_station.sigma_distance_mm",
+        "missing key",
+    ),
+    (
+        "negative distance sigma",
+        ("sigma_distance_mm = 3.0", "sigma_distance_mm = -3.0"),
+        "8:21",
+        "instruments.total_station.sigma_distance_mm",
+        "expected > 0",
+    ),
+    (
+        "zero hz sigma",
+        ("sigma_hz_arcsec = 5.0", "sigma_hz_arcsec = 0"),
+        "9:19",
+        "instruments.total_station.sigma_hz_arcsec",
+        "expected > 0",
+    ),
+    (
+        "nan v sigma",
+        ("sigma_v_arcsec = 5.0", "sigma_v_arcsec = nan"),
+        "10:18",
+        "instruments.total_station.sigma_v_arcsec",
+        "finite",
+    ),
+    (
+        "inf v sigma",
+        ("sigma_v_arcsec = 5.0", "sigma_v_arcsec = inf"),
+        "10:18",
+        "instruments.total_station.sigma_v_arcsec",
+        "finite",
+    ),
+    (
+        "string sigma",
+        ("sigma_hz_arcsec = 5.0", "sigma_hz_arcsec = \"5\""),
+        "9:19",
+        "instruments.total_station.sigma_hz_arcsec",
+        "expected a number",
+    ),
+    (
+        "unknown distance model",
+        ("sigma_distance_mm = 3.0", "sigma_distance_mm = 3.0\ndistance_error_model = \"cubic\""),
+        "9:24",
+        "instruments.total_station.distance_error_model",
+        "quadrature",
+    ),
+    (
+        "negative ppm",
+        ("sigma_distance_mm = 3.0", "sigma_distance_mm = 3.0\nsigma_distance_ppm = -1"),
+        "9:22",
+        "instruments.total_station.sigma_distance_ppm",
+        "≥ 0",
+    ),
+    (
+        "negative centring",
+        ("sigma_distance_mm = 3.0", "sigma_distance_mm = 3.0\ncentring_target_mm = -0.5"),
+        "9:22",
+        "instruments.total_station.centring_target_mm",
+        "≥ 0",
+    ),
+    (
+        "max range below min range",
+        ("max_range_m = 400.0", "max_range_m = 2.0"),
+        "12:15",
+        "instruments.total_station.max_range_m",
+        "min_range_m",
+    ),
+    (
+        "unknown instrument key",
+        ("sigma_v_arcsec = 5.0", "sigma_v_arcsec = 5.0\nsigma_v_gon = 1"),
+        "11:1",
+        "instruments.total_station.sigma_v_gon",
+        "unknown key",
+    ),
+    (
+        "total_station not a table",
+        ("[instruments.total_station]", "[instruments]\ntotal_station = 3\n[x]"),
+        "8:17",
+        "instruments.total_station",
+        "expected a table",
+    ),
+    ("missing route", ("route_m = [[0.0, 0.0, 0.0], [100.0, 0.0, 0.0]]\n", ""), "14:1", "plan.route_m", "missing key"),
+    (
+        "one waypoint",
+        ("route_m = [[0.0, 0.0, 0.0], [100.0, 0.0, 0.0]]", "route_m = [[0.0, 0.0, 0.0]]"),
+        "15:11",
+        "plan.route_m",
+        "at least 2",
+    ),
+    (
+        "waypoint with two numbers",
+        ("[100.0, 0.0, 0.0]]", "[100.0, 0.0]]"),
+        "15:29",
+        "plan.route_m[1]",
+        "expected 3 numbers",
+    ),
+    ("repeated waypoint", ("[100.0, 0.0, 0.0]]", "[0.0, 0.0, 0.0]]"), "15:29", "plan.route_m[1]", "non-zero length"),
+    (
+        "waypoint with a string",
+        ("[100.0, 0.0, 0.0]]", "[100.0, \"a\", 0.0]]"),
+        "15:37",
+        "plan.route_m[1][1]",
+        "expected a number",
+    ),
+    ("zero stride", ("stride_m = 10.0", "stride_m = 0"), "16:12", "plan.stride_m", "expected > 0"),
+    ("negative stride", ("stride_m = 10.0", "stride_m = -4.0"), "16:12", "plan.stride_m", "expected > 0"),
+    ("stride as string", ("stride_m = 10.0", "stride_m = \"10 m\""), "16:12", "plan.stride_m", "expected a number"),
+    (
+        "formation too short",
+        ("formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]", "formation_m = [[5.0, 10.0, 0.0]]"),
+        "17:15",
+        "plan.formation_m",
+        "one per child",
+    ),
+    (
+        "formation too long",
+        ("[5.0, -10.0, 0.0]]", "[5.0, -10.0, 0.0], [1.0, 5.0, 0.0]]"),
+        "17:15",
+        "plan.formation_m",
+        "one per child",
+    ),
+    (
+        "child straight above",
+        ("[5.0, -10.0, 0.0]]", "[0.0, 0.0, 5.0]]"),
+        "17:34",
+        "plan.formation_m[1]",
+        "horizontal offset",
+    ),
+    (
+        "child beyond max range",
+        ("[5.0, -10.0, 0.0]]", "[5.0, -500.0, 0.0]]"),
+        "17:34",
+        "plan.formation_m[1]",
+        "max_range_m = 400",
+    ),
+    (
+        "child inside min range",
+        ("[5.0, 10.0, 0.0],", "[1.0, 2.0, 0.0],"),
+        "17:16",
+        "plan.formation_m[0]",
+        "min_range_m = 4",
+    ),
+    ("unknown plan key", ("stride_m = 10.0", "stride_m = 10.0\nstrid_m = 3"), "17:1", "plan.strid_m", "unknown key"),
+    (
+        "negative start sigma",
+        ("stride_m = 10.0", "stride_m = 10.0\nstart_sigma_m = [0.1, -0.1, 0.0]"),
+        "17:17",
+        "plan.start_sigma_m[1]",
+        "≥ 0",
+    ),
+    (
+        "negative acceptance",
+        ("[plan]", "[acceptance]\nmax_final_sigma_xy_m = -1\n[plan]"),
+        "15:24",
+        "acceptance.max_final_sigma_xy_m",
+        "expected > 0",
+    ),
+    ("broken TOML", ("[plan]", "[plan"), "14:6", "", "invalid TOML"),
+    ("duplicate key", ("stride_m = 10.0", "stride_m = 10.0\nstride_m = 5.0"), "17:1", "", "invalid TOML"),
+];
+
+#[test]
+fn every_malformed_mission_exits_2_at_the_right_place() {
+    assert!(CASES.len() >= 30);
+    let dir = tempfile::tempdir().expect("tmp");
+    // The unmodified mission is fine: each case's failure is its edit's.
+    let good = dir.path().join("good.toml");
+    std::fs::write(&good, GOOD).expect("write");
+    assert_eq!(cps_survey(["validate".into(), good.into_os_string()]).code, 0);
+    let mut failures = Vec::new();
+    for (k, (name, (from, to), at, field, text)) in CASES.iter().enumerate() {
+        assert!(GOOD.contains(from), "case {name}: edit does not apply");
+        let mission = GOOD.replacen(from, to, 1);
+        let path = dir.path().join(format!("case{k:02}.toml"));
+        std::fs::write(&path, &mission).expect("write");
+        let run = cps_survey(["validate".into(), path.clone().into_os_string()]);
+        let location = format!("{}:{at}: ", path.display());
+        let expected_field = if field.is_empty() { String::new() } else { format!("{field}: ") };
+        let found = run.stderr.lines().any(|l| {
+            let l = l.trim_start();
+            l.starts_with(&location) && l[location.len()..].starts_with(&expected_field) && l.contains(text)
+        });
+        if run.code != 2 || !found {
+            failures
+                .push(format!("{name}: exit {} expected {location}{expected_field}…{text}…\n{}", run.code, run.stderr));
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n\n"));
+}
+
+#[test]
+fn a_mistyped_table_is_one_problem_not_one_per_missing_key() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let mission = GOOD.replacen("[instruments.total_station]", "[instruments]\ntotal_station = 3\n[x]", 1);
+    let path = dir.path().join("t.toml");
+    std::fs::write(&path, mission).expect("write");
+    let run = cps_survey(["validate".into(), path.into_os_string()]);
+    assert_eq!(run.code, 2);
+    assert!(!run.stderr.contains("missing key"), "{}", run.stderr);
+}
+
+#[test]
+fn several_problems_are_reported_at_once() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let mission =
+        GOOD.replace("stride_m = 10.0", "stride_m = 0").replace("sigma_hz_arcsec = 5.0", "sigma_hz_arcsec = -5");
+    let path = dir.path().join("two.toml");
+    std::fs::write(&path, mission).expect("write");
+    let run = cps_survey(["predict".into(), path.into_os_string()]);
+    assert_eq!(run.code, 2);
+    assert!(run.stderr.contains("2 problems found"), "{}", run.stderr);
+}
