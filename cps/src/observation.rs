@@ -146,6 +146,17 @@ pub fn observe_with_jacobians(parent: &ParentPose, child: &Point3<f64>) -> Resul
     Ok((reading, ObservationJacobians { wrt_parent, wrt_child }))
 }
 
+/// A random pose with |x|, |y| < `xy_m`, |z| < `z_m` and any heading (tests only).
+#[cfg(test)]
+pub(crate) fn random_pose(rng: &mut impl rand::Rng, xy_m: f64, z_m: f64) -> ParentPose {
+    ParentPose::new(
+        rng.random_range(-xy_m..xy_m),
+        rng.random_range(-xy_m..xy_m),
+        rng.random_range(-z_m..z_m),
+        rng.random_range(-3.1..3.1),
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -153,12 +164,7 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
 
     fn random_geometry(rng: &mut ChaCha8Rng) -> (ParentPose, Point3<f64>) {
-        let parent = ParentPose::new(
-            rng.random_range(-100.0..100.0),
-            rng.random_range(-100.0..100.0),
-            rng.random_range(-5.0..5.0),
-            rng.random_range(-3.1..3.1),
-        );
+        let parent = random_pose(rng, 100.0, 5.0);
         let dist = rng.random_range(2.0..300.0);
         let az = rng.random_range(-3.1..3.1f64);
         let el = rng.random_range(-0.6..0.6f64);

@@ -46,7 +46,7 @@ pub fn place(parent: &ParentPose, reading: &Reading, child: usize) -> Result<Pla
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::observation::observe;
+    use crate::observation::{observe, random_pose};
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
@@ -54,12 +54,7 @@ mod tests {
     fn placement_inverts_observation() {
         let mut rng = ChaCha8Rng::seed_from_u64(11);
         for _ in 0..50 {
-            let parent = ParentPose::new(
-                rng.random_range(-50.0..50.0),
-                rng.random_range(-50.0..50.0),
-                rng.random_range(-2.0..2.0),
-                rng.random_range(-3.0..3.0),
-            );
+            let parent = random_pose(&mut rng, 50.0, 2.0);
             let child =
                 Point3::new(rng.random_range(-50.0..50.0), rng.random_range(-50.0..50.0), rng.random_range(-2.0..2.0));
             let reading = observe(&parent, &child).expect("regular");
@@ -72,12 +67,7 @@ mod tests {
     fn placement_jacobians_match_central_differences() {
         let mut rng = ChaCha8Rng::seed_from_u64(12);
         for _ in 0..60 {
-            let parent = ParentPose::new(
-                rng.random_range(-50.0..50.0),
-                rng.random_range(-50.0..50.0),
-                rng.random_range(-2.0..2.0),
-                rng.random_range(-3.0..3.0),
-            );
+            let parent = random_pose(&mut rng, 50.0, 2.0);
             let reading = Reading {
                 slope_m: rng.random_range(1.0..200.0),
                 azimuth_rad: rng.random_range(-3.0..3.0),

@@ -5,7 +5,7 @@
 
 use nalgebra::{Point3, Rotation3, Vector3};
 
-use cps::Instrument;
+use cps::{FixOptions, Instrument, ParentPose, Reading, TeamState};
 
 use crate::error::{Phase, PlanError};
 use crate::route::Station;
@@ -92,4 +92,38 @@ impl Dance {
         }
         out
     }
+}
+
+/// Runs `dance` through `team`: in every cycle each child is placed from the
+/// reading `read(station, child)` taken at the standing parent's nominal
+/// station, then the parent fixes itself at the next station from fresh
+/// readings; `after_fix` sees the team after each fix. With
+/// `start_at_nominal`, Gauss–Newton starts at the planned station instead of
+/// the closed-form start (prediction: the readings are exact).
+pub fn run_dance(
+    dance: &Dance,
+    team: &mut TeamState,
+    instrument: &Instrument,
+    start_at_nominal: bool,
+    mut read: impl FnMut(&ParentPose, &Point3<f64>) -> cps::Result<Reading>,
+    mut after_fix: impl FnMut(&DanceCycle, &TeamState),
+) -> Result<(), PlanError> {
+    let mut readings = Vec::with_capacity(dance.n_children());
+    for c in &dance.cycles {
+        let model = |source| PlanError::Model { cycle: c.cycle, source };
+        let from = dance.station_pose(c.from);
+        for (j, child) in c.children.iter().enumerate() {
+            let reading = read(&from, child).map_err(model)?;
+            team.place_child(j, &reading, instrument).map_err(model)?;
+        }
+        let to = dance.station_pose(c.to);
+        readings.clear();
+        for (j, child) in c.children.iter().enumerate() {
+            readings.push((j, read(&to, child).map_err(model)?));
+        }
+        let options = FixOptions { initial: start_at_nominal.then_some(to), ..FixOptions::default() };
+        team.fix_parent(&readings, instrument, &options).map_err(model)?;
+        after_fix(c, team);
+    }
+    Ok(())
 }

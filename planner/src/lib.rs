@@ -13,7 +13,7 @@ pub mod montecarlo;
 pub mod predict;
 pub mod route;
 
-pub use dance::{Dance, DanceCycle, Formation, leapfrog};
+pub use dance::{Dance, DanceCycle, Formation, leapfrog, run_dance};
 pub use error::{Phase, PlanError};
 pub use predict::{CyclePrediction, Prediction, predict};
 pub use route::{Station, stations};

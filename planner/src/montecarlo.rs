@@ -7,9 +7,9 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
-use cps::{FixOptions, Instrument, ParentPose, Reading, TeamState, observe, wrap_angle};
+use cps::{Instrument, ParentPose, Reading, TeamState, observe, wrap_angle};
 
-use crate::dance::Dance;
+use crate::dance::{Dance, run_dance};
 use crate::error::PlanError;
 
 /// A reading from `from` to `to` with the instrument's noise added.
@@ -47,29 +47,13 @@ pub fn execute(
     start_covariance: &Matrix4<f64>,
     rng: &mut impl Rng,
 ) -> Result<Vec<ParentPose>, PlanError> {
-    let model = |cycle: usize| move |source| PlanError::Model { cycle, source };
     let start = dance.station_pose(0);
     let start_estimate = ParentPose::from_vector(&(start.to_vector() + sample_pose_error(start_covariance, rng)));
-    let n = dance.n_children();
-    let mut team = TeamState::new(start_estimate, *start_covariance, n).map_err(model(0))?;
+    let mut team = TeamState::new(start_estimate, *start_covariance, dance.n_children())
+        .map_err(|source| PlanError::Model { cycle: 0, source })?;
     let mut estimates = Vec::with_capacity(dance.cycles.len());
-    for c in &dance.cycles {
-        let from = dance.station_pose(c.from);
-        for (j, child) in c.children.iter().enumerate() {
-            let reading = noisy_reading(&from, child, instrument, rng).map_err(model(c.cycle))?;
-            team.place_child(j, &reading, instrument).map_err(model(c.cycle))?;
-        }
-        let to = dance.station_pose(c.to);
-        let readings = c
-            .children
-            .iter()
-            .enumerate()
-            .map(|(j, child)| Ok((j, noisy_reading(&to, child, instrument, rng)?)))
-            .collect::<cps::Result<Vec<_>>>()
-            .map_err(model(c.cycle))?;
-        team.fix_parent(&readings, instrument, &FixOptions::default()).map_err(model(c.cycle))?;
-        estimates.push(team.parent());
-    }
+    let read = |from: &ParentPose, to: &nalgebra::Point3<f64>| noisy_reading(from, to, instrument, rng);
+    run_dance(dance, &mut team, instrument, false, read, |_, team| estimates.push(team.parent()))?;
     Ok(estimates)
 }
 

@@ -3,9 +3,9 @@
 
 use nalgebra::{Matrix2, Matrix3, Matrix4};
 
-use cps::{ErrorEllipse, FixOptions, Instrument, ParentPose, TeamState, observe};
+use cps::{ErrorEllipse, Instrument, ParentPose, TeamState, observe};
 
-use crate::dance::Dance;
+use crate::dance::{Dance, run_dance};
 use crate::error::PlanError;
 
 /// The prediction after one dance cycle.
@@ -70,32 +70,19 @@ pub fn predict(
     if let Some(first) = dance.range_violations(instrument).into_iter().next() {
         return Err(first);
     }
-    instrument.validate().map_err(|source| PlanError::Model { cycle: 0, source })?;
-    let model = |cycle: usize| move |source| PlanError::Model { cycle, source };
+    let model = |source| PlanError::Model { cycle: 0, source };
+    instrument.validate().map_err(model)?;
     let n = dance.n_children();
-    let mut team = TeamState::new(dance.station_pose(0), *start_covariance, n).map_err(model(0))?;
+    let mut team = TeamState::new(dance.station_pose(0), *start_covariance, n).map_err(model)?;
     let mut cycles = Vec::with_capacity(dance.cycles.len());
-    let mut readings = Vec::with_capacity(n);
-    for c in &dance.cycles {
-        let from = dance.station_pose(c.from);
-        for (j, child) in c.children.iter().enumerate() {
-            let reading = observe(&from, child).map_err(model(c.cycle))?;
-            team.place_child(j, &reading, instrument).map_err(model(c.cycle))?;
-        }
-        let to = dance.station_pose(c.to);
-        readings.clear();
-        for (j, child) in c.children.iter().enumerate() {
-            readings.push((j, observe(&to, child).map_err(model(c.cycle))?));
-        }
-        let options = FixOptions { initial: Some(to), ..FixOptions::default() };
-        team.fix_parent(&readings, instrument, &options).map_err(model(c.cycle))?;
+    run_dance(dance, &mut team, instrument, true, observe, |c, team| {
         cycles.push(CyclePrediction {
             cycle: c.cycle,
             distance_m: dance.stations[c.to].distance_m,
-            parent: to,
+            parent: dance.station_pose(c.to),
             covariance: team.parent_covariance(),
             children_covariance: (0..n).map(|j| team.child_covariance(j)).collect(),
-        });
-    }
+        })
+    })?;
     Ok(Prediction { cycles })
 }
