@@ -12,6 +12,13 @@ fn main() -> ExitCode {
     let mut stdout = std::io::stdout().lock();
     let result = run(cli, &mut stdout).and_then(|outcome| Ok(stdout.flush().map(|()| outcome)?));
     if let Err(e) = &result {
+        // The reader of our output went away (`… | head`): nothing to report.
+        let broken_pipe = e
+            .chain()
+            .any(|c| c.downcast_ref::<std::io::Error>().is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe));
+        if broken_pipe {
+            return ExitCode::SUCCESS;
+        }
         eprintln!("error: {e}");
         for cause in e.chain().skip(1) {
             eprintln!("  caused by: {cause}");
