@@ -17,7 +17,7 @@ use nalgebra::{Cholesky, DMatrix, Matrix4, Point3};
 
 use crate::error::{CpsError, Result};
 use crate::instrument::Instrument;
-use crate::observation::{ParentPose, Reading, observation_jacobians, observe, wrap_angle};
+use crate::observation::{ParentPose, Reading, observe_with_jacobians, wrap_angle};
 
 /// One pointing of the network.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -115,8 +115,7 @@ pub fn adjust(network: &Network, instrument: &Instrument, max_iterations: usize)
         let mut row = 0;
         for nr in &network.readings {
             let (p, c) = (&stations[nr.station], &points[nr.point]);
-            let computed = observe(p, c)?;
-            let j = observation_jacobians(p, c)?;
+            let (computed, j) = observe_with_jacobians(p, c)?;
             let misclosure = [
                 nr.reading.slope_m - computed.slope_m,
                 wrap_angle(nr.reading.azimuth_rad - computed.azimuth_rad),

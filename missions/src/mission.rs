@@ -94,14 +94,6 @@ impl MissionError {
     pub fn invalid(mission: &Mission, problems: Diagnostics) -> Self {
         MissionError::Invalid { file: mission.source.file.display().to_string(), problems }
     }
-
-    /// The diagnostics, if the file was read.
-    pub fn diagnostics(&self) -> &[Diagnostic] {
-        match self {
-            MissionError::Invalid { problems, .. } => &problems.0,
-            MissionError::Io { .. } => &[],
-        }
-    }
 }
 
 impl Mission {
@@ -132,16 +124,10 @@ impl Mission {
         let parsed = read_mission(&mut r, &mut root);
         root.finish(&mut r);
         match parsed {
-            Some(parts) if r.problems.is_empty() => {
-                let problems = std::mem::take(&mut r.problems);
-                debug_assert!(problems.is_empty());
-                let (name, children, total_station, plan, acceptance, spans) = parts;
+            Some((name, children, total_station, plan, acceptance, spans)) if r.problems.is_empty() => {
                 Ok(Mission { source, name, children, total_station, plan, acceptance, spans })
             }
-            _ => {
-                let problems = std::mem::take(&mut r.problems);
-                Err(invalid(&source, problems))
-            }
+            _ => Err(invalid(&source, r.problems)),
         }
     }
 
