@@ -18,6 +18,22 @@ pub fn example(name: &str) -> PathBuf {
     workspace().join("missions/examples").join(name)
 }
 
+/// A mission file in its own temporary directory, removed when dropped.
+#[derive(Debug)]
+pub struct TempMission {
+    _dir: tempfile::TempDir,
+    /// The file's path.
+    pub path: PathBuf,
+}
+
+/// Writes `text` as `mission.toml` in a fresh temporary directory.
+pub fn temp_mission(text: &str) -> TempMission {
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let path = dir.path().join("mission.toml");
+    std::fs::write(&path, text).expect("the mission file is written");
+    TempMission { _dir: dir, path }
+}
+
 /// What one command produced.
 #[derive(Debug)]
 pub struct Run {

@@ -1,7 +1,7 @@
 //! A corpus of malformed missions: each must exit 2 with a diagnostic at the
 //! right file:line:column naming the field.
 
-use tests::cps_survey;
+use tests::{cps_survey, temp_mission};
 
 const GOOD: &str = r#"[mission]
 name = "ok"
@@ -221,19 +221,15 @@ const CASES: &[Case] = &[
 #[test]
 fn every_malformed_mission_exits_2_at_the_right_place() {
     assert!(CASES.len() >= 30);
-    let dir = tempfile::tempdir().expect("tmp");
     // The unmodified mission is fine: each case's failure is its edit's.
-    let good = dir.path().join("good.toml");
-    std::fs::write(&good, GOOD).expect("write");
-    assert_eq!(cps_survey(["validate".into(), good.into_os_string()]).code, 0);
+    let good = temp_mission(GOOD);
+    assert_eq!(cps_survey(["validate".into(), good.path.clone().into_os_string()]).code, 0);
     let mut failures = Vec::new();
-    for (k, (name, (from, to), at, field, text)) in CASES.iter().enumerate() {
+    for (name, (from, to), at, field, text) in CASES {
         assert!(GOOD.contains(from), "case {name}: edit does not apply");
-        let mission = GOOD.replacen(from, to, 1);
-        let path = dir.path().join(format!("case{k:02}.toml"));
-        std::fs::write(&path, &mission).expect("write");
-        let run = cps_survey(["validate".into(), path.clone().into_os_string()]);
-        let location = format!("{}:{at}: ", path.display());
+        let mission = temp_mission(&GOOD.replacen(from, to, 1));
+        let run = cps_survey(["validate".into(), mission.path.clone().into_os_string()]);
+        let location = format!("{}:{at}: ", mission.path.display());
         let expected_field = if field.is_empty() { String::new() } else { format!("{field}: ") };
         let found = run.stderr.lines().any(|l| {
             let l = l.trim_start();
@@ -249,23 +245,19 @@ fn every_malformed_mission_exits_2_at_the_right_place() {
 
 #[test]
 fn a_mistyped_table_is_one_problem_not_one_per_missing_key() {
-    let dir = tempfile::tempdir().expect("tmp");
-    let mission = GOOD.replacen("[instruments.total_station]", "[instruments]\ntotal_station = 3\n[x]", 1);
-    let path = dir.path().join("t.toml");
-    std::fs::write(&path, mission).expect("write");
-    let run = cps_survey(["validate".into(), path.into_os_string()]);
+    let mission =
+        temp_mission(&GOOD.replacen("[instruments.total_station]", "[instruments]\ntotal_station = 3\n[x]", 1));
+    let run = cps_survey(["validate".into(), mission.path.clone().into_os_string()]);
     assert_eq!(run.code, 2);
     assert!(!run.stderr.contains("missing key"), "{}", run.stderr);
 }
 
 #[test]
 fn several_problems_are_reported_at_once() {
-    let dir = tempfile::tempdir().expect("tmp");
-    let mission =
-        GOOD.replace("stride_m = 10.0", "stride_m = 0").replace("sigma_hz_arcsec = 5.0", "sigma_hz_arcsec = -5");
-    let path = dir.path().join("two.toml");
-    std::fs::write(&path, mission).expect("write");
-    let run = cps_survey(["predict".into(), path.into_os_string()]);
+    let mission = temp_mission(
+        &GOOD.replace("stride_m = 10.0", "stride_m = 0").replace("sigma_hz_arcsec = 5.0", "sigma_hz_arcsec = -5"),
+    );
+    let run = cps_survey(["predict".into(), mission.path.clone().into_os_string()]);
     assert_eq!(run.code, 2);
     assert!(run.stderr.contains("2 problems found"), "{}", run.stderr);
 }
