@@ -97,6 +97,26 @@ pub enum CpsError {
         /// Iterations done.
         iterations: usize,
     },
+    /// A name that is not one of the known ones.
+    #[error("unknown {what} '{name}': expected one of {expected}")]
+    UnknownName {
+        /// What kind of name.
+        what: String,
+        /// The name given.
+        name: String,
+        /// The names accepted.
+        expected: String,
+    },
+    /// A scene file is malformed or describes impossible geometry.
+    #[error("line {line}, column {column}: {message}")]
+    SceneFile {
+        /// 1-based line (0 when unknown).
+        line: usize,
+        /// 1-based column (0 when unknown).
+        column: usize,
+        /// What is wrong.
+        message: String,
+    },
 }
 
 /// Result alias of the `cps` crate.

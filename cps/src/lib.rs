@@ -17,12 +17,16 @@
 //! - [`batch::Network`] / [`batch::adjust`] — the whole dance as one
 //!   least-squares adjustment.
 //!
+//! - [`geom::Scene`] — surfaces with a BVH for ray casting and line of sight,
+//!   the built-in scenes and the scene file.
+//!
 //! Units are SI (m, rad) throughout; frames are right-handed with z up.
 #![warn(missing_docs)]
 
 pub mod batch;
 pub mod error;
 pub mod fix;
+pub mod geom;
 pub mod instrument;
 pub mod observation;
 pub mod placement;

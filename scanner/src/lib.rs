@@ -1,6 +1,29 @@
-//! Instruments of the survey team: device traits, simulated devices, serial
-//! drivers, scan assembly and scan files.
+//! Instruments of the survey team.
 //!
-//! This crate is built up by the simulator and serial-driver issues; the CPS
-//! model it feeds lives in [`cps`]. Nothing here is exposed yet.
+//! - [`devices`]: the traits every backend implements — [`TotalStation`],
+//!   [`RangeFinder2D`], [`ScanHead`], [`TiltSensor`], [`Drive`] — and their
+//!   data ([`TsMeasurement`], [`Slice`], [`Tilt`], [`Odometry`]);
+//! - [`sim`]: the built-in simulator ([`sim::SimWorld`] and its devices);
+//! - [`assembly`]: slices + head angles + lever arm → a 3D [`Scan`];
+//! - [`reduce`]: reduced points (voxel means);
+//! - [`io`]: scan files (3DTK, PLY, XYZ, PCD, LAS, E57) as [`PointCloud`]s.
+//!
+//! Frames: scanner S (the 2D scanner's plane is its x-y plane), head H,
+//! body B (origin at the total-station centre, x forward, z up), world W.
 #![warn(missing_docs)]
+
+pub mod assembly;
+pub mod devices;
+pub mod error;
+pub mod io;
+pub mod reduce;
+pub mod sim;
+
+pub use assembly::{Scan, assemble, scan_3d};
+pub use devices::{
+    Drive, HeadKind, Odometry, PlanarPose, RangeFinder2D, ScanHead, Slice, Target, Tilt, TiltSensor, TotalStation,
+    TsMeasurement, TsStatus,
+};
+pub use error::{Location, Result, ScannerError};
+pub use io::PointCloud;
+pub use reduce::reduced_points;

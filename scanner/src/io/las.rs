@@ -1,0 +1,53 @@
+//! LAS 1.4 through the `las` crate: point format 0 with intensity, scale
+//! 0.1 mm, offset at the cloud's lower corner (rounded to metres).
+
+use std::path::Path;
+
+use las::{Builder, Point, Reader, Transform, Vector, Writer};
+use nalgebra::Point3;
+
+use super::PointCloud;
+use crate::error::{Location, Result, ScannerError};
+
+/// Coordinate resolution of the LAS files we write, metres.
+pub const LAS_SCALE_M: f64 = 1e-4;
+
+fn las_error(path: &Path, e: impl std::fmt::Display) -> ScannerError {
+    ScannerError::file(path, Location::File, e.to_string())
+}
+
+pub(super) fn read(path: &Path) -> Result<PointCloud> {
+    let mut reader = Reader::from_path(path).map_err(|e| las_error(path, e))?;
+    let mut cloud = PointCloud::default();
+    let mut intensity = Vec::new();
+    let data = reader.read_all().map_err(|e| las_error(path, e))?;
+    for (i, p) in data.points().enumerate() {
+        let p = p.map_err(|e| las_error(path, format!("point {i}: {e}")))?;
+        cloud.points.push(Point3::new(p.x as f32, p.y as f32, p.z as f32));
+        intensity.push(f32::from(p.intensity));
+    }
+    cloud.intensity = Some(intensity);
+    Ok(cloud)
+}
+
+pub(super) fn write(path: &Path, cloud: &PointCloud) -> Result<()> {
+    let mut builder = Builder::from((1, 4));
+    let lo = cloud.points.iter().fold([f64::INFINITY; 3], |m, p| {
+        [m[0].min(f64::from(p.x)), m[1].min(f64::from(p.y)), m[2].min(f64::from(p.z))]
+    });
+    let offset = lo.map(|v| if v.is_finite() { v.floor() } else { 0.0 });
+    builder.transforms = Vector {
+        x: Transform { scale: LAS_SCALE_M, offset: offset[0] },
+        y: Transform { scale: LAS_SCALE_M, offset: offset[1] },
+        z: Transform { scale: LAS_SCALE_M, offset: offset[2] },
+    };
+    builder.generating_software = "cps-survey".into();
+    let header = builder.into_header().map_err(|e| las_error(path, e))?;
+    let mut writer = Writer::from_path(path, header).map_err(|e| las_error(path, e))?;
+    for (i, p) in cloud.points.iter().enumerate() {
+        let intensity = cloud.intensity.as_ref().map_or(0, |v| v[i].clamp(0.0, 65535.0).round() as u16);
+        let point = Point { x: f64::from(p.x), y: f64::from(p.y), z: f64::from(p.z), intensity, ..Default::default() };
+        writer.write_point(point).map_err(|e| las_error(path, format!("point {i}: {e}")))?;
+    }
+    writer.close().map_err(|e| las_error(path, e))
+}

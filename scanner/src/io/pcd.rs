@@ -1,0 +1,429 @@
+//! PCD v0.7 (Point Cloud Library), written by hand: the header, then
+//! `ascii`, `binary` (point records) or `binary_compressed` (u32 compressed
+//! size, u32 raw size, an LZF stream of the field-major data). Reads x, y,
+//! z and an optional `intensity` of types F4/F8/I1–I8/U1–U8; other fields
+//! are skipped. Points with a non-finite coordinate are PCL's marker for
+//! "no return" in organised clouds and are left out.
+
+use std::io::Write;
+use std::path::Path;
+
+use nalgebra::Point3;
+
+use super::{PointCloud, read_bytes};
+use crate::error::{Location, Result, ScannerError};
+
+/// PCD data encoding.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PcdData {
+    /// Text.
+    Ascii,
+    /// Binary point records.
+    Binary,
+    /// LZF-compressed, field-major.
+    BinaryCompressed,
+}
+
+#[derive(Debug, Clone)]
+struct Field {
+    name: String,
+    size: usize,
+    kind: u8,
+    count: usize,
+}
+
+impl Field {
+    fn bytes(&self) -> usize {
+        self.size * self.count
+    }
+
+    /// The first element of this field from little-endian bytes.
+    fn value(&self, b: &[u8]) -> Option<f64> {
+        let a = |n: usize| -> Option<[u8; 8]> {
+            let mut out = [0u8; 8];
+            out[..n].copy_from_slice(b.get(..n)?);
+            Some(out)
+        };
+        Some(match (self.kind, self.size) {
+            (b'F', 4) => f64::from(f32::from_le_bytes(b.get(..4)?.try_into().ok()?)),
+            (b'F', 8) => f64::from_le_bytes(b.get(..8)?.try_into().ok()?),
+            (b'U', n @ (1 | 2 | 4 | 8)) => u64::from_le_bytes(a(n)?) as f64,
+            (b'I', n @ (1 | 2 | 4 | 8)) => {
+                let shift = 64 - 8 * n as u32;
+                ((i64::from_le_bytes(a(n)?) << shift) >> shift) as f64
+            }
+            _ => return None,
+        })
+    }
+}
+
+struct Header {
+    fields: Vec<Field>,
+    points: usize,
+    data: PcdData,
+    /// Byte offset of the data.
+    offset: usize,
+}
+
+fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header> {
+    let err = |line: usize, msg: String| ScannerError::file(path, Location::Line(line), msg);
+    let mut pos = 0;
+    let mut line_no = 0;
+    let (mut names, mut sizes, mut kinds, mut counts) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut points = None;
+    let (mut width, mut height) = (None, None);
+    loop {
+        let end =
+            bytes[pos..].iter().position(|&b| b == b'\n').map(|e| pos + e).ok_or_else(|| {
+                ScannerError::file(path, Location::Byte(pos as u64), "header ends without a DATA line")
+            })?;
+        line_no += 1;
+        let line = std::str::from_utf8(&bytes[pos..end])
+            .map_err(|_| ScannerError::file(path, Location::Byte(pos as u64), "header is not text"))?
+            .trim();
+        pos = end + 1;
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let mut toks = line.split_whitespace();
+        let key = toks.next().unwrap_or_default().to_ascii_uppercase();
+        let rest: Vec<&str> = toks.collect();
+        let usize_list = |what: &str| -> Result<Vec<usize>> {
+            rest.iter()
+                .map(|t| t.parse().map_err(|_| err(line_no, format!("{what}: '{t}' is not a non-negative integer"))))
+                .collect()
+        };
+        match key.as_str() {
+            "VERSION" | "VIEWPOINT" => {}
+            "FIELDS" => names = rest.iter().map(|s| s.to_string()).collect(),
+            "SIZE" => sizes = usize_list("SIZE")?,
+            "TYPE" => {
+                kinds = rest
+                    .iter()
+                    .map(|t| match t.as_bytes() {
+                        [k @ (b'F' | b'I' | b'U')] => Ok(*k),
+                        _ => Err(err(line_no, format!("TYPE '{t}': expected F, I or U"))),
+                    })
+                    .collect::<Result<_>>()?
+            }
+            "COUNT" => counts = usize_list("COUNT")?,
+            "WIDTH" => width = usize_list("WIDTH")?.first().copied(),
+            "HEIGHT" => height = usize_list("HEIGHT")?.first().copied(),
+            "POINTS" => points = usize_list("POINTS")?.first().copied(),
+            "DATA" => {
+                let data = match rest.first().map(|s| s.to_ascii_lowercase()).as_deref() {
+                    Some("ascii") => PcdData::Ascii,
+                    Some("binary") => PcdData::Binary,
+                    Some("binary_compressed") => PcdData::BinaryCompressed,
+                    other => {
+                        return Err(err(
+                            line_no,
+                            format!("DATA {other:?}: expected ascii, binary or binary_compressed"),
+                        ));
+                    }
+                };
+                if counts.is_empty() {
+                    counts = vec![1; names.len()];
+                }
+                if names.is_empty()
+                    || sizes.len() != names.len()
+                    || kinds.len() != names.len()
+                    || counts.len() != names.len()
+                {
+                    return Err(err(
+                        line_no,
+                        format!(
+                            "FIELDS ({}), SIZE ({}), TYPE ({}) and COUNT ({}) must have the same, non-zero length",
+                            names.len(),
+                            sizes.len(),
+                            kinds.len(),
+                            counts.len()
+                        ),
+                    ));
+                }
+                let fields: Vec<Field> = names
+                    .into_iter()
+                    .zip(sizes)
+                    .zip(kinds)
+                    .zip(counts)
+                    .map(|(((name, size), kind), count)| Field { name, size, kind, count })
+                    .collect();
+                let points = points
+                    .or(width.zip(height).map(|(w, h)| w * h))
+                    .ok_or_else(|| err(line_no, "no POINTS (or WIDTH and HEIGHT) before DATA".into()))?;
+                return Ok(Header { fields, points, data, offset: pos });
+            }
+            other => return Err(err(line_no, format!("unknown header key '{other}'"))),
+        }
+    }
+}
+
+pub(super) fn read(path: &Path) -> Result<PointCloud> {
+    let bytes = read_bytes(path)?;
+    let h = parse_header(path, &bytes)?;
+    let find = |n: &str| h.fields.iter().position(|f| f.name == n);
+    let (Some(ix), Some(iy), Some(iz)) = (find("x"), find("y"), find("z")) else {
+        return Err(ScannerError::file(path, Location::File, "FIELDS lacks x, y or z"));
+    };
+    let ii = find("intensity");
+    let wanted: Vec<usize> = [Some(ix), Some(iy), Some(iz), ii].into_iter().flatten().collect();
+    for &f in &wanted {
+        if h.fields[f].value(&[0u8; 8]).is_none() {
+            let fd = &h.fields[f];
+            return Err(ScannerError::file(
+                path,
+                Location::File,
+                format!("field {} has type {}{}: unsupported", fd.name, fd.kind as char, fd.size),
+            ));
+        }
+    }
+    let record: usize = h.fields.iter().map(Field::bytes).sum();
+    let n = h.points;
+    // values[k][i]: wanted field k of point i.
+    let mut values: Vec<Vec<f64>> = vec![Vec::with_capacity(n); wanted.len()];
+    let data = &bytes[h.offset..];
+    match h.data {
+        PcdData::Ascii => {
+            let text = std::str::from_utf8(data).map_err(|e| {
+                ScannerError::file(path, Location::Byte((h.offset + e.valid_up_to()) as u64), "ASCII data is not text")
+            })?;
+            let header_lines = bytes[..h.offset].iter().filter(|&&b| b == b'\n').count();
+            let columns: Vec<usize> = h
+                .fields
+                .iter()
+                .scan(0, |c, f| {
+                    let s = *c;
+                    *c += f.count;
+                    Some(s)
+                })
+                .collect();
+            let mut read = 0;
+            for (k, line) in text.lines().enumerate() {
+                if line.trim().is_empty() {
+                    continue;
+                }
+                let toks: Vec<&str> = line.split_whitespace().collect();
+                for (slot, &f) in wanted.iter().enumerate() {
+                    let t = toks.get(columns[f]).ok_or_else(|| {
+                        ScannerError::file(
+                            path,
+                            Location::Line(header_lines + k + 1),
+                            format!(
+                                "{} values: expected {}",
+                                toks.len(),
+                                columns.last().map_or(0, |c| c + h.fields[h.fields.len() - 1].count)
+                            ),
+                        )
+                    })?;
+                    let v: f64 = if t.eq_ignore_ascii_case("nan") {
+                        f64::NAN
+                    } else {
+                        t.parse().map_err(|_| {
+                            ScannerError::file(
+                                path,
+                                Location::Line(header_lines + k + 1),
+                                format!("'{t}' is not a number"),
+                            )
+                        })?
+                    };
+                    values[slot].push(v);
+                }
+                read += 1;
+            }
+            if read != n {
+                return Err(ScannerError::file(
+                    path,
+                    Location::File,
+                    format!("{read} points in the data: the header says {n}"),
+                ));
+            }
+        }
+        PcdData::Binary => {
+            if data.len() < n * record {
+                return Err(ScannerError::file(
+                    path,
+                    Location::Byte(bytes.len() as u64),
+                    format!(
+                        "truncated: {n} points of {record} bytes need {} data bytes, found {}",
+                        n * record,
+                        data.len()
+                    ),
+                ));
+            }
+            let offsets: Vec<usize> = h
+                .fields
+                .iter()
+                .scan(0, |c, f| {
+                    let s = *c;
+                    *c += f.bytes();
+                    Some(s)
+                })
+                .collect();
+            for i in 0..n {
+                let rec = &data[i * record..(i + 1) * record];
+                for (slot, &f) in wanted.iter().enumerate() {
+                    values[slot].push(h.fields[f].value(&rec[offsets[f]..]).unwrap_or(f64::NAN));
+                }
+            }
+        }
+        PcdData::BinaryCompressed => {
+            let word = |at: usize| -> Result<usize> {
+                data.get(at..at + 4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize).ok_or_else(|| {
+                    ScannerError::file(
+                        path,
+                        Location::Byte((h.offset + at) as u64),
+                        "truncated: expected the compressed and uncompressed sizes (2 × u32)",
+                    )
+                })
+            };
+            let (compressed, raw) = (word(0)?, word(4)?);
+            if raw != n * record {
+                return Err(ScannerError::file(
+                    path,
+                    Location::Byte((h.offset + 4) as u64),
+                    format!("uncompressed size {raw}: expected {} ({n} points × {record} bytes)", n * record),
+                ));
+            }
+            let stream = data.get(8..8 + compressed).ok_or_else(|| {
+                ScannerError::file(
+                    path,
+                    Location::Byte(bytes.len() as u64),
+                    format!(
+                        "truncated: {compressed} compressed bytes announced, {} present",
+                        data.len().saturating_sub(8)
+                    ),
+                )
+            })?;
+            let plain = if raw == 0 {
+                Vec::new()
+            } else {
+                lzf::decompress(stream, raw).map_err(|e| {
+                    ScannerError::file(path, Location::Byte((h.offset + 8) as u64), format!("corrupt LZF data: {e:?}"))
+                })?
+            };
+            if plain.len() != raw {
+                return Err(ScannerError::file(
+                    path,
+                    Location::Byte((h.offset + 8) as u64),
+                    format!("LZF data expands to {} bytes: expected {raw}", plain.len()),
+                ));
+            }
+            // Field-major: all of field 0, then all of field 1, ...
+            let starts: Vec<usize> = h
+                .fields
+                .iter()
+                .scan(0, |c, f| {
+                    let s = *c;
+                    *c += f.bytes() * n;
+                    Some(s)
+                })
+                .collect();
+            for (slot, &f) in wanted.iter().enumerate() {
+                let fd = &h.fields[f];
+                values[slot].extend((0..n).map(|i| fd.value(&plain[starts[f] + i * fd.bytes()..]).unwrap_or(f64::NAN)));
+            }
+        }
+    }
+    let mut cloud = PointCloud { points: Vec::with_capacity(n), intensity: ii.map(|_| Vec::with_capacity(n)) };
+    for (i, ((x, y), z)) in values[0].iter().zip(&values[1]).zip(&values[2]).enumerate() {
+        if !(x.is_finite() && y.is_finite() && z.is_finite()) {
+            continue;
+        }
+        cloud.points.push(Point3::new(*x as f32, *y as f32, *z as f32));
+        if let Some(v) = cloud.intensity.as_mut() {
+            v.push(values[3][i] as f32);
+        }
+    }
+    Ok(cloud)
+}
+
+pub(super) fn write(w: &mut impl Write, cloud: &PointCloud, data: PcdData) -> std::io::Result<()> {
+    let n = cloud.points.len();
+    let with_i = cloud.intensity.is_some();
+    let (fields, sizes, types, counts) = if with_i {
+        ("x y z intensity", "4 4 4 4", "F F F F", "1 1 1 1")
+    } else {
+        ("x y z", "4 4 4", "F F F", "1 1 1")
+    };
+    let encoding = match data {
+        PcdData::Ascii => "ascii",
+        PcdData::Binary => "binary",
+        PcdData::BinaryCompressed => "binary_compressed",
+    };
+    write!(
+        w,
+        "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS {fields}\nSIZE {sizes}\nTYPE {types}\nCOUNT {counts}\nWIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA {encoding}\n"
+    )?;
+    let value = |i: usize, f: usize| -> f32 {
+        match f {
+            0 => cloud.points[i].x,
+            1 => cloud.points[i].y,
+            2 => cloud.points[i].z,
+            _ => cloud.intensity.as_ref().map_or(0.0, |v| v[i]),
+        }
+    };
+    let nf = if with_i { 4 } else { 3 };
+    match data {
+        PcdData::Ascii => {
+            for i in 0..n {
+                let row: Vec<String> = (0..nf).map(|f| value(i, f).to_string()).collect();
+                writeln!(w, "{}", row.join(" "))?;
+            }
+        }
+        PcdData::Binary => {
+            for i in 0..n {
+                for f in 0..nf {
+                    w.write_all(&value(i, f).to_le_bytes())?;
+                }
+            }
+        }
+        PcdData::BinaryCompressed => {
+            let mut plain = Vec::with_capacity(n * nf * 4);
+            for f in 0..nf {
+                for i in 0..n {
+                    plain.extend_from_slice(&value(i, f).to_le_bytes());
+                }
+            }
+            let packed = if plain.is_empty() {
+                Vec::new()
+            } else {
+                lzf::compress(&plain).unwrap_or_else(|_| literal_lzf(&plain))
+            };
+            w.write_all(&(packed.len() as u32).to_le_bytes())?;
+            w.write_all(&(plain.len() as u32).to_le_bytes())?;
+            w.write_all(&packed)?;
+        }
+    }
+    Ok(())
+}
+
+/// An LZF stream of literal runs only (for data LZF cannot shrink).
+fn literal_lzf(plain: &[u8]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(plain.len() + plain.len() / 32 + 1);
+    for chunk in plain.chunks(32) {
+        out.push((chunk.len() - 1) as u8);
+        out.extend_from_slice(chunk);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn literal_stream_decodes() {
+        let plain: Vec<u8> = (0..1000u32).map(|i| (i * 2654435761u32 >> 24) as u8).collect();
+        assert_eq!(lzf::decompress(&literal_lzf(&plain), plain.len()).expect("valid LZF"), plain);
+    }
+
+    #[test]
+    fn signed_and_unsigned_fields() {
+        let i2 = Field { name: "i".into(), size: 2, kind: b'I', count: 1 };
+        assert_eq!(i2.value(&(-3i16).to_le_bytes()), Some(-3.0));
+        let u1 = Field { name: "u".into(), size: 1, kind: b'U', count: 1 };
+        assert_eq!(u1.value(&[200]), Some(200.0));
+        let f8 = Field { name: "f".into(), size: 8, kind: b'F', count: 1 };
+        assert_eq!(f8.value(&1.25f64.to_le_bytes()), Some(1.25));
+    }
+}

@@ -1,0 +1,129 @@
+//! The simulated total station: the CPS noise model (distance, Hz, V and
+//! centring) on the true sight line, the instrument's range limits, line of
+//! sight through the scene, and the prism constant.
+
+use cps::{Instrument, observe, wrap_angle};
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+
+use super::{SimWorld, rng, stream};
+use crate::devices::{Target, TotalStation, TsMeasurement};
+use crate::error::{Result, ScannerError};
+
+/// A simulated total station on the parent.
+#[derive(Debug, Clone)]
+pub struct SimTotalStation {
+    world: SimWorld,
+    instrument: Instrument,
+    rng: ChaCha8Rng,
+}
+
+impl SimTotalStation {
+    /// A total station with the given noise model and limits.
+    pub fn new(world: SimWorld, instrument: Instrument, seed: u64) -> Self {
+        Self { world, instrument, rng: rng(seed, stream::TOTAL_STATION) }
+    }
+}
+
+impl TotalStation for SimTotalStation {
+    fn name(&self) -> &str {
+        "simulated total station"
+    }
+
+    fn measure(&mut self, target: &Target) -> Result<TsMeasurement> {
+        let truth = self.world.truth();
+        let child = *truth
+            .children
+            .get(target.child)
+            .ok_or(cps::CpsError::UnknownChild { child: target.child, team: truth.children.len() })?;
+        let from = truth.parent.position;
+        if let Some(hit) = self.world.scene().obstruction(&from, &child) {
+            return Err(ScannerError::NoLineOfSight {
+                device: self.name().into(),
+                target: format!("child {}", target.child),
+                blocked_by: self.world.scene().object_name(hit.object).into(),
+                at_m: hit.distance_m,
+            });
+        }
+        let exact = observe(&truth.parent, &child)?;
+        let inst = &self.instrument;
+        if exact.slope_m < inst.min_range_m || exact.slope_m > inst.max_range_m {
+            return Err(ScannerError::OutOfRange {
+                device: self.name().into(),
+                what: format!("slope distance to child {} (m)", target.child),
+                value: exact.slope_m,
+                expected: format!("{} m … {} m", inst.min_range_m, inst.max_range_m),
+            });
+        }
+        let [vr, vp, vv] = inst.reading_variances(&exact);
+        let mut n = || -> f64 { self.rng.sample(StandardNormal) };
+        let noisy = cps::Reading {
+            slope_m: exact.slope_m + vr.sqrt() * n(),
+            azimuth_rad: wrap_angle(exact.azimuth_rad + vp.sqrt() * n()),
+            elevation_rad: exact.elevation_rad + vv.sqrt() * n(),
+        };
+        Ok(TsMeasurement::from_reading(&noisy, inst))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use cps::ParentPose;
+    use cps::geom::builtin;
+    use nalgebra::Point3;
+
+    use super::*;
+
+    fn world() -> SimWorld {
+        let parent = ParentPose::new(15.0, 6.0, 1.5, 0.3);
+        let children = vec![Point3::new(25.0, 6.0, 1.0), Point3::new(25.0, 3.0, 1.0), Point3::new(15.5, 6.0, 1.0)];
+        SimWorld::new(builtin("hall").expect("hall"), parent, children)
+    }
+
+    fn target(child: usize) -> Target {
+        Target { child, predicted: cps::Reading { slope_m: 10.0, azimuth_rad: 0.0, elevation_rad: 0.0 } }
+    }
+
+    #[test]
+    fn errors_name_the_obstruction_and_the_range() {
+        let inst = Instrument { prism_constant_m: 0.0175, ..Instrument::default() };
+        let mut ts = SimTotalStation::new(world(), inst.clone(), 1);
+        let e = ts.measure(&target(0)).expect_err("pillar 2 is in the way");
+        assert!(e.to_string().contains("blocked by 'pillar 2'"), "{e}");
+        let e = ts.measure(&target(2)).expect_err("0.5 m is below the 4 m minimum");
+        assert!(e.to_string().contains("slope distance to child 2"), "{e}");
+        assert!(matches!(ts.measure(&target(5)), Err(ScannerError::Cps(cps::CpsError::UnknownChild { .. }))));
+    }
+
+    /// Mean and spread of many measurements match the truth and the model,
+    /// with the prism constant applied by `to_reading`.
+    #[test]
+    fn noise_matches_the_instrument_model() {
+        let inst = Instrument { prism_constant_m: 0.0175, ..Instrument::default() };
+        let w = world();
+        let mut ts = SimTotalStation::new(w.clone(), inst.clone(), 7);
+        let truth = w.truth();
+        let exact = observe(&truth.parent, &truth.children[1]).expect("observe");
+        let n = 4000;
+        let mut sum = nalgebra::Vector3::zeros();
+        let mut sq = nalgebra::Vector3::zeros();
+        for _ in 0..n {
+            let m = ts.measure(&target(1)).expect("clear sight");
+            let e = m.to_reading(&inst).to_vector() - exact.to_vector();
+            sum += e;
+            sq += e.component_mul(&e);
+        }
+        let sigma = inst.reading_variances(&exact).map(f64::sqrt);
+        for k in 0..3 {
+            let mean = sum[k] / n as f64;
+            let sd = (sq[k] / n as f64).sqrt();
+            assert!(mean.abs() < 4.0 * sigma[k] / (n as f64).sqrt(), "component {k}: mean {mean}");
+            assert!((sd / sigma[k] - 1.0).abs() < 0.05, "component {k}: sd {sd} vs {}", sigma[k]);
+        }
+        // Same seed, same bytes.
+        let a = SimTotalStation::new(w.clone(), inst.clone(), 3).measure(&target(1)).expect("m");
+        let b = SimTotalStation::new(w, inst, 3).measure(&target(1)).expect("m");
+        assert_eq!(a, b);
+    }
+}
