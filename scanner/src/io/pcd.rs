@@ -413,7 +413,7 @@ mod tests {
 
     #[test]
     fn literal_stream_decodes() {
-        let plain: Vec<u8> = (0..1000u32).map(|i| (i * 2654435761u32 >> 24) as u8).collect();
+        let plain: Vec<u8> = (0..1000u32).map(|i| (i.wrapping_mul(2_654_435_761) >> 24) as u8).collect();
         assert_eq!(lzf::decompress(&literal_lzf(&plain), plain.len()).expect("valid LZF"), plain);
     }
 
