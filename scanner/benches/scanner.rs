@@ -1,1 +1,66 @@
-fn main() {}
+//! Simulator and scan-file throughput.
+//!
+//! `cargo bench -p scanner --bench scanner`
+
+use std::hint::black_box;
+
+use cps::ParentPose;
+use cps::geom::builtin;
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use nalgebra::{Isometry3, Translation3};
+use scanner::io::{Format, PcdData, PlyEncoding, read, write};
+use scanner::sim::{LmsConfig, SimHead, SimLms, SimWorld};
+use scanner::{HeadKind, PointCloud, reduced_points, scan_3d};
+
+fn hall_scan() -> scanner::Scan {
+    let world = SimWorld::new(builtin("hall").expect("hall"), ParentPose::new(14.0, 4.0, 1.4, 0.4), vec![]);
+    let body_from_head = Isometry3::from_parts(Translation3::new(0.1, 0.0, 0.3), nalgebra::UnitQuaternion::identity());
+    let mut lms = SimLms::new(world.clone(), LmsConfig::default(), HeadKind::RotatingTable, body_from_head, 1);
+    let mut head = SimHead::new(world, HeadKind::RotatingTable);
+    scan_3d(&mut head, &mut lms, 720, &body_from_head, &mut |_, _| {}).expect("scan")
+}
+
+fn simulate(c: &mut Criterion) {
+    let mut g = c.benchmark_group("simulate");
+    g.sample_size(10);
+    g.throughput(Throughput::Elements(720 * 361));
+    g.bench_function("hall rotating table 0.5°×0.5° (259,920 rays)", |b| b.iter(|| black_box(hall_scan())));
+    g.finish();
+}
+
+fn reduce(c: &mut Criterion) {
+    let scan = hall_scan();
+    let mut g = c.benchmark_group("reduced points");
+    g.throughput(Throughput::Elements(scan.len() as u64));
+    for cell in [0.05, 0.2] {
+        g.bench_function(format!("{} points, {cell} m cells", scan.len()), |b| {
+            b.iter(|| black_box(reduced_points(&scan.points, cell).expect("reduce")))
+        });
+    }
+    g.finish();
+}
+
+fn files(c: &mut Criterion) {
+    let cloud = PointCloud::from_points(hall_scan().points);
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut g = c.benchmark_group("files");
+    g.sample_size(10);
+    g.throughput(Throughput::Elements(cloud.len() as u64));
+    for (name, format) in [
+        ("scan.3d", Format::ThreeDtk),
+        ("scan.xyz", Format::Xyz),
+        ("scan.ply", Format::Ply(PlyEncoding::BinaryLittleEndian)),
+        ("scan.pcd", Format::Pcd(PcdData::Binary)),
+        ("scanc.pcd", Format::Pcd(PcdData::BinaryCompressed)),
+        ("scan.las", Format::Las),
+        ("scan.e57", Format::E57),
+    ] {
+        let path = dir.path().join(name);
+        g.bench_function(format!("write {name}"), |b| b.iter(|| write(&path, &cloud, format).expect("write")));
+        g.bench_function(format!("read {name}"), |b| b.iter(|| black_box(read(&path).expect("read"))));
+    }
+    g.finish();
+}
+
+criterion_group!(benches, simulate, reduce, files);
+criterion_main!(benches);

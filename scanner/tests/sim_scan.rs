@@ -73,7 +73,6 @@ fn reduced_points_of_a_hall_scan() {
     let (scan, world_from_body) = scan(HeadKind::RotatingTable, 720, LmsResolution::Half, 5);
     let reduced = scanner::reduced_points(&scan.points, 0.2).expect("reduce");
     let ratio = scan.len() as f64 / reduced.len() as f64;
-    eprintln!("reduction ×{ratio:.1}: {} → {}", scan.len(), reduced.len());
     assert!(ratio > 8.0, "reduction ×{ratio:.1}");
     let cloud = Scan { points: reduced, ..Scan::default() };
     // Means of points on a plane stay on it; at edges they cut corners by < cell/2.
