@@ -123,12 +123,24 @@ impl SceneBuilder {
 
     /// A box with centre, full edge lengths and a rotation about z.
     pub fn cuboid(&mut self, name: &str, center: Point3<f64>, size_m: Vector3<f64>, yaw_rad: f64) -> Result<()> {
+        self.oriented_cuboid(name, center, size_m, [0.0, 0.0, yaw_rad])
+    }
+
+    /// A box with centre, full edge lengths and orientation
+    /// `[roll, pitch, yaw]` (rad): `world_from_box = Rz(yaw)·Ry(pitch)·Rx(roll)`.
+    pub fn oriented_cuboid(
+        &mut self,
+        name: &str,
+        center: Point3<f64>,
+        size_m: Vector3<f64>,
+        rpy_rad: [f64; 3],
+    ) -> Result<()> {
         finite(&format!("box '{name}': centre"), center.coords.as_slice())?;
         for k in 0..3 {
             positive(&format!("box '{name}': size_m[{k}]"), size_m[k])?;
         }
-        finite(&format!("box '{name}': yaw"), &[yaw_rad])?;
-        let r = Rotation3::from_axis_angle(&Vector3::z_axis(), yaw_rad);
+        finite(&format!("box '{name}': orientation"), &rpy_rad)?;
+        let r = Rotation3::from_euler_angles(rpy_rad[0], rpy_rad[1], rpy_rad[2]);
         let h = size_m / 2.0;
         let corner = |sx: f64, sy: f64, sz: f64| center + r * Vector3::new(sx * h.x, sy * h.y, sz * h.z);
         let c: Vec<Point3<f64>> = (0..8)
@@ -355,6 +367,24 @@ mod tests {
         assert!(through(4.5, 2.5).is_some(), "lintel");
         assert!(through(3.5, 1.0).is_some());
         assert!(through(5.5, 1.0).is_some());
+    }
+
+    /// A box pitched by 90° stands its long x edge upright.
+    #[test]
+    fn oriented_box() {
+        let mut b = SceneBuilder::new();
+        b.oriented_cuboid(
+            "post",
+            Point3::new(0.0, 0.0, 0.0),
+            Vector3::new(4.0, 0.2, 0.2),
+            [0.0, std::f64::consts::FRAC_PI_2, 0.0],
+        )
+        .expect("valid box");
+        let scene = b.build("b");
+        let down = scene.cast(&Ray::new(Point3::new(0.0, 0.0, 5.0), -Vector3::z()).expect("ray"), 10.0).expect("top");
+        assert!((down.distance_m - 3.0).abs() < 1e-9, "top at z = 2: {}", down.distance_m);
+        let side = scene.cast(&Ray::new(Point3::new(-5.0, 0.0, 1.5), Vector3::x()).expect("ray"), 10.0).expect("side");
+        assert!((side.distance_m - 4.9).abs() < 1e-9);
     }
 
     #[test]

@@ -10,11 +10,13 @@
 //! name = "ramp"
 //! vertices_m = [[0, 0, 0], [4, 0, 0], [4, 2, 0.5], [0, 2, 0.5]]
 //!
-//! [[box]]                 # centre, full edge lengths, rotation about z
+//! [[box]]                 # centre, full edge lengths, orientation
 //! name = "crate"
 //! center_m = [3, 4, 0.5]
 //! size_m = [1, 1, 1]
-//! yaw_deg = 30            # optional, default 0
+//! yaw_deg = 30            # optional, default 0; R = Rz(yaw)·Ry(pitch)·Rx(roll)
+//! pitch_deg = 0           # optional, default 0
+//! roll_deg = 0            # optional, default 0
 //!
 //! [[cylinder]]            # lateral surface from a_m to b_m
 //! name = "column"
@@ -91,6 +93,12 @@ pub struct BoxSpec {
     /// Rotation about z, degrees.
     #[serde(default)]
     pub yaw_deg: f64,
+    /// Rotation about y, degrees.
+    #[serde(default)]
+    pub pitch_deg: f64,
+    /// Rotation about x, degrees.
+    #[serde(default)]
+    pub roll_deg: f64,
 }
 
 /// `[[cylinder]]`.
@@ -186,8 +194,13 @@ pub fn parse_scene_toml(text: &str) -> Result<Scene> {
     }
     for s in &spec.boxes {
         let x = s.get_ref();
-        b.cuboid(&x.name, p(&x.center_m), Vector3::from(x.size_m), x.yaw_deg.to_radians())
-            .map_err(|e| at(text, s.span(), e))?;
+        b.oriented_cuboid(
+            &x.name,
+            p(&x.center_m),
+            Vector3::from(x.size_m),
+            [x.roll_deg, x.pitch_deg, x.yaw_deg].map(f64::to_radians),
+        )
+        .map_err(|e| at(text, s.span(), e))?;
     }
     for s in &spec.cylinder {
         let x = s.get_ref();
