@@ -1,5 +1,10 @@
-//! Point-cloud fusion: direct transformation to the world frame, ICP,
-//! multi-view matching, CPS-prior ICP and pipe fitting.
+//! Point-cloud fusion: scans into the world frame.
 //!
-//! This crate is built up by the fusion issue; nothing is exposed yet.
+//! - [`direct`]: the direct transformation with the CPS pose, tilt and lever
+//!   arm ([`direct::world_from_scanner`], [`direct::transform`]).
+//!
+//! ICP, multi-view matching, CPS-prior ICP and pipe fitting are being built
+//! (see the README's status table).
 #![warn(missing_docs)]
+
+pub mod direct;
