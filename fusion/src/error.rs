@@ -1,0 +1,45 @@
+//! The one error type of the `fusion` crate.
+
+use thiserror::Error;
+
+/// What can go wrong while fusing scans.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum FusionError {
+    /// Too few point pairs within the correspondence distance.
+    #[error(
+        "ICP: {found} correspondences within {max_distance_m} m at iteration {iteration}: expected at least {needed} (is the initial guess within the correspondence distance?)"
+    )]
+    TooFewCorrespondences {
+        /// Pairs found.
+        found: usize,
+        /// Pairs needed.
+        needed: usize,
+        /// The correspondence distance, metres.
+        max_distance_m: f64,
+        /// Iteration (0-based).
+        iteration: usize,
+    },
+    /// A setting is out of range.
+    #[error("{what} = {value} is out of range: expected {expected}")]
+    OutOfRange {
+        /// Which setting.
+        what: String,
+        /// Its value.
+        value: f64,
+        /// What is accepted.
+        expected: String,
+    },
+    /// The geometry does not constrain all six degrees of freedom.
+    #[error("ICP: the normal equations are singular ({what}); the scans do not constrain all six degrees of freedom")]
+    Degenerate {
+        /// Where.
+        what: String,
+    },
+    /// A scanner or file error.
+    #[error(transparent)]
+    Scanner(#[from] scanner::ScannerError),
+}
+
+/// Result alias of the `fusion` crate.
+pub type Result<T, E = FusionError> = std::result::Result<T, E>;
