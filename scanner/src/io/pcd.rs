@@ -57,6 +57,18 @@ impl Field {
     }
 }
 
+/// Where each field starts when fields of `width(f)` follow each other.
+fn starts(fields: &[Field], width: impl Fn(&Field) -> usize) -> Vec<usize> {
+    fields
+        .iter()
+        .scan(0, |c, f| {
+            let s = *c;
+            *c += width(f);
+            Some(s)
+        })
+        .collect()
+}
+
 struct Header {
     fields: Vec<Field>,
     points: usize,
@@ -188,15 +200,7 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
                 ScannerError::file(path, Location::Byte((h.offset + e.valid_up_to()) as u64), "ASCII data is not text")
             })?;
             let header_lines = bytes[..h.offset].iter().filter(|&&b| b == b'\n').count();
-            let columns: Vec<usize> = h
-                .fields
-                .iter()
-                .scan(0, |c, f| {
-                    let s = *c;
-                    *c += f.count;
-                    Some(s)
-                })
-                .collect();
+            let columns = starts(&h.fields, |f| f.count);
             let mut read = 0;
             for (k, line) in text.lines().enumerate() {
                 if line.trim().is_empty() {
@@ -250,15 +254,7 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
                     ),
                 ));
             }
-            let offsets: Vec<usize> = h
-                .fields
-                .iter()
-                .scan(0, |c, f| {
-                    let s = *c;
-                    *c += f.bytes();
-                    Some(s)
-                })
-                .collect();
+            let offsets = starts(&h.fields, |f| f.bytes());
             for i in 0..n {
                 let rec = &data[i * record..(i + 1) * record];
                 for (slot, &f) in wanted.iter().enumerate() {
@@ -309,18 +305,11 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
                 ));
             }
             // Field-major: all of field 0, then all of field 1, ...
-            let starts: Vec<usize> = h
-                .fields
-                .iter()
-                .scan(0, |c, f| {
-                    let s = *c;
-                    *c += f.bytes() * n;
-                    Some(s)
-                })
-                .collect();
+            let field_start = starts(&h.fields, |f| f.bytes() * n);
             for (slot, &f) in wanted.iter().enumerate() {
                 let fd = &h.fields[f];
-                values[slot].extend((0..n).map(|i| fd.value(&plain[starts[f] + i * fd.bytes()..]).unwrap_or(f64::NAN)));
+                values[slot]
+                    .extend((0..n).map(|i| fd.value(&plain[field_start[f] + i * fd.bytes()..]).unwrap_or(f64::NAN)));
             }
         }
     }
