@@ -140,6 +140,19 @@ impl Instrument {
         Matrix3::from_diagonal(&nalgebra::Vector3::new(a, b, c))
     }
 
+    /// `exact` with this instrument's noise: `z` holds three standard-normal
+    /// draws, scaled by (σ_r, σ_φ, σ_ψ) of [`Instrument::reading_variances`]
+    /// (the azimuth is wrapped). Simulators and Monte Carlo share this so
+    /// that they draw exactly the noise the prediction assumes.
+    pub fn perturbed(&self, exact: &Reading, z: [f64; 3]) -> Reading {
+        let [vr, vp, vv] = self.reading_variances(exact);
+        Reading {
+            slope_m: exact.slope_m + vr.sqrt() * z[0],
+            azimuth_rad: crate::observation::wrap_angle(exact.azimuth_rad + vp.sqrt() * z[1]),
+            elevation_rad: exact.elevation_rad + vv.sqrt() * z[2],
+        }
+    }
+
     /// The raw slope distance corrected by the prism constant.
     pub fn corrected_slope_m(&self, raw_slope_m: f64) -> f64 {
         raw_slope_m + self.prism_constant_m

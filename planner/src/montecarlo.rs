@@ -20,13 +20,8 @@ pub fn noisy_reading(
     rng: &mut impl Rng,
 ) -> cps::Result<Reading> {
     let truth = observe(from, to)?;
-    let [vr, vp, vv] = instrument.reading_variances(&truth);
-    let mut n = || -> f64 { rng.sample(StandardNormal) };
-    Ok(Reading {
-        slope_m: truth.slope_m + vr.sqrt() * n(),
-        azimuth_rad: wrap_angle(truth.azimuth_rad + vp.sqrt() * n()),
-        elevation_rad: truth.elevation_rad + vv.sqrt() * n(),
-    })
+    let z = [(); 3].map(|()| rng.sample(StandardNormal));
+    Ok(instrument.perturbed(&truth, z))
 }
 
 /// Draws a pose error with covariance `cov` (positive semi-definite).

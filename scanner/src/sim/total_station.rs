@@ -2,7 +2,7 @@
 //! centring) on the true sight line, the instrument's range limits, line of
 //! sight through the scene, and the prism constant.
 
-use cps::{Instrument, observe, wrap_angle};
+use cps::{Instrument, observe};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
@@ -56,14 +56,8 @@ impl TotalStation for SimTotalStation {
                 expected: format!("{} m … {} m", inst.min_range_m, inst.max_range_m),
             });
         }
-        let [vr, vp, vv] = inst.reading_variances(&exact);
-        let mut n = || -> f64 { self.rng.sample(StandardNormal) };
-        let noisy = cps::Reading {
-            slope_m: exact.slope_m + vr.sqrt() * n(),
-            azimuth_rad: wrap_angle(exact.azimuth_rad + vp.sqrt() * n()),
-            elevation_rad: exact.elevation_rad + vv.sqrt() * n(),
-        };
-        Ok(TsMeasurement::from_reading(&noisy, inst))
+        let z = [(); 3].map(|()| self.rng.sample(StandardNormal));
+        Ok(TsMeasurement::from_reading(&inst.perturbed(&exact, z), inst))
     }
 }
 
