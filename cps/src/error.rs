@@ -122,6 +122,19 @@ pub enum CpsError {
 /// Result alias of the `cps` crate.
 pub type Result<T, E = CpsError> = std::result::Result<T, E>;
 
+/// 1-based (line, column) of byte `offset` in `text`, counting columns in
+/// characters; an offset inside a character or past the end is clamped.
+pub fn line_column(text: &str, offset: usize) -> (usize, usize) {
+    let mut end = offset.min(text.len());
+    while end > 0 && !text.is_char_boundary(end) {
+        end -= 1;
+    }
+    let before = &text[..end];
+    let line = before.matches('\n').count() + 1;
+    let line_start = before.rfind('\n').map_or(0, |i| i + 1);
+    (line, before[line_start..].chars().count() + 1)
+}
+
 /// Error when `value` is not finite.
 pub(crate) fn ensure_finite(what: impl FnOnce() -> String, value: f64) -> Result<f64> {
     if value.is_finite() { Ok(value) } else { Err(CpsError::NonFinite { what: what(), value }) }

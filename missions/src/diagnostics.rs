@@ -45,11 +45,7 @@ impl Source {
 
     /// 1-based (line, column) of a byte offset.
     pub fn line_column(&self, offset: usize) -> (usize, usize) {
-        let offset = offset.min(self.text.len());
-        let before = &self.text[..floor_char_boundary(&self.text, offset)];
-        let line = before.matches('\n').count() + 1;
-        let line_start = before.rfind('\n').map_or(0, |i| i + 1);
-        (line, before[line_start..].chars().count() + 1)
+        cps::error::line_column(&self.text, offset)
     }
 
     /// A diagnostic at `span`.
@@ -57,13 +53,6 @@ impl Source {
         let (line, column) = self.line_column(span.start);
         Diagnostic { file: self.file.clone(), line, column, field: field.to_string(), message: message.into() }
     }
-}
-
-fn floor_char_boundary(s: &str, mut i: usize) -> usize {
-    while i > 0 && !s.is_char_boundary(i) {
-        i -= 1;
-    }
-    i
 }
 
 /// Every problem found in one file.

@@ -43,7 +43,7 @@ use serde::Deserialize;
 use toml::Spanned;
 
 use super::{Opening, Scene, SceneBuilder};
-use crate::error::{CpsError, Result};
+use crate::error::{CpsError, Result, line_column};
 
 /// The raw scene file.
 #[derive(Debug, Clone, Deserialize)]
@@ -161,14 +161,6 @@ pub struct OpeningSpec {
     pub z_min_m: f64,
     /// Top, metres.
     pub z_max_m: f64,
-}
-
-/// 1-based line and column of byte `offset` in `text`.
-fn line_column(text: &str, offset: usize) -> (usize, usize) {
-    let before = &text[..offset.min(text.len())];
-    let line = before.matches('\n').count() + 1;
-    let column = before.rfind('\n').map_or(before.chars().count(), |nl| before[nl + 1..].chars().count()) + 1;
-    (line, column)
 }
 
 fn at(text: &str, span: std::ops::Range<usize>, error: CpsError) -> CpsError {
