@@ -157,6 +157,7 @@ struct Sums {
     sp: Vector3<f64>,
     sq_t: Vector3<f64>,
     spq: Matrix3<f64>,
+    spp: Matrix3<f64>,
 }
 
 impl Sums {
@@ -168,7 +169,26 @@ impl Sums {
         self.sp += o.sp;
         self.sq_t += o.sq_t;
         self.spq += o.spq;
+        self.spp += o.spp;
         self
+    }
+
+    /// Σ JᵀJ of the pairs, with J = [−[p]×, I] for point-to-point (derived
+    /// from n, Σp and Σppᵀ: [p]×ᵀ[p]× = |p|²I − ppᵀ) and the accumulated
+    /// `h` for point-to-plane.
+    fn normal_matrix(&self, method: Method) -> Matrix6<f64> {
+        match method {
+            Method::PointToPlane => self.h,
+            Method::PointToPoint => {
+                let k = skew(&self.sp);
+                let mut h = Matrix6::zeros();
+                h.fixed_view_mut::<3, 3>(0, 0).copy_from(&(Matrix3::identity() * self.spp.trace() - self.spp));
+                h.fixed_view_mut::<3, 3>(0, 3).copy_from(&k);
+                h.fixed_view_mut::<3, 3>(3, 0).copy_from(&(-k));
+                h.fixed_view_mut::<3, 3>(3, 3).copy_from(&(Matrix3::identity() * self.n as f64));
+                h
+            }
+        }
     }
 }
 
@@ -256,7 +276,7 @@ pub fn align(source: &[Point3<f32>], target: &Target, init: &Isometry3<f64>, con
     let scalars = if config.method == Method::PointToPlane { sums.n } else { 3 * sums.n };
     let sigma2 = (sums.sq / scalars.saturating_sub(6).max(1) as f64).max(1e-18);
     let rmse_m = (sums.sq / sums.n.max(1) as f64).sqrt();
-    let information = sums.h / sigma2;
+    let information = sums.normal_matrix(config.method) / sigma2;
     Ok(IcpResult { target_from_source: estimate, converged, iterations, inliers: sums.n, rmse_m, information })
 }
 
@@ -308,14 +328,7 @@ fn accumulate(source: &[Point3<f32>], target: &Target, estimate: &Isometry3<f64>
                         s.sp += pt;
                         s.sq_t += q;
                         s.spq += pt * q.transpose();
-                        // JᵀJ of J = [−[p]×, I].
-                        let k = skew(&pt);
-                        let mut h = Matrix6::zeros();
-                        h.fixed_view_mut::<3, 3>(0, 0).copy_from(&(k.transpose() * k));
-                        h.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-k.transpose()));
-                        h.fixed_view_mut::<3, 3>(3, 0).copy_from(&(-k));
-                        h.fixed_view_mut::<3, 3>(3, 3).copy_from(&Matrix3::identity());
-                        s.h += h;
+                        s.spp += pt * pt.transpose();
                     }
                 }
             }
@@ -373,6 +386,26 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
 
     use super::*;
+
+    /// The point-to-point normal matrix derived from the sums equals Σ JᵀJ
+    /// with J = [−[p]×, I] built point by point.
+    #[test]
+    fn point_to_point_normal_matrix() {
+        let mut rng = ChaCha8Rng::seed_from_u64(2);
+        let mut sums = Sums::default();
+        let mut explicit = Matrix6::zeros();
+        for _ in 0..20 {
+            let p = Vector3::new(rng.random_range(-5.0..5.0), rng.random_range(-5.0..5.0), rng.random_range(-5.0..5.0));
+            let mut j = nalgebra::Matrix3x6::zeros();
+            j.fixed_view_mut::<3, 3>(0, 0).copy_from(&(-skew(&p)));
+            j.fixed_view_mut::<3, 3>(0, 3).copy_from(&Matrix3::identity());
+            explicit += j.transpose() * j;
+            sums.n += 1;
+            sums.sp += p;
+            sums.spp += p * p.transpose();
+        }
+        assert!((sums.normal_matrix(Method::PointToPoint) - explicit).amax() < 1e-9);
+    }
 
     /// Horn recovers an exact rotation from noiseless pairs.
     #[test]
