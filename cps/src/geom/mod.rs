@@ -181,7 +181,11 @@ impl Scene {
 
     /// The nearest surface along `ray` within `max_m`, if any.
     pub fn cast(&self, ray: &Ray, max_m: f64) -> Option<Hit> {
-        self.bvh.cast(ray, 0.0, max_m).map(|(h, object)| Hit {
+        self.cast_between(ray, 0.0, max_m)
+    }
+
+    fn cast_between(&self, ray: &Ray, t_min: f64, t_max: f64) -> Option<Hit> {
+        self.bvh.cast(ray, t_min, t_max).map(|(h, object)| Hit {
             distance_m: h.distance_m,
             point: ray.at(h.distance_m),
             normal: h.normal,
@@ -198,12 +202,7 @@ impl Scene {
             return None;
         }
         let ray = Ray::new(*from, d).ok()?;
-        self.bvh.cast(&ray, LINE_OF_SIGHT_CLEARANCE_M, len - LINE_OF_SIGHT_CLEARANCE_M).map(|(h, object)| Hit {
-            distance_m: h.distance_m,
-            point: ray.at(h.distance_m),
-            normal: h.normal,
-            object,
-        })
+        self.cast_between(&ray, LINE_OF_SIGHT_CLEARANCE_M, len - LINE_OF_SIGHT_CLEARANCE_M)
     }
 
     /// True when nothing lies between `from` and `to`.

@@ -154,7 +154,6 @@ impl RangeFinder2D for SimLms {
 mod tests {
     use cps::ParentPose;
     use cps::geom::builtin;
-    use nalgebra::Point3;
 
     use super::*;
 
@@ -212,6 +211,5 @@ mod tests {
         let a = lms(LmsRangeMode::Mm32, LmsResolution::Half, 0.01, 20.0).scan().expect("scan");
         let b = lms(LmsRangeMode::Mm32, LmsResolution::Half, 0.01, 20.0).scan().expect("scan");
         assert_eq!(a, b);
-        let _ = Point3::<f64>::origin();
     }
 }

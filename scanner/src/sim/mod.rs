@@ -108,23 +108,17 @@ impl ScanHead for SimHead {
     }
 
     fn move_to(&mut self, angle_rad: f64) -> Result<f64> {
-        let limit = match self.kind {
-            HeadKind::RotatingTable => std::f64::consts::TAU,
-            HeadKind::PitchingMount => 60f64.to_radians() + 1e-9,
-        };
-        let ok = match self.kind {
-            HeadKind::RotatingTable => angle_rad.is_finite() && (0.0..limit).contains(&angle_rad),
-            HeadKind::PitchingMount => angle_rad.is_finite() && angle_rad.abs() <= limit,
+        // NaN fails both range tests.
+        let (ok, expected) = match self.kind {
+            HeadKind::RotatingTable => ((0.0..std::f64::consts::TAU).contains(&angle_rad), "0 ≤ angle < 2π"),
+            HeadKind::PitchingMount => (angle_rad.abs() <= 60f64.to_radians() + 1e-9, "|angle| ≤ 60°"),
         };
         if !ok {
             return Err(ScannerError::OutOfRange {
                 device: format!("simulated {:?}", self.kind),
                 what: "head angle (rad)".into(),
                 value: angle_rad,
-                expected: match self.kind {
-                    HeadKind::RotatingTable => "0 ≤ angle < 2π".into(),
-                    HeadKind::PitchingMount => "|angle| ≤ 60°".into(),
-                },
+                expected: expected.into(),
             });
         }
         self.world.lock().head_angle_rad = angle_rad;
