@@ -4,7 +4,10 @@
 use std::path::PathBuf;
 
 use fusion::icp::{IcpConfig, Method, Stage, align_coarse_to_fine};
-use nalgebra::{Isometry3, Point3};
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
 use scanner::io::{from_3dtk_axes, read, read_3dtk_pose, read_matrix4};
 
 fn data(rel: &str) -> PathBuf {
@@ -58,6 +61,49 @@ fn threedtk_pairs_from_odometry() {
             if method == Method::PointToPlane {
                 assert!(r.converged, "{a}←{b} did not converge in {} iterations", r.iterations);
             }
+        }
+    }
+}
+
+/// `start` moved by 0.5 m and turned by 5° about random axes (left side).
+fn perturbed(start: &Isometry3<f64>, rng: &mut ChaCha8Rng) -> Isometry3<f64> {
+    let mut unit = || {
+        let v: Vector3<f64> = Vector3::from_fn(|_, _| rng.sample(StandardNormal));
+        v.normalize()
+    };
+    let (d, axis) = (unit() * 0.5, unit());
+    Isometry3::from_parts(Translation3::from(d), UnitQuaternion::from_scaled_axis(axis * 5f64.to_radians())) * start
+}
+
+/// Point-to-plane with the coarse-to-fine schedule lands within 0.3° and
+/// 2 cm of the reference from the odometry and from ten perturbed guesses,
+/// on every pair that has an odometry guess.
+#[test]
+fn perturbed_guesses_land_on_the_reference() {
+    let pose = |k: usize| read_3dtk_pose(&data(&format!("3dtk_dat/scan{k:03}.pose"))).expect("pose");
+    let reference_3dtk = |a: usize, b: usize| {
+        from_3dtk_axes(&read_matrix4(&data(&format!("3dtk_dat/reference_T_scan{a:03}_scan{b:03}.txt"))).expect("m"))
+    };
+    let pairs = [
+        ("3dtk 0←1", threedtk(1), threedtk(0), pose(0).inverse() * pose(1), reference_3dtk(0, 1)),
+        ("3dtk 1←2", threedtk(2), threedtk(1), pose(1).inverse() * pose(2), reference_3dtk(1, 2)),
+        (
+            "room",
+            read(&data("pcl_room_scans/room_scan2.pcd")).expect("scan2").points,
+            read(&data("pcl_room_scans/room_scan1.pcd")).expect("scan1").points,
+            iso_from_file("pcl_room_scans/odometry_T_scan1_scan2.txt"),
+            iso_from_file("pcl_room_scans/reference_T_scan1_scan2.txt"),
+        ),
+    ];
+    let mut rng = ChaCha8Rng::seed_from_u64(2026);
+    for (name, source, target, odometry, reference) in pairs {
+        let mut starts = vec![odometry];
+        starts.extend((0..10).map(|_| perturbed(&odometry, &mut rng)));
+        for (k, start) in starts.iter().enumerate() {
+            let (deg0, m0) = error(start, &reference);
+            let r = align_coarse_to_fine(&source, &target, start, &SCHEDULE, &IcpConfig::default()).expect("icp");
+            let (deg, m) = error(&r.target_from_source, &reference);
+            assert!(deg < 0.3 && m < 0.02, "{name}, start {k} ({deg0:.2}°, {m0:.2} m off): {deg}° {m} m");
         }
     }
 }

@@ -32,6 +32,8 @@ pub enum Command {
         /// The mission file (TOML).
         mission: PathBuf,
     },
+    /// Align one scan file to another with ICP.
+    Register(crate::register::RegisterArgs),
 }
 
 /// How a command that ran ended.
@@ -70,6 +72,11 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> anyhow::Result<Outcome> {
             } else {
                 Outcome::AcceptanceFailed
             })
+        }
+        Command::Register(args) => {
+            crate::register::register(&args, out)?;
+            out.flush()?;
+            Ok(Outcome::Success)
         }
         Command::Validate { mission } => {
             let m = Mission::load(&mission)?;

@@ -11,6 +11,7 @@ pub mod diagnostics;
 pub mod mission;
 pub mod predict;
 pub mod reader;
+pub mod register;
 
 pub use diagnostics::{Diagnostic, Diagnostics};
 pub use mission::{Mission, MissionError};

@@ -8,8 +8,9 @@ use rayon::prelude::*;
 use crate::error::{Result, ScannerError};
 
 /// Joins the points in each cubic cell of edge `cell_m` into their mean
-/// (accumulated in f64). The output is ordered by cell (x, then y, then z
-/// cell index), so it is deterministic. Non-finite points are an error.
+/// (accumulated in f64). The output is ordered by the cells' Morton (Z-order)
+/// key, so it is deterministic and spatially coherent. Non-finite points and
+/// clouds spanning 2²¹ cells or more along an axis are errors.
 pub fn reduced_points(points: &[Point3<f32>], cell_m: f64) -> Result<Vec<Point3<f32>>> {
     if !(cell_m.is_finite() && cell_m > 0.0) {
         return Err(ScannerError::OutOfRange {
@@ -20,27 +21,52 @@ pub fn reduced_points(points: &[Point3<f32>], cell_m: f64) -> Result<Vec<Point3<
         });
     }
     let inv = 1.0 / cell_m;
-    let limit = f64::from(i32::MAX);
-    let mut keyed: Vec<((i32, i32, i32), u32)> = points
+    let cell = |c: f32| (f64::from(c) * inv).floor();
+    // Cell indices relative to the lowest cell, 21 bits per axis, interleaved
+    // into one u64 Morton key: sorting by it groups the output spatially,
+    // which keeps later nearest-neighbour queries cache-friendly.
+    let (lo, hi) = points
         .par_iter()
         .enumerate()
         .map(|(i, p)| {
-            let cell = |c: f32| {
-                let k = (f64::from(c) * inv).floor();
-                (k.abs() < limit).then_some(k as i32)
-            };
-            match (cell(p.x), cell(p.y), cell(p.z)) {
-                (Some(x), Some(y), Some(z)) => Ok(((x, y, z), i as u32)),
-                _ => Err(ScannerError::OutOfRange {
+            let c = [cell(p.x), cell(p.y), cell(p.z)];
+            if c.iter().all(|k| k.abs() < 1e15) {
+                Ok((c, c))
+            } else {
+                Err(ScannerError::OutOfRange {
                     device: "reduced points".into(),
                     what: format!("point {i} coordinate (m)"),
                     value: f64::from(p.x.abs().max(p.y.abs()).max(p.z.abs())),
-                    expected: format!("finite and within ±{:.3e} m for a {cell_m} m cell", limit * cell_m),
-                }),
+                    expected: format!("finite and within ±{:.3e} m for a {cell_m} m cell", 1e15 * cell_m),
+                })
             }
         })
-        .collect::<Result<_>>()?;
-    keyed.par_sort_unstable();
+        .try_reduce(
+            || ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]),
+            |(alo, ahi), (blo, bhi)| {
+                Ok((std::array::from_fn(|k| alo[k].min(blo[k])), std::array::from_fn(|k| ahi[k].max(bhi[k]))))
+            },
+        )?;
+    const BITS: u32 = 21;
+    for (k, axis) in ["x", "y", "z"].into_iter().enumerate() {
+        if hi[k] - lo[k] >= f64::from(1u32 << BITS) {
+            return Err(ScannerError::OutOfRange {
+                device: "reduced points".into(),
+                what: format!("cloud extent along {axis} in {cell_m} m cells"),
+                value: hi[k] - lo[k] + 1.0,
+                expected: format!("< {} cells: use a larger cell or split the cloud", 1u32 << BITS),
+            });
+        }
+    }
+    let mut keyed: Vec<(u64, u32)> = points
+        .par_iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let key = |c: f32, k: usize| spread((cell(c) - lo[k]) as u64);
+            ((key(p.x, 0) << 2) | (key(p.y, 1) << 1) | key(p.z, 2), i as u32)
+        })
+        .collect();
+    keyed.sort_unstable();
     let mut out = Vec::with_capacity(points.len() / 4);
     let mut start = 0;
     while start < keyed.len() {
@@ -57,9 +83,28 @@ pub fn reduced_points(points: &[Point3<f32>], cell_m: f64) -> Result<Vec<Point3<
     Ok(out)
 }
 
+/// Spreads the low 21 bits of `v` to every third bit (bit i → bit 3i).
+fn spread(v: u64) -> u64 {
+    let mut x = v & 0x1f_ffff;
+    x = (x | (x << 32)) & 0x1f_0000_0000_ffff;
+    x = (x | (x << 16)) & 0x1f_0000_ff00_00ff;
+    x = (x | (x << 8)) & 0x100f_00f0_0f00_f00f;
+    x = (x | (x << 4)) & 0x10c3_0c30_c30c_30c3;
+    (x | (x << 2)) & 0x1249_2492_4924_9249
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn spread_moves_bit_i_to_3i() {
+        for i in 0..21 {
+            assert_eq!(spread(1 << i), 1 << (3 * i));
+        }
+        assert_eq!(spread(0x1f_ffff), 0x1249_2492_4924_9249);
+        assert_eq!(spread(1 << 21), 0, "bits above 21 are dropped");
+    }
 
     #[test]
     fn means_per_cell() {
