@@ -267,7 +267,7 @@ fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
 
 /// Horn's closed-form rotation: the unit quaternion is the eigenvector of
 /// the largest eigenvalue of N built from S = Σ (p − p̄)(q − q̄)ᵀ.
-fn horn_rotation(s: &Matrix3<f64>) -> UnitQuaternion<f64> {
+pub(crate) fn horn_rotation(s: &Matrix3<f64>) -> UnitQuaternion<f64> {
     let (sxx, sxy, sxz) = (s[(0, 0)], s[(0, 1)], s[(0, 2)]);
     let (syx, syy, syz) = (s[(1, 0)], s[(1, 1)], s[(1, 2)]);
     let (szx, szy, szz) = (s[(2, 0)], s[(2, 1)], s[(2, 2)]);

@@ -4,14 +4,14 @@
 //!   arm ([`direct::world_from_scanner`], [`direct::transform`]);
 //! - [`icp`]: point-to-point (Horn) and point-to-plane ICP on a `kiddo`
 //!   k-d tree ([`icp::Target`], [`icp::align`], [`icp::align_coarse_to_fine`],
-//!   [`icp::IcpResult`]).
-//!
-//! Multi-view matching, CPS-prior ICP and pipe fitting are being built (see
-//! the README's status table).
+//!   [`icp::IcpResult`]);
+//! - [`pipe`]: tube fitting into scanned pipes and the deviation map
+//!   ([`pipe::fit_pipe`], [`pipe::anomalies`]).
 #![warn(missing_docs)]
 
 pub mod direct;
 pub mod error;
 pub mod icp;
+pub mod pipe;
 
 pub use error::{FusionError, Result};

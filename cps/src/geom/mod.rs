@@ -13,7 +13,7 @@ mod shape;
 mod spec;
 
 pub use builder::{Opening, SceneBuilder};
-pub use builtin::{BUILTIN_SCENES, builtin};
+pub use builtin::{BUILTIN_SCENES, SEWER_BRICK_CENTER, SEWER_BRICK_SIZE_M, SEWER_RADIUS_M, builtin};
 pub use bvh::Bvh;
 pub use shape::{Primitive, PrimitiveHit};
 pub use spec::{SceneSpec, parse_scene_toml};
