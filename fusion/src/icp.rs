@@ -285,6 +285,68 @@ pub(crate) fn horn_rotation(s: &Matrix3<f64>) -> UnitQuaternion<f64> {
 
 /// Aligns `source` to `target` from `init` (`target_from_source`).
 pub fn align(source: &[Point3<f32>], target: &Target, init: &Isometry3<f64>, config: &IcpConfig) -> Result<IcpResult> {
+    align_impl(source, target, init, config, None)
+}
+
+/// A prior on `target_from_source` — typically the CPS pose of the scan
+/// and its covariance — with its 6×6 information in the same convention as
+/// [`IcpResult::information`] (ξ = (ω, v), left perturbation, target frame).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Prior {
+    /// The prior's mean.
+    pub target_from_source: Isometry3<f64>,
+    /// Its information (inverse covariance), symmetric positive semi-definite.
+    pub information: Matrix6<f64>,
+}
+
+/// Point-to-plane ICP whose normal equations include a prior: each
+/// Gauss–Newton step minimises Σ r²/σ̂² + eᵀ Λ e, with σ̂² the current
+/// residual variance and e ≈ ξ(T · T_prior⁻¹) the prior's error (first
+/// order). The result is the fused estimate; its `information` is the
+/// fused one, H/σ̂² + Λ, so directions the scans do not constrain (along a
+/// corridor, about a pipe's axis) keep the prior's uncertainty instead of
+/// failing as singular.
+pub fn align_with_prior(
+    source: &[Point3<f32>],
+    target: &Target,
+    init: &Isometry3<f64>,
+    prior: &Prior,
+    config: &IcpConfig,
+) -> Result<IcpResult> {
+    if config.method != Method::PointToPlane {
+        return Err(FusionError::OutOfRange {
+            what: "ICP method with a prior".into(),
+            value: 0.0,
+            expected: "point-to-plane".into(),
+        });
+    }
+    let l = &prior.information;
+    let symmetric = (l - l.transpose()).amax() <= 1e-9 * l.amax().max(1.0);
+    let psd = l.symmetric_eigenvalues().iter().all(|v| *v >= -1e-9 * l.amax().max(1.0));
+    if !(l.iter().all(|v| v.is_finite()) && symmetric && psd) {
+        return Err(FusionError::OutOfRange {
+            what: "prior information".into(),
+            value: l.amax(),
+            expected: "a finite, symmetric, positive semi-definite 6×6".into(),
+        });
+    }
+    align_impl(source, target, init, config, Some(prior))
+}
+
+/// ξ = (ω, v) with `a ≈ exp(ξ) · b` to first order.
+fn left_difference(a: &Isometry3<f64>, b: &Isometry3<f64>) -> Vector6<f64> {
+    let d = a * b.inverse();
+    let w = d.rotation.scaled_axis();
+    Vector6::new(w.x, w.y, w.z, d.translation.x, d.translation.y, d.translation.z)
+}
+
+fn align_impl(
+    source: &[Point3<f32>],
+    target: &Target,
+    init: &Isometry3<f64>,
+    config: &IcpConfig,
+    prior: Option<&Prior>,
+) -> Result<IcpResult> {
     check(config)?;
     if config.method == Method::PointToPlane && target.normals.is_empty() {
         return Err(FusionError::OutOfRange {
@@ -316,13 +378,20 @@ pub fn align(source: &[Point3<f32>], target: &Target, init: &Isometry3<f64>, con
                 Isometry3::from_parts(Translation3::from(cq - r * cp), r)
             }
             Method::PointToPlane => {
-                let delta = sums
-                    .h
+                let (h, b) = match prior {
+                    None => (sums.h, sums.b),
+                    Some(p) => {
+                        let sigma2 = residual_variance(&sums, config.method);
+                        let e = left_difference(&estimate, &p.target_from_source);
+                        (sums.h / sigma2 + p.information, sums.b / sigma2 + p.information * e)
+                    }
+                };
+                let delta = h
                     .cholesky()
                     .ok_or_else(|| FusionError::Degenerate {
                         what: format!("point-to-plane normal equations at iteration {iterations}"),
                     })?
-                    .solve(&(-sums.b));
+                    .solve(&(-b));
                 let w = Vector3::new(delta[0], delta[1], delta[2]);
                 Isometry3::from_parts(
                     Translation3::new(delta[3], delta[4], delta[5]),
@@ -341,12 +410,16 @@ pub fn align(source: &[Point3<f32>], target: &Target, init: &Isometry3<f64>, con
     }
     // Statistics and information at the solution.
     let sums = accumulate(source, target, &estimate, max_sq, config);
-    // σ̂² per scalar residual: point-to-plane has one per pair, point-to-point three.
-    let scalars = if config.method == Method::PointToPlane { sums.n } else { 3 * sums.n };
-    let sigma2 = (sums.sq / scalars.saturating_sub(6).max(1) as f64).max(1e-18);
     let rmse_m = (sums.sq / sums.n.max(1) as f64).sqrt();
-    let information = sums.normal_matrix(config.method) / sigma2;
+    let information = sums.normal_matrix(config.method) / residual_variance(&sums, config.method)
+        + prior.map_or_else(Matrix6::zeros, |p| p.information);
     Ok(IcpResult { target_from_source: estimate, converged, iterations, inliers: sums.n, rmse_m, information })
+}
+
+/// σ̂² per scalar residual: point-to-plane has one per pair, point-to-point three.
+fn residual_variance(sums: &Sums, method: Method) -> f64 {
+    let scalars = if method == Method::PointToPlane { sums.n } else { 3 * sums.n };
+    (sums.sq / scalars.saturating_sub(6).max(1) as f64).max(1e-18)
 }
 
 fn check(c: &IcpConfig) -> Result<()> {
