@@ -156,6 +156,17 @@ pub struct PipeFit {
 /// Fits a tube into `points` from the default tube `initial`.
 pub fn fit_pipe(points: &[Point3<f32>], initial: &Pipe, config: &PipeConfig) -> Result<PipeFit> {
     initial.check("default tube")?;
+    for (what, v) in [
+        ("pipe initial gate (m)", config.initial_gate_m),
+        ("pipe gate (robust σ)", config.gate_sigmas),
+        ("pipe minimum gate (m)", config.min_gate_m),
+        ("pipe tolerance (m)", config.tolerance_m),
+        ("pipe iteration cap", config.max_iterations as f64),
+    ] {
+        if !(v.is_finite() && v > 0.0) {
+            return Err(FusionError::OutOfRange { what: what.into(), value: v, expected: "finite and > 0".into() });
+        }
+    }
     let coarse = scanner::reduced_points(points, config.coarse_voxel_m)?;
     let to64 = |v: &[Point3<f32>]| v.iter().map(|p| p.cast::<f64>()).collect::<Vec<_>>();
     let (mut pipe, mut gate) = (*initial, config.initial_gate_m);
@@ -386,5 +397,9 @@ mod tests {
         for pipe in bad {
             assert!(fit_pipe(&[Point3::origin(); 10], &pipe, &PipeConfig::default()).is_err());
         }
+        let good = Pipe { a: Point3::origin(), b: p, radius_m: 0.5 };
+        let no_iterations = PipeConfig { max_iterations: 0, ..PipeConfig::default() };
+        let e = fit_pipe(&[Point3::origin(); 10], &good, &no_iterations).expect_err("cap 0");
+        assert!(e.to_string().contains("iteration cap"), "{e}");
     }
 }
