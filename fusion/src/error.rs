@@ -41,5 +41,17 @@ pub enum FusionError {
     Scanner(#[from] scanner::ScannerError),
 }
 
+impl FusionError {
+    /// `Ok` when `value` is finite and > 0, else [`FusionError::OutOfRange`]
+    /// naming `what`.
+    pub(crate) fn require_positive(what: &str, value: f64) -> Result<()> {
+        if value.is_finite() && value > 0.0 {
+            Ok(())
+        } else {
+            Err(FusionError::OutOfRange { what: what.into(), value, expected: "finite and > 0".into() })
+        }
+    }
+}
+
 /// Result alias of the `fusion` crate.
 pub type Result<T, E = FusionError> = std::result::Result<T, E>;

@@ -423,17 +423,9 @@ fn residual_variance(sums: &Sums, method: Method) -> f64 {
 }
 
 fn check(c: &IcpConfig) -> Result<()> {
-    if !(c.max_correspondence_m.is_finite() && c.max_correspondence_m > 0.0) {
-        return Err(FusionError::OutOfRange {
-            what: "max correspondence distance (m)".into(),
-            value: c.max_correspondence_m,
-            expected: "> 0".into(),
-        });
-    }
-    if let Kernel::Huber { width_m } = c.kernel
-        && !(width_m.is_finite() && width_m > 0.0)
-    {
-        return Err(FusionError::OutOfRange { what: "Huber width (m)".into(), value: width_m, expected: "> 0".into() });
+    FusionError::require_positive("max correspondence distance (m)", c.max_correspondence_m)?;
+    if let Kernel::Huber { width_m } = c.kernel {
+        FusionError::require_positive("Huber width (m)", width_m)?;
     }
     for (what, v) in [
         ("translation tolerance (m)", c.translation_tolerance_m),

@@ -51,18 +51,20 @@ impl Pipe {
         (self.b - self.a).norm()
     }
 
-    /// (s, u): the clamped axial coordinate of `x` and its radial vector.
-    fn project(&self, x: &Point3<f64>) -> (f64, Vector3<f64>) {
-        let n = self.direction();
+    /// (s, u, n): the clamped axial coordinate of `x`, its radial vector and
+    /// the unit axis.
+    fn project(&self, x: &Point3<f64>) -> (f64, Vector3<f64>, Vector3<f64>) {
+        let axis = self.b - self.a;
+        let length = axis.norm();
+        let n = axis / length;
         let s = (x - self.a).dot(&n);
         let u = (x - self.a) - s * n;
-        (s.clamp(0.0, self.length_m()), u)
+        (s.clamp(0.0, length), u, n)
     }
 
     /// The closest point on the tube's surface (see the module docs).
     pub fn closest_point(&self, x: &Point3<f64>) -> Point3<f64> {
-        let n = self.direction();
-        let (s, u) = self.project(x);
+        let (s, u, n) = self.project(x);
         let radial = u.try_normalize(1e-12).unwrap_or_else(|| perpendicular(&n));
         self.a + s * n + self.radius_m * radial
     }
@@ -88,14 +90,7 @@ impl Pipe {
                 expected: "finite points a ≠ b".into(),
             });
         }
-        if !(self.radius_m.is_finite() && self.radius_m > 0.0) {
-            return Err(FusionError::OutOfRange {
-                what: format!("{what} radius (m)"),
-                value: self.radius_m,
-                expected: "> 0".into(),
-            });
-        }
-        Ok(())
+        FusionError::require_positive(&format!("{what} radius (m)"), self.radius_m)
     }
 }
 
@@ -163,9 +158,7 @@ pub fn fit_pipe(points: &[Point3<f32>], initial: &Pipe, config: &PipeConfig) -> 
         ("pipe tolerance (m)", config.tolerance_m),
         ("pipe iteration cap", config.max_iterations as f64),
     ] {
-        if !(v.is_finite() && v > 0.0) {
-            return Err(FusionError::OutOfRange { what: what.into(), value: v, expected: "finite and > 0".into() });
-        }
+        FusionError::require_positive(what, v)?;
     }
     let coarse = scanner::reduced_points(points, config.coarse_voxel_m)?;
     let to64 = |v: &[Point3<f32>]| v.iter().map(|p| p.cast::<f64>()).collect::<Vec<_>>();
@@ -195,12 +188,13 @@ pub fn fit_pipe(points: &[Point3<f32>], initial: &Pipe, config: &PipeConfig) -> 
             let motion = nalgebra::Isometry3::from_parts(Translation3::from(cx - r * cc), r);
             let mut next = pipe.moved(&motion);
             // 3. Radius: the mean radial distance of the inliers.
-            next.radius_m = inliers.iter().map(|x| next.project(x).1.norm()).sum::<f64>() / n;
+            let radial: Vec<f64> = inliers.iter().map(|x| next.project(x).1.norm()).collect();
+            next.radius_m = radial.iter().sum::<f64>() / n;
             let step =
                 (next.a - pipe.a).norm().max((next.b - pipe.b).norm()).max((next.radius_m - pipe.radius_m).abs());
             pipe = next;
             // The gate follows the robust spread of the inliers' deviations.
-            let mut dev: Vec<f64> = inliers.iter().map(|x| pipe.deviation_m(x).abs()).collect();
+            let mut dev: Vec<f64> = radial.iter().map(|r| (r - pipe.radius_m).abs()).collect();
             let mid = dev.len() / 2;
             let mad = *dev.select_nth_unstable_by(mid, f64::total_cmp).1;
             gate = (config.gate_sigmas * 1.4826 * mad).max(config.min_gate_m);
@@ -258,11 +252,8 @@ pub fn anomalies(
     link_m: f64,
     min_points: usize,
 ) -> Result<Vec<Anomaly>> {
-    for (what, v) in [("anomaly threshold (m)", threshold_m), ("anomaly link distance (m)", link_m)] {
-        if !(v.is_finite() && v > 0.0) {
-            return Err(FusionError::OutOfRange { what: what.into(), value: v, expected: "> 0".into() });
-        }
-    }
+    FusionError::require_positive("anomaly threshold (m)", threshold_m)?;
+    FusionError::require_positive("anomaly link distance (m)", link_m)?;
     let dev = deviation_map(points, pipe);
     let mut out = Vec::new();
     for kind in [AnomalyKind::Intrusion, AnomalyKind::Bulge] {
@@ -357,7 +348,7 @@ mod tests {
             let x = Point3::new(rng.random_range(2.0..8.0), rng.random_range(-3.0..2.0), rng.random_range(4.0..7.0));
             let c = pipe.closest_point(&x);
             // On the surface: radius r from the axis, within the ends.
-            let (s, u) = pipe.project(&c);
+            let (s, u, _) = pipe.project(&c);
             assert!((u.norm() - 0.4).abs() < 1e-12 && (0.0..=pipe.length_m()).contains(&s));
             // Closest among a dense sampling of the lateral surface.
             let d = (x - c).norm();
