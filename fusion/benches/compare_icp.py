@@ -36,6 +36,7 @@ VOXEL, MAX_DIST, ITERATIONS, NEIGHBOURS = 0.1, 1.0, 50, 10
 # small_gicp's default convergence thresholds, given to cps-survey too
 # (Open3D converges on relative fitness/RMSE instead and keeps its defaults).
 TOL_DEG, TOL_M = 0.1, 1e-3
+METHODS = {"plane": "point-to-plane", "point": "point-to-point"}
 
 
 def load_scan(k):
@@ -111,7 +112,7 @@ def child(args):
 def ours(exe, kind, threads, reps, tmp):
     env = dict(os.environ, RAYON_NUM_THREADS=str(threads))
     cmd = [exe, "register", f"{tmp}/source.xyz", f"{tmp}/target.xyz", "--init-file", f"{tmp}/init.txt",
-           "--method", {"plane": "point-to-plane", "point": "point-to-point"}[kind],
+           "--method", METHODS[kind],
            "--voxel", str(VOXEL), "--max-dist", str(MAX_DIST), "--iterations", str(ITERATIONS),
            "--tolerance-deg", str(TOL_DEG), "--tolerance-m", str(TOL_M), "--json"]
     times, out = [], None
@@ -201,18 +202,14 @@ def main():
                         env=env, check=True, capture_output=True, text=True).stdout
                     r = json.loads(out.strip().splitlines()[-1])
                     rows.append((tool, kind, threads, r["seconds"], np.array(r["T"]), r["iterations"]))
-    print(f"3DTK scan001 → scan000: {len(source)} / {len(target)} points, voxel {VOXEL} m, "
-          f"max correspondence {MAX_DIST} m, ≤ {ITERATIONS} iterations, median of {args.reps}")
-    print()
-    print("| method | threads | tool | time | iterations | rotation error | translation error |")
-    print("|---|---|---|---|---|---|---|")
-    for tool, kind, threads, t, m, it in rows:
-        deg, mm = error(m, reference)
-        name = {"plane": "point-to-plane", "point": "point-to-point"}[kind]
-        print(f"| {name} | {threads} | {tool} | {t * 1e3:.1f} ms | {it if it is not None else '–'} | {deg:.3f}° | {mm:.1f} mm |")
-    with tempfile.TemporaryDirectory() as tmp:
-        np.savetxt(f"{tmp}/target.xyz", target, fmt="%.6f")
-        np.savetxt(f"{tmp}/source.xyz", source, fmt="%.6f")
+        print(f"3DTK scan001 → scan000: {len(source)} / {len(target)} points, voxel {VOXEL} m, "
+              f"max correspondence {MAX_DIST} m, ≤ {ITERATIONS} iterations, median of {args.reps}")
+        print()
+        print("| method | threads | tool | time | iterations | rotation error | translation error |")
+        print("|---|---|---|---|---|---|---|")
+        for tool, kind, threads, t, m, it in rows:
+            deg, mm = error(m, reference)
+            print(f"| {METHODS[kind]} | {threads} | {tool} | {t * 1e3:.1f} ms | {it if it is not None else '–'} | {deg:.3f}° | {mm:.1f} mm |")
         accuracy(args.cps_survey, target, source, init, reference, tmp)
 
 

@@ -1,6 +1,9 @@
 //! Monte Carlo check of the point-to-plane ICP covariance and of its
 //! convention (ξ = (ω, v), left perturbation, target frame).
 
+mod common;
+
+use common::left_error;
 use fusion::icp::{IcpConfig, Target, align};
 use nalgebra::{Isometry3, Matrix6, Point3, Translation3, UnitQuaternion, Vector3, Vector6};
 use rand::{Rng, SeedableRng};
@@ -20,13 +23,6 @@ fn room(n: usize, sigma: f64, rng: &mut ChaCha8Rng) -> Vec<Point3<f64>> {
             Point3::from(p)
         })
         .collect()
-}
-
-/// ξ with `a = exp(ξ) · b`, ξ = (ω, v) (small-angle log is enough here).
-fn left_error(a: &Isometry3<f64>, b: &Isometry3<f64>) -> Vector6<f64> {
-    let d = a * b.inverse();
-    let w = d.rotation.scaled_axis();
-    Vector6::new(w.x, w.y, w.z, d.translation.x, d.translation.y, d.translation.z)
 }
 
 /// ξ with `a = b · exp(ξ)` (the other convention).

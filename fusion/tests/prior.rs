@@ -2,6 +2,9 @@
 //! corridor: the prior fills that direction, the scans the others, and the
 //! fused covariance matches Monte Carlo.
 
+mod common;
+
+use common::left_error;
 use fusion::FusionError;
 use fusion::icp::{IcpConfig, Prior, Target, align, align_with_prior};
 use nalgebra::{Isometry3, Matrix6, Point3, Translation3, UnitQuaternion, Vector3, Vector6};
@@ -34,12 +37,6 @@ fn exp(xi: &Vector6<f64>) -> Isometry3<f64> {
         Translation3::new(xi[3], xi[4], xi[5]),
         UnitQuaternion::from_scaled_axis(Vector3::new(xi[0], xi[1], xi[2])),
     )
-}
-
-fn left_error(a: &Isometry3<f64>, b: &Isometry3<f64>) -> Vector6<f64> {
-    let d = a * b.inverse();
-    let w = d.rotation.scaled_axis();
-    Vector6::new(w.x, w.y, w.z, d.translation.x, d.translation.y, d.translation.z)
 }
 
 #[test]

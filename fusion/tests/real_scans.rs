@@ -39,14 +39,21 @@ fn threedtk(k: usize) -> Vec<Point3<f32>> {
     c.points.into_iter().filter(|p| (0.5..32.5).contains(&p.coords.norm())).collect()
 }
 
+/// The odometry's scan_a_from_scan_b of the 3DTK data.
+fn threedtk_odometry(a: usize, b: usize) -> Isometry3<f64> {
+    let pose = |k: usize| read_3dtk_pose(&data(&format!("3dtk_dat/scan{k:03}.pose"))).expect("pose");
+    pose(a).inverse() * pose(b)
+}
+
+/// The reference scan_a_from_scan_b of the 3DTK data, in our axes.
+fn threedtk_reference(a: usize, b: usize) -> Isometry3<f64> {
+    from_3dtk_axes(&read_matrix4(&data(&format!("3dtk_dat/reference_T_scan{a:03}_scan{b:03}.txt"))).expect("m"))
+}
+
 #[test]
 fn threedtk_pairs_from_odometry() {
     for (a, b) in [(0, 1), (1, 2)] {
-        let pose = |k: usize| read_3dtk_pose(&data(&format!("3dtk_dat/scan{k:03}.pose"))).expect("pose");
-        let odometry = pose(a).inverse() * pose(b);
-        let reference = from_3dtk_axes(
-            &read_matrix4(&data(&format!("3dtk_dat/reference_T_scan{a:03}_scan{b:03}.txt"))).expect("m"),
-        );
+        let (odometry, reference) = (threedtk_odometry(a, b), threedtk_reference(a, b));
         for method in [Method::PointToPlane, Method::PointToPoint] {
             let cfg = IcpConfig { method, ..IcpConfig::default() };
             let r = align_coarse_to_fine(&threedtk(b), &threedtk(a), &odometry, &SCHEDULE, &cfg).expect("icp");
@@ -80,13 +87,9 @@ fn perturbed(start: &Isometry3<f64>, rng: &mut ChaCha8Rng) -> Isometry3<f64> {
 /// on every pair that has an odometry guess.
 #[test]
 fn perturbed_guesses_land_on_the_reference() {
-    let pose = |k: usize| read_3dtk_pose(&data(&format!("3dtk_dat/scan{k:03}.pose"))).expect("pose");
-    let reference_3dtk = |a: usize, b: usize| {
-        from_3dtk_axes(&read_matrix4(&data(&format!("3dtk_dat/reference_T_scan{a:03}_scan{b:03}.txt"))).expect("m"))
-    };
     let pairs = [
-        ("3dtk 0←1", threedtk(1), threedtk(0), pose(0).inverse() * pose(1), reference_3dtk(0, 1)),
-        ("3dtk 1←2", threedtk(2), threedtk(1), pose(1).inverse() * pose(2), reference_3dtk(1, 2)),
+        ("3dtk 0←1", threedtk(1), threedtk(0), threedtk_odometry(0, 1), threedtk_reference(0, 1)),
+        ("3dtk 1←2", threedtk(2), threedtk(1), threedtk_odometry(1, 2), threedtk_reference(1, 2)),
         (
             "room",
             read(&data("pcl_room_scans/room_scan2.pcd")).expect("scan2").points,
