@@ -92,6 +92,11 @@ impl ScannerError {
         ScannerError::File { path: path.into(), location, message: message.into() }
     }
 
+    /// A format library's error about the file as a whole.
+    pub(crate) fn whole_file(path: &std::path::Path, e: impl std::fmt::Display) -> Self {
+        Self::file(path, Location::File, e.to_string())
+    }
+
     pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         ScannerError::Io { path: path.into(), source }
     }

@@ -8,22 +8,18 @@ use e57::{CartesianCoordinate, E57Reader, E57Writer, Record, RecordValue};
 use nalgebra::Point3;
 
 use super::PointCloud;
-use crate::error::{Location, Result, ScannerError};
-
-fn e57_error(path: &Path, e: impl std::fmt::Display) -> ScannerError {
-    ScannerError::file(path, Location::File, e.to_string())
-}
+use crate::error::{Result, ScannerError};
 
 pub(super) fn read(path: &Path) -> Result<PointCloud> {
-    let mut reader = E57Reader::from_file(path).map_err(|e| e57_error(path, e))?;
+    let mut reader = E57Reader::from_file(path).map_err(|e| ScannerError::whole_file(path, e))?;
     let mut cloud = PointCloud::default();
     let mut intensity = Vec::new();
     let mut all_have_intensity = true;
     for pc in reader.pointclouds() {
-        let mut points = reader.pointcloud_simple(&pc).map_err(|e| e57_error(path, e))?;
+        let mut points = reader.pointcloud_simple(&pc).map_err(|e| ScannerError::whole_file(path, e))?;
         points.normalize_intensity(false);
         for (i, p) in points.enumerate() {
-            let p = p.map_err(|e| e57_error(path, format!("point {i}: {e}")))?;
+            let p = p.map_err(|e| ScannerError::whole_file(path, format!("point {i}: {e}")))?;
             if let CartesianCoordinate::Valid { x, y, z } = p.cartesian {
                 cloud.points.push(Point3::new(x as f32, y as f32, z as f32));
                 match p.intensity {
@@ -40,21 +36,22 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
 }
 
 pub(super) fn write(path: &Path, cloud: &PointCloud) -> Result<()> {
-    let mut writer = E57Writer::from_file(path, "cps-survey-e57").map_err(|e| e57_error(path, e))?;
+    let mut writer = E57Writer::from_file(path, "cps-survey-e57").map_err(|e| ScannerError::whole_file(path, e))?;
     let mut prototype = vec![Record::CARTESIAN_X_F32, Record::CARTESIAN_Y_F32, Record::CARTESIAN_Z_F32];
     if cloud.intensity.is_some() {
         prototype.push(Record::INTENSITY_UNIT_F32);
     }
     {
-        let mut pc = writer.add_pointcloud("cps-survey-cloud", prototype).map_err(|e| e57_error(path, e))?;
+        let mut pc =
+            writer.add_pointcloud("cps-survey-cloud", prototype).map_err(|e| ScannerError::whole_file(path, e))?;
         for (i, p) in cloud.points.iter().enumerate() {
             let mut values = vec![RecordValue::Single(p.x), RecordValue::Single(p.y), RecordValue::Single(p.z)];
             if let Some(v) = &cloud.intensity {
                 values.push(RecordValue::Single(v[i]));
             }
-            pc.add_point(values).map_err(|e| e57_error(path, format!("point {i}: {e}")))?;
+            pc.add_point(values).map_err(|e| ScannerError::whole_file(path, format!("point {i}: {e}")))?;
         }
-        pc.finalize().map_err(|e| e57_error(path, e))?;
+        pc.finalize().map_err(|e| ScannerError::whole_file(path, e))?;
     }
-    writer.finalize().map_err(|e| e57_error(path, e))
+    writer.finalize().map_err(|e| ScannerError::whole_file(path, e))
 }

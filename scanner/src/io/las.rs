@@ -7,22 +7,18 @@ use las::{Builder, Point, Reader, Transform, Vector, Writer};
 use nalgebra::Point3;
 
 use super::PointCloud;
-use crate::error::{Location, Result, ScannerError};
+use crate::error::{Result, ScannerError};
 
 /// Coordinate resolution of the LAS files we write, metres.
 pub const LAS_SCALE_M: f64 = 1e-4;
 
-fn las_error(path: &Path, e: impl std::fmt::Display) -> ScannerError {
-    ScannerError::file(path, Location::File, e.to_string())
-}
-
 pub(super) fn read(path: &Path) -> Result<PointCloud> {
-    let mut reader = Reader::from_path(path).map_err(|e| las_error(path, e))?;
+    let mut reader = Reader::from_path(path).map_err(|e| ScannerError::whole_file(path, e))?;
     let mut cloud = PointCloud::default();
     let mut intensity = Vec::new();
-    let data = reader.read_all().map_err(|e| las_error(path, e))?;
+    let data = reader.read_all().map_err(|e| ScannerError::whole_file(path, e))?;
     for (i, p) in data.points().enumerate() {
-        let p = p.map_err(|e| las_error(path, format!("point {i}: {e}")))?;
+        let p = p.map_err(|e| ScannerError::whole_file(path, format!("point {i}: {e}")))?;
         cloud.points.push(Point3::new(p.x as f32, p.y as f32, p.z as f32));
         intensity.push(f32::from(p.intensity));
     }
@@ -42,12 +38,12 @@ pub(super) fn write(path: &Path, cloud: &PointCloud) -> Result<()> {
         z: Transform { scale: LAS_SCALE_M, offset: offset[2] },
     };
     builder.generating_software = "cps-survey".into();
-    let header = builder.into_header().map_err(|e| las_error(path, e))?;
-    let mut writer = Writer::from_path(path, header).map_err(|e| las_error(path, e))?;
+    let header = builder.into_header().map_err(|e| ScannerError::whole_file(path, e))?;
+    let mut writer = Writer::from_path(path, header).map_err(|e| ScannerError::whole_file(path, e))?;
     for (i, p) in cloud.points.iter().enumerate() {
         let intensity = cloud.intensity.as_ref().map_or(0, |v| v[i].clamp(0.0, 65535.0).round() as u16);
         let point = Point { x: f64::from(p.x), y: f64::from(p.y), z: f64::from(p.z), intensity, ..Default::default() };
-        writer.write_point(point).map_err(|e| las_error(path, format!("point {i}: {e}")))?;
+        writer.write_point(point).map_err(|e| ScannerError::whole_file(path, format!("point {i}: {e}")))?;
     }
-    writer.close().map_err(|e| las_error(path, e))
+    writer.close().map_err(|e| ScannerError::whole_file(path, e))
 }
