@@ -36,6 +36,28 @@ pub enum FusionError {
         /// Where.
         what: String,
     },
+    /// A scan does not overlap the scans it must be matched against.
+    #[error(
+        "multi-view: scan {scan} has {pairs} correspondences with {against}: expected at least {needed} (is its pose guess within the correspondence distance, and do the scans overlap?)"
+    )]
+    NoOverlap {
+        /// The scan's index.
+        scan: usize,
+        /// Correspondences found.
+        pairs: usize,
+        /// Correspondences needed.
+        needed: usize,
+        /// What it was matched against.
+        against: String,
+    },
+    /// An error while matching one scan of a set.
+    #[error("scan {scan}: {source}")]
+    InScan {
+        /// The scan's index.
+        scan: usize,
+        /// What went wrong.
+        source: Box<FusionError>,
+    },
     /// A scanner or file error.
     #[error(transparent)]
     Scanner(#[from] scanner::ScannerError),

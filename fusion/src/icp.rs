@@ -114,6 +114,47 @@ impl Target {
         Ok(t)
     }
 
+    /// A target from points and their unit normals (estimated elsewhere, e.g.
+    /// once per scan in its own frame and then moved with the scan); no
+    /// normals (an empty vector) make a point-to-point target.
+    pub fn with_normals(points: &[Point3<f32>], normals: Vec<Vector3<f64>>) -> Result<Self> {
+        if !normals.is_empty() && normals.len() != points.len() {
+            return Err(FusionError::OutOfRange {
+                what: "normal count".into(),
+                value: normals.len() as f64,
+                expected: format!("one per point ({})", points.len()),
+            });
+        }
+        let mut t = Self::new(points, 0)?;
+        t.normals = normals;
+        Ok(t)
+    }
+
+    /// The points, in the order of [`normals`](Self::normals).
+    pub fn points(&self) -> impl ExactSizeIterator<Item = Point3<f32>> + '_ {
+        self.points.iter().map(|p| Point3::new(p[0], p[1], p[2]))
+    }
+
+    /// How many `source` points, mapped by `target_from_source`, have a
+    /// target point within `max_distance_m` (the correspondences ICP would
+    /// use there).
+    pub fn correspondences(
+        &self,
+        source: &[Point3<f32>],
+        target_from_source: &Isometry3<f64>,
+        max_distance_m: f64,
+    ) -> usize {
+        let max_sq = max_distance_m * max_distance_m;
+        let m: Isometry3<f32> = target_from_source.cast();
+        source
+            .par_iter()
+            .filter(|p| {
+                let q = m * *p;
+                self.nearest(&[q.x, q.y, q.z]).1 <= max_sq
+            })
+            .count()
+    }
+
     /// Number of points.
     pub fn len(&self) -> usize {
         self.points.len()

@@ -5,6 +5,8 @@
 //! - [`icp`]: point-to-point (Horn) and point-to-plane ICP on a `kiddo`
 //!   k-d tree ([`icp::Target`], [`icp::align`], [`icp::align_coarse_to_fine`],
 //!   [`icp::IcpResult`]);
+//! - [`multiview`]: pairwise, incremental and simultaneous matching of many
+//!   scans ([`multiview::register_views`]);
 //! - [`pipe`]: tube fitting into scanned pipes and the deviation map
 //!   ([`pipe::fit_pipe`], [`pipe::anomalies`]).
 #![warn(missing_docs)]
@@ -12,6 +14,7 @@
 pub mod direct;
 pub mod error;
 pub mod icp;
+pub mod multiview;
 pub mod pipe;
 
 pub use error::{FusionError, Result};

@@ -1,0 +1,321 @@
+//! Multi-view matching (seed 000 §4.2): many scans into one consistent
+//! world frame.
+//!
+//! Scans arrive in order, each with a guess of its pose (odometry or CPS).
+//! Scan 0 is the master scan: it is fixed and defines the frame. Each new
+//! scan starts from the previous scan's registered pose moved by the
+//! guesses' increment (`pose[i−1] · guess[i−1]⁻¹ · guess[i]`), and then
+//! - [`Strategy::Pairwise`] registers it against the earlier scan with the
+//!   most overlap (most correspondences at the start pose);
+//! - [`Strategy::Incremental`] registers it against the *metascan*, the
+//!   union of all scans registered so far (Chen and Medioni);
+//! - [`Strategy::Simultaneous`] registers it pairwise for a start, puts it in
+//!   a queue and repeats until the queue is empty: take the first scan off
+//!   the queue; unless it is the master, align it (ICP) against the union of
+//!   its neighbours — every scan with more than
+//!   [`min_pairs`](MultiviewConfig::min_pairs) correspondences with it — and,
+//!   if that moved it, append each neighbour not yet in the queue.
+//!
+//! Pairwise and incremental registration accumulate each match's error;
+//! simultaneous matching lets later scans pull earlier ones back, so the
+//! whole set stays consistent.
+//!
+//! Each scan is prepared once: reduced points (the data set D) and a
+//! finer target with normals estimated in the scan's own frame; a model set
+//! M is the neighbours' targets moved into the world with their current
+//! poses (normals rotated along), so only its k-d tree is built per match.
+
+use std::collections::VecDeque;
+
+use nalgebra::{Isometry3, Point3};
+use rayon::prelude::*;
+
+use crate::error::{FusionError, Result};
+use crate::icp::{IcpConfig, IcpResult, Kernel, Method, Target, align};
+
+/// How each new scan is registered.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Strategy {
+    /// Against the earlier scan with the most overlap.
+    Pairwise,
+    /// Against the union of all earlier scans (the metascan).
+    Incremental,
+    /// Pairwise start, then the seed's queue over the neighbours.
+    Simultaneous,
+}
+
+/// Multi-view settings (documented defaults).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MultiviewConfig {
+    /// The strategy. Default simultaneous.
+    pub strategy: Strategy,
+    /// Every match's ICP settings. Default point-to-plane, 0.5 m, 50
+    /// iterations.
+    pub icp: IcpConfig,
+    /// Reduced-points cell of the data set D, metres. Default 0.2.
+    pub source_voxel_m: f64,
+    /// Reduced-points cell of the model set M, metres. Default 0.1.
+    pub target_voxel_m: f64,
+    /// Two scans overlap when more than this many correspondences exist
+    /// (within the ICP distance). Default 250, as in the seed.
+    pub min_pairs: usize,
+    /// A match "moved" its scan (and re-queues its neighbours) when it
+    /// shifted it by more than this, metres. Default 0.01: about twice a
+    /// match's own σ for LMS-class scans. Smaller thresholds keep the queue
+    /// chasing the matches' noise, which walks the whole set away from the
+    /// master scan (measured on the corridor: see the README).
+    pub moved_translation_m: f64,
+    /// … or turned it by more than this, radians. Default 0.05° (8.7e-4).
+    pub moved_rotation_rad: f64,
+    /// Simultaneous matching: at most this many matches per new scan before
+    /// its queue is abandoned (reported as not settled). Default 100.
+    pub max_matches_per_scan: usize,
+}
+
+impl Default for MultiviewConfig {
+    fn default() -> Self {
+        Self {
+            strategy: Strategy::Simultaneous,
+            icp: IcpConfig {
+                max_correspondence_m: 0.5,
+                kernel: Kernel::Huber { width_m: 0.02 },
+                ..IcpConfig::default()
+            },
+            source_voxel_m: 0.2,
+            target_voxel_m: 0.1,
+            min_pairs: 250,
+            moved_translation_m: 0.01,
+            moved_rotation_rad: 0.05f64.to_radians(),
+            max_matches_per_scan: 100,
+        }
+    }
+}
+
+/// What multi-view matching returns.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MultiviewResult {
+    /// The registered pose of every scan; scan 0 is its guess.
+    pub world_from_scan: Vec<Isometry3<f64>>,
+    /// The ICP result of each scan's last match (`None` for the master), its
+    /// `target_from_source` being the scan's pose and its information the
+    /// match's (conditional on the partners' poses).
+    pub last_match: Vec<Option<IcpResult>>,
+    /// The scans each scan was last matched against.
+    pub partners: Vec<Vec<usize>>,
+    /// ICP runs in total.
+    pub matches: usize,
+    /// False when a simultaneous queue hit
+    /// [`max_matches_per_scan`](MultiviewConfig::max_matches_per_scan).
+    pub settled: bool,
+}
+
+/// A scan prepared for matching, in its own frame.
+struct Prepared {
+    /// Reduced points: the data set D.
+    source: Vec<Point3<f32>>,
+    /// The finer model points with their normals.
+    local: Target,
+}
+
+/// Registers `scans` (each in its own frame) given a guess of each one's
+/// pose. `progress(done, total)` is called as each scan is registered.
+pub fn register_views(
+    scans: &[Vec<Point3<f32>>],
+    guesses: &[Isometry3<f64>],
+    config: &MultiviewConfig,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<MultiviewResult> {
+    check(scans, guesses, config)?;
+    let k = if config.icp.method == Method::PointToPlane { config.icp.normal_neighbours.max(3) } else { 0 };
+    let prepared: Vec<Prepared> = scans
+        .par_iter()
+        .enumerate()
+        .map(|(i, points)| -> Result<Prepared> {
+            let source = scanner::reduced_points(points, config.source_voxel_m).map_err(|e| in_scan(i, e.into()))?;
+            let model = scanner::reduced_points(points, config.target_voxel_m).map_err(|e| in_scan(i, e.into()))?;
+            let local = Target::new(&model, k).map_err(|e| in_scan(i, e))?;
+            Ok(Prepared { source, local })
+        })
+        .collect::<Result<_>>()?;
+    let n = scans.len();
+    let mut m = Matcher {
+        prepared,
+        config,
+        poses: vec![guesses[0]],
+        last_match: vec![None],
+        partners: vec![Vec::new()],
+        matches: 0,
+        settled: true,
+    };
+    progress(1, n);
+    for i in 1..n {
+        let start = m.poses[i - 1] * guesses[i - 1].inverse() * guesses[i];
+        m.poses.push(start);
+        m.last_match.push(None);
+        m.partners.push(Vec::new());
+        match config.strategy {
+            Strategy::Pairwise => m.pairwise(i)?,
+            Strategy::Incremental => m.incremental(i)?,
+            Strategy::Simultaneous => {
+                m.pairwise(i)?;
+                m.settle(i)?;
+            }
+        }
+        progress(i + 1, n);
+    }
+    Ok(MultiviewResult {
+        world_from_scan: m.poses,
+        last_match: m.last_match,
+        partners: m.partners,
+        matches: m.matches,
+        settled: m.settled,
+    })
+}
+
+struct Matcher<'a> {
+    prepared: Vec<Prepared>,
+    config: &'a MultiviewConfig,
+    /// Current poses of the scans registered so far (and the new one).
+    poses: Vec<Isometry3<f64>>,
+    last_match: Vec<Option<IcpResult>>,
+    partners: Vec<Vec<usize>>,
+    matches: usize,
+    settled: bool,
+}
+
+impl Matcher<'_> {
+    /// Correspondences of scan `c`'s reduced points with scan `j`'s model
+    /// at the current poses.
+    fn overlap(&self, c: usize, j: usize) -> usize {
+        let j_from_c = self.poses[j].inverse() * self.poses[c];
+        self.prepared[j].local.correspondences(
+            &self.prepared[c].source,
+            &j_from_c,
+            self.config.icp.max_correspondence_m,
+        )
+    }
+
+    /// The model set M: the `members`' models in the world frame.
+    fn model(&self, members: &[usize]) -> Result<Target> {
+        let total: usize = members.iter().map(|&j| self.prepared[j].local.len()).sum();
+        let (mut points, mut normals) = (Vec::with_capacity(total), Vec::with_capacity(total));
+        for &j in members {
+            let pose = self.poses[j];
+            let moved: Isometry3<f32> = pose.cast();
+            let local = &self.prepared[j].local;
+            points.extend(local.points().map(|p| moved * p));
+            normals.extend(local.normals().iter().map(|v| pose.rotation * v));
+        }
+        Target::with_normals(&points, normals)
+    }
+
+    /// Aligns scan `c` to `model` from its current pose and records the match.
+    fn align(&mut self, c: usize, model: &Target, partners: Vec<usize>) -> Result<Isometry3<f64>> {
+        let r = align(&self.prepared[c].source, model, &self.poses[c], &self.config.icp).map_err(|e| in_scan(c, e))?;
+        let before = self.poses[c];
+        self.poses[c] = r.target_from_source;
+        self.last_match[c] = Some(r);
+        self.partners[c] = partners;
+        self.matches += 1;
+        Ok(before)
+    }
+
+    fn no_overlap(&self, c: usize, best: usize, against: &str) -> FusionError {
+        FusionError::NoOverlap { scan: c, pairs: best, needed: self.config.min_pairs + 1, against: against.into() }
+    }
+
+    /// Registers scan `i` against the earlier scan with the most overlap.
+    fn pairwise(&mut self, i: usize) -> Result<()> {
+        let (best, pairs) = (0..i).map(|j| (j, self.overlap(i, j))).max_by_key(|&(j, p)| (p, j)).unwrap_or((0, 0));
+        if pairs <= self.config.min_pairs {
+            return Err(self.no_overlap(i, pairs, &format!("the best earlier scan ({best})")));
+        }
+        let model = self.model(&[best])?;
+        self.align(i, &model, vec![best])?;
+        Ok(())
+    }
+
+    /// Registers scan `i` against the metascan of scans `0..i`.
+    fn incremental(&mut self, i: usize) -> Result<()> {
+        let members: Vec<usize> = (0..i).collect();
+        let model = self.model(&members)?;
+        let pairs =
+            model.correspondences(&self.prepared[i].source, &self.poses[i], self.config.icp.max_correspondence_m);
+        if pairs <= self.config.min_pairs {
+            return Err(self.no_overlap(i, pairs, "the metascan"));
+        }
+        self.align(i, &model, members)?;
+        Ok(())
+    }
+
+    /// The seed's queue, started with the new scan `i`; scans `0..=i` take part.
+    fn settle(&mut self, i: usize) -> Result<()> {
+        let mut queue = VecDeque::from([i]);
+        let mut runs = 0;
+        while let Some(c) = queue.pop_front() {
+            if c == 0 {
+                continue;
+            }
+            if runs == self.config.max_matches_per_scan {
+                self.settled = false;
+                break;
+            }
+            let neighbours: Vec<usize> =
+                (0..=i).into_par_iter().filter(|&j| j != c && self.overlap(c, j) > self.config.min_pairs).collect();
+            if neighbours.is_empty() {
+                continue;
+            }
+            let model = self.model(&neighbours)?;
+            let before = self.align(c, &model, neighbours.clone())?;
+            runs += 1;
+            let step = self.poses[c] * before.inverse();
+            let moved = step.translation.vector.norm() > self.config.moved_translation_m
+                || step.rotation.angle() > self.config.moved_rotation_rad;
+            if moved {
+                for j in neighbours {
+                    if j != 0 && !queue.contains(&j) {
+                        queue.push_back(j);
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+fn in_scan(scan: usize, e: FusionError) -> FusionError {
+    FusionError::InScan { scan, source: Box::new(e) }
+}
+
+fn check(scans: &[Vec<Point3<f32>>], guesses: &[Isometry3<f64>], c: &MultiviewConfig) -> Result<()> {
+    if scans.len() != guesses.len() {
+        return Err(FusionError::OutOfRange {
+            what: "number of pose guesses".into(),
+            value: guesses.len() as f64,
+            expected: format!("one per scan ({})", scans.len()),
+        });
+    }
+    if scans.is_empty() {
+        return Err(FusionError::OutOfRange { what: "number of scans".into(), value: 0.0, expected: "≥ 1".into() });
+    }
+    FusionError::require_positive("source voxel (m)", c.source_voxel_m)?;
+    FusionError::require_positive("target voxel (m)", c.target_voxel_m)?;
+    FusionError::require_positive("max correspondence distance (m)", c.icp.max_correspondence_m)?;
+    for (what, v) in [("moved translation (m)", c.moved_translation_m), ("moved rotation (rad)", c.moved_rotation_rad)]
+    {
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(FusionError::OutOfRange { what: what.into(), value: v, expected: "finite and ≥ 0".into() });
+        }
+    }
+    if c.max_matches_per_scan == 0 {
+        return Err(FusionError::OutOfRange { what: "matches per scan".into(), value: 0.0, expected: "≥ 1".into() });
+    }
+    if let Some((i, g)) = guesses.iter().enumerate().find(|(_, g)| !g.to_homogeneous().iter().all(|v| v.is_finite())) {
+        return Err(FusionError::OutOfRange {
+            what: format!("pose guess of scan {i}"),
+            value: g.translation.vector.norm(),
+            expected: "finite".into(),
+        });
+    }
+    Ok(())
+}
