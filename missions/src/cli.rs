@@ -32,6 +32,17 @@ pub enum Command {
         /// The mission file (TOML).
         mission: PathBuf,
     },
+    /// Run a mission on the simulator: dance, scans, fusion, outputs.
+    Run {
+        /// The mission file (TOML).
+        mission: PathBuf,
+        /// The run directory (default `runs/<mission name>/`).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// No progress bars.
+        #[arg(long)]
+        quiet: bool,
+    },
     /// Align one scan file to another with ICP.
     Register(crate::register::RegisterArgs),
 }
@@ -72,6 +83,14 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> anyhow::Result<Outcome> {
             } else {
                 Outcome::AcceptanceFailed
             })
+        }
+        Command::Run { mission, out: dir, quiet } => {
+            let m = Mission::load(&mission)?;
+            let dir = dir.unwrap_or_else(|| PathBuf::from("runs").join(&m.name));
+            let summary = crate::runner::run(&m, &dir, quiet)?;
+            crate::runner::write_summary(out, &m, &summary)?;
+            out.flush()?;
+            Ok(if summary.accepted { Outcome::Success } else { Outcome::AcceptanceFailed })
         }
         Command::Register(args) => {
             crate::register::register(&args, out)?;

@@ -31,7 +31,55 @@ pub struct Plan {
 pub struct Acceptance {
     /// Largest acceptable final √(σx² + σy²), metres.
     pub max_final_sigma_xy_m: Option<f64>,
+    /// Largest acceptable horizontal error of any station against the
+    /// simulator's truth, metres (sim backend only).
+    pub max_station_error_m: Option<f64>,
 }
+
+/// Where the devices come from (`[backend]`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Backend {
+    /// Built-in scene of the simulator (`scene`, default `"hall"`).
+    pub scene: String,
+    /// Seed of every simulated device (`seed`, default 1).
+    pub seed: u64,
+}
+
+/// What the scanner does (`[scan]`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScanPlan {
+    /// Scan at every n-th parent station, 0 = never (`every_n_stations`,
+    /// default 1; station 0 is the start).
+    pub every_n_stations: usize,
+    /// Table steps per 360° (`slices`, default 180).
+    pub slices: usize,
+    /// LMS angular resolution (`resolution_deg`: 1, 0.5 or 0.25; default 1).
+    pub resolution: scanner::sim::LmsResolution,
+    /// Scan head centre in the body frame (`body_from_head_m`, default
+    /// [0, 0, 0.4]), metres.
+    pub body_from_head_m: Vector3<f64>,
+}
+
+impl Default for ScanPlan {
+    fn default() -> Self {
+        Self {
+            every_n_stations: 1,
+            slices: 180,
+            resolution: scanner::sim::LmsResolution::One,
+            body_from_head_m: Vector3::new(0.0, 0.0, 0.4),
+        }
+    }
+}
+
+/// Output formats of the merged cloud (`[output] formats`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Output {
+    /// File extensions, e.g. `["ply", "las"]` (default `["ply"]`).
+    pub formats: Vec<String>,
+}
+
+/// Cloud formats `[output] formats` accepts.
+pub const OUTPUT_FORMATS: [&str; 5] = ["ply", "las", "e57", "pcd", "xyz"];
 
 /// Where in the file each value came from, to point errors found later
 /// (e.g. by the planner) at the right line.
@@ -62,6 +110,12 @@ pub struct Mission {
     pub plan: Plan,
     /// Tolerances.
     pub acceptance: Acceptance,
+    /// The simulator's settings.
+    pub backend: Backend,
+    /// The scanner's settings.
+    pub scan: ScanPlan,
+    /// The outputs.
+    pub output: Output,
     /// Spans for later diagnostics.
     pub spans: Spans,
 }
@@ -124,8 +178,10 @@ impl Mission {
         let parsed = read_mission(&mut r, &mut root);
         root.finish(&mut r);
         match parsed {
-            Some((name, children, total_station, plan, acceptance, spans)) if r.problems.is_empty() => {
-                Ok(Mission { source, name, children, total_station, plan, acceptance, spans })
+            Some(Parts { name, children, total_station, plan, acceptance, backend, scan, output, spans })
+                if r.problems.is_empty() =>
+            {
+                Ok(Mission { source, name, children, total_station, plan, acceptance, backend, scan, output, spans })
             }
             _ => Err(invalid(&source, r.problems)),
         }
@@ -137,7 +193,17 @@ impl Mission {
     }
 }
 
-type Parts = (String, Vec<String>, Instrument, Plan, Acceptance, Spans);
+struct Parts {
+    name: String,
+    children: Vec<String>,
+    total_station: Instrument,
+    plan: Plan,
+    acceptance: Acceptance,
+    backend: Backend,
+    scan: ScanPlan,
+    output: Output,
+    spans: Spans,
+}
 
 fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Parts> {
     let mut mission = root.table(r, "mission");
@@ -166,12 +232,71 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Parts> {
     plan_t.finish(r);
 
     let mut acc = root.table(r, "acceptance");
-    let max_xy =
-        acc.optional(r, "max_final_sigma_xy_m", |r, v, f| r.number_in(v, f, 0.0, false, None).map(At::into_inner));
+    let positive = |r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, f: &str| {
+        r.number_in(v, f, 0.0, false, None).map(At::into_inner)
+    };
+    let max_xy = acc.optional(r, "max_final_sigma_xy_m", positive);
+    let max_err = acc.optional(r, "max_station_error_m", positive);
     acc.finish(r);
 
+    let mut b = root.table(r, "backend");
+    let kind = b.optional(r, "kind", |r, v, f| {
+        let k = r.choice(v, f, &["sim", "serial"])?;
+        if k.get_ref() == "serial" {
+            r.problem(&k.span(), f, "the serial backend is not in this build yet; expected \"sim\"");
+            return None;
+        }
+        Some(())
+    });
+    let scene = b.optional(r, "scene", |r, v, f| r.choice(v, f, &cps::geom::BUILTIN_SCENES).map(At::into_inner));
+    let seed = b.optional(r, "seed", |r, v, f| r.integer_in(v, f, 0, 1 << 53));
+    b.finish(r);
+
+    let mut sc = root.table(r, "scan");
+    let every = sc.optional(r, "every_n_stations", |r, v, f| r.integer_in(v, f, 0, 1_000_000));
+    let slices = sc.optional(r, "slices", |r, v, f| r.integer_in(v, f, 2, 100_000));
+    let resolution = sc.optional(r, "resolution_deg", |r, v, f| {
+        let x = r.number(v, f)?;
+        use scanner::sim::LmsResolution::{Half, One, Quarter};
+        match *x.get_ref() {
+            1.0 => Some(One),
+            0.5 => Some(Half),
+            0.25 => Some(Quarter),
+            other => {
+                r.problem(&x.span(), f, format!("value {other} is not an LMS resolution; expected 1, 0.5 or 0.25"));
+                None
+            }
+        }
+    });
+    let lever = sc.optional(r, "body_from_head_m", |r, v, f| r.point3(v, f).map(|p| Vector3::from(*p.get_ref())));
+    sc.finish(r);
+
+    let mut o = root.table(r, "output");
+    let formats = o
+        .optional(r, "formats", |r, v, f| r.array(v, f, |r, e, f| r.choice(e, f, &OUTPUT_FORMATS).map(At::into_inner)));
+    o.finish(r);
+
     let (plan, spans) = plan?;
-    Some((name?, children?, total_station?, plan, Acceptance { max_final_sigma_xy_m: max_xy? }, spans))
+    let d = ScanPlan::default();
+    Some(Parts {
+        name: name?,
+        children: children?,
+        total_station: total_station?,
+        plan,
+        acceptance: Acceptance { max_final_sigma_xy_m: max_xy?, max_station_error_m: max_err? },
+        backend: {
+            kind?;
+            Backend { scene: scene?.unwrap_or_else(|| "hall".into()), seed: seed?.unwrap_or(1) }
+        },
+        scan: ScanPlan {
+            every_n_stations: every?.map_or(d.every_n_stations, |n| n as usize),
+            slices: slices?.map_or(d.slices, |n| n as usize),
+            resolution: resolution?.unwrap_or(d.resolution),
+            body_from_head_m: lever?.unwrap_or(d.body_from_head_m),
+        },
+        output: Output { formats: formats?.unwrap_or_else(|| vec!["ply".into()]) },
+        spans,
+    })
 }
 
 fn read_children(r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, field: &str) -> Option<Vec<String>> {

@@ -89,6 +89,27 @@ impl<'s> Reader<'s> {
         Some(x)
     }
 
+    /// Reads a whole number in `min ..= max`.
+    pub fn integer_in(&mut self, v: &Spanned<DeValue<'_>>, field: &str, min: u64, max: u64) -> Option<u64> {
+        let x = self.number_in(v, field, min as f64, true, Some(max as f64))?;
+        if x.get_ref().fract() != 0.0 {
+            self.problem(&v.span(), field, format!("value {} is not a whole number; expected an integer", x.get_ref()));
+            return None;
+        }
+        Some(*x.get_ref() as u64)
+    }
+
+    /// Reads one of `choices` (strings).
+    pub fn choice(&mut self, v: &Spanned<DeValue<'_>>, field: &str, choices: &[&str]) -> Option<At<String>> {
+        let s = self.string(v, field)?;
+        if choices.contains(&s.get_ref().as_str()) {
+            return Some(s);
+        }
+        let list = choices.iter().map(|c| format!("\"{c}\"")).collect::<Vec<_>>().join(", ");
+        self.problem(&s.span(), field, format!("unknown value \"{}\"; expected one of {list}", s.get_ref()));
+        None
+    }
+
     /// Reads an array, each element through `item`.
     pub fn array<T>(
         &mut self,

@@ -1,0 +1,119 @@
+//! `cps-survey run` end to end on the simulator: the hall example's outputs
+//! exist, parse and agree with each other, the errors are consistent with the
+//! reported covariance, the fused cloud lies on the scene, and a finished run
+//! is never overwritten.
+
+use serde_json::Value;
+use tests::{cps_survey, example, temp_mission};
+
+fn run_into(mission: &std::path::Path, out: &std::path::Path) -> tests::Run {
+    cps_survey([
+        "run".into(),
+        mission.as_os_str().to_owned(),
+        "--out".into(),
+        out.as_os_str().to_owned(),
+        "--quiet".into(),
+    ])
+}
+
+#[test]
+fn hall_runs_end_to_end() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("hall");
+    let run = run_into(&example("hall.toml"), &out);
+    assert_eq!(run.code, 0, "{}\n{}", run.stdout, run.stderr);
+    assert!(run.stdout.contains("acceptance: passed"), "{}", run.stdout);
+
+    // report.json: every station with its pose, covariances, truth and error.
+    let report: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).expect("report")).expect("JSON");
+    assert_eq!(report["mission"], "hall");
+    assert_eq!(report["seed"], 1);
+    let stations = report["stations"].as_array().expect("stations");
+    assert_eq!(stations.len(), 8);
+    for (k, s) in stations.iter().enumerate() {
+        assert_eq!(s["index"], k);
+        let cov: Vec<Vec<f64>> = serde_json::from_value(s["covariance"].clone()).expect("4×4");
+        let pred: Vec<Vec<f64>> = serde_json::from_value(s["predicted_covariance"].clone()).expect("4×4");
+        let sigma_xy = (cov[0][0] + cov[1][1]).sqrt();
+        let (x, y) = (s["pose"]["x_m"].as_f64().expect("x"), s["pose"]["y_m"].as_f64().expect("y"));
+        let (tx, ty) = (s["truth"]["x_m"].as_f64().expect("x"), s["truth"]["y_m"].as_f64().expect("y"));
+        let e = s["error_m"].as_f64().expect("error");
+        assert!(((x - tx).hypot(y - ty) - e).abs() < 1e-9, "station {k}: error_m is the horizontal error");
+        if k == 0 {
+            assert_eq!(e, 0.0, "the start is known");
+            continue;
+        }
+        // The estimate's covariance is the prediction's within 5 % (same
+        // geometry, readings a few mm off), and the error is within 3.5 σ.
+        let pred_xy = (pred[0][0] + pred[1][1]).sqrt();
+        assert!((sigma_xy / pred_xy - 1.0).abs() < 0.05, "station {k}: σ {sigma_xy} vs predicted {pred_xy}");
+        assert!(e < 3.5 * sigma_xy, "station {k}: error {e} m vs σxy {sigma_xy} m");
+        assert_eq!(s["scan"], format!("scans/scan{k:03}.3d"));
+    }
+    let last = stations.last().expect("last");
+    assert_eq!(report["final"]["error_xy_m"], last["error_m"]);
+    let distance = report["final"]["distance_m"].as_f64().expect("distance");
+    assert!((distance - 28.0).abs() < 0.5, "the route is 28 m: {distance}");
+
+    // stations.csv: a header with units and one row per station matching the report.
+    let csv = std::fs::read_to_string(out.join("stations.csv")).expect("csv");
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+    assert!(header.iter().skip(1).all(|h| h.ends_with("_m") || h.ends_with("_rad")), "{header:?}");
+    let rows: Vec<Vec<f64>> = lines.map(|l| l.split(',').map(|v| v.parse().expect("a number")).collect()).collect();
+    assert_eq!(rows.len(), 8);
+    let col = |name: &str| header.iter().position(|h| *h == name).expect("column");
+    for (row, s) in rows.iter().zip(stations) {
+        // (serde_json parses floats to within an ulp or two.)
+        assert!((row[col("x_m")] - s["pose"]["x_m"].as_f64().expect("x")).abs() < 1e-9);
+        assert!((row[col("error_xy_m")] - s["error_m"].as_f64().expect("e")).abs() < 1e-12);
+    }
+
+    // The journal: one JSON object per line with the schema version, every
+    // reading in order, each scan file written before it is referenced.
+    let journal = std::fs::read_to_string(out.join("journal.jsonl")).expect("journal");
+    let events: Vec<Value> = journal.lines().map(|l| serde_json::from_str(l).expect("a JSON line")).collect();
+    assert!(events.iter().all(|e| e["v"] == 1));
+    assert_eq!(events[0]["event"], "start");
+    assert_eq!(events.last().expect("end")["event"], "end");
+    let count = |kind: &str| events.iter().filter(|e| e["event"] == kind).count();
+    assert_eq!(count("measure"), 7 * 2 * 2, "two children, placement and fix, 7 cycles");
+    assert_eq!(count("fix"), 7);
+    assert_eq!(count("scan"), 8);
+    for e in events.iter().filter(|e| e["event"] == "scan") {
+        let file = out.join(e["file"].as_str().expect("file"));
+        let cloud = scanner::io::read(&file).expect("the scan file reads");
+        assert_eq!(cloud.len() as u64, e["points"].as_u64().expect("points"));
+        assert!(file.with_extension("pose").exists());
+    }
+
+    // The fused cloud lies on the hall's surfaces.
+    let cloud = scanner::io::read(&out.join("cloud.ply")).expect("cloud.ply");
+    assert!(cloud.len() > 200_000, "{} points", cloud.len());
+    let scene = cps::geom::builtin("hall").expect("hall");
+    let on = missions::runner::on_surface_fraction(&scene, &cloud.points, 0.05);
+    assert!(on > 0.99, "{:.2} % of the points within 5 cm of a surface", 100.0 * on);
+
+    // A finished run is never overwritten.
+    let again = run_into(&example("hall.toml"), &out);
+    assert_eq!(again.code, 2);
+    assert!(again.stderr.contains("already holds a run"), "{}", again.stderr);
+}
+
+#[test]
+fn acceptance_failure_exits_1_with_outputs_written() {
+    let text = std::fs::read_to_string(example("hall.toml")).expect("hall.toml");
+    let strict = text
+        .replace("max_final_sigma_xy_m = 0.05", "max_final_sigma_xy_m = 0.001")
+        .replace("every_n_stations = 1", "every_n_stations = 0");
+    let mission = temp_mission(&strict);
+    let dir = tempfile::tempdir().expect("tempdir");
+    let run = run_into(&mission.path, dir.path());
+    assert_eq!(run.code, 1, "{}", run.stderr);
+    assert!(run.stdout.contains("acceptance: FAILED"));
+    let report: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("report.json")).expect("report")).expect("JSON");
+    assert_eq!(report["accepted"], false);
+    assert!(report["stations"].as_array().expect("stations").iter().all(|s| s["scan"].is_null()), "no scans");
+}
