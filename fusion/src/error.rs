@@ -73,6 +73,16 @@ impl FusionError {
             Err(FusionError::OutOfRange { what: what.into(), value, expected: "finite and > 0".into() })
         }
     }
+
+    /// `Ok` when `value` is finite and ≥ 0, else [`FusionError::OutOfRange`]
+    /// naming `what`.
+    pub(crate) fn require_non_negative(what: &str, value: f64) -> Result<()> {
+        if value.is_finite() && value >= 0.0 {
+            Ok(())
+        } else {
+            Err(FusionError::OutOfRange { what: what.into(), value, expected: "finite and ≥ 0".into() })
+        }
+    }
 }
 
 /// Result alias of the `fusion` crate.

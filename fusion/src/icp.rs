@@ -468,14 +468,8 @@ fn check(c: &IcpConfig) -> Result<()> {
     if let Kernel::Huber { width_m } = c.kernel {
         FusionError::require_positive("Huber width (m)", width_m)?;
     }
-    for (what, v) in [
-        ("translation tolerance (m)", c.translation_tolerance_m),
-        ("rotation tolerance (rad)", c.rotation_tolerance_rad),
-    ] {
-        if !(v.is_finite() && v >= 0.0) {
-            return Err(FusionError::OutOfRange { what: what.into(), value: v, expected: "finite and ≥ 0".into() });
-        }
-    }
+    FusionError::require_non_negative("translation tolerance (m)", c.translation_tolerance_m)?;
+    FusionError::require_non_negative("rotation tolerance (rad)", c.rotation_tolerance_rad)?;
     if c.max_iterations == 0 {
         return Err(FusionError::OutOfRange { what: "iteration cap".into(), value: 0.0, expected: "≥ 1".into() });
     }

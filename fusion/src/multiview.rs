@@ -301,12 +301,8 @@ fn check(scans: &[Vec<Point3<f32>>], guesses: &[Isometry3<f64>], c: &MultiviewCo
     FusionError::require_positive("source voxel (m)", c.source_voxel_m)?;
     FusionError::require_positive("target voxel (m)", c.target_voxel_m)?;
     FusionError::require_positive("max correspondence distance (m)", c.icp.max_correspondence_m)?;
-    for (what, v) in [("moved translation (m)", c.moved_translation_m), ("moved rotation (rad)", c.moved_rotation_rad)]
-    {
-        if !(v.is_finite() && v >= 0.0) {
-            return Err(FusionError::OutOfRange { what: what.into(), value: v, expected: "finite and ≥ 0".into() });
-        }
-    }
+    FusionError::require_non_negative("moved translation (m)", c.moved_translation_m)?;
+    FusionError::require_non_negative("moved rotation (rad)", c.moved_rotation_rad)?;
     if c.max_matches_per_scan == 0 {
         return Err(FusionError::OutOfRange { what: "matches per scan".into(), value: 0.0, expected: "≥ 1".into() });
     }

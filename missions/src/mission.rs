@@ -329,15 +329,8 @@ fn read_total_station(r: &mut Reader<'_>, t: &mut Table<'_, '_>) -> Option<Instr
         t.required(r, "sigma_distance_mm", "the distance error's constant part in mm (> 0)", positive);
     let ppm = t.optional(r, "sigma_distance_ppm", nonneg);
     let model = t.optional(r, "distance_error_model", |r, v, f| {
-        let s = r.string(v, f)?;
-        match s.get_ref().as_str() {
-            "quadrature" => Some(DistanceErrorModel::Quadrature),
-            "linear" => Some(DistanceErrorModel::Linear),
-            other => {
-                r.problem(&s.span(), f, format!("unknown model \"{other}\"; expected \"quadrature\" or \"linear\""));
-                None
-            }
-        }
+        let s = r.choice(v, f, &["quadrature", "linear"])?;
+        Some(if s.get_ref() == "linear" { DistanceErrorModel::Linear } else { DistanceErrorModel::Quadrature })
     });
     let hz = t.required(r, "sigma_hz_arcsec", "the horizontal-direction error in arc-seconds (> 0)", positive);
     let v = t.required(r, "sigma_v_arcsec", "the vertical-angle error in arc-seconds (> 0)", positive);

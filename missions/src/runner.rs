@@ -21,7 +21,7 @@ use anyhow::{Context, Result, bail};
 use cps::{FixOptions, ParentPose, TeamState, observe};
 use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
 use nalgebra::{Isometry3, Matrix4, Point3, Translation3, UnitQuaternion};
-use scanner::io::{Format, PlyEncoding, PointCloud};
+use scanner::io::{Format, PointCloud};
 use scanner::sim::{
     LmsConfig, LmsRangeMode, OdometryError, Robot, SimDrive, SimHead, SimLms, SimTilt, SimTotalStation, SimWorld,
 };
@@ -174,11 +174,12 @@ pub fn run(mission: &Mission, dir: &Path, quiet: bool) -> Result<RunSummary> {
         })?;
         let world_from_body = tilt_reading.world_from_body(&team.parent());
         let name = format!("scans/scan{index:03}");
-        let cloud = PointCloud::from_points(scan.points.clone());
+        let points = scan.len();
+        merged.extend(fusion::direct::transform(&scan.points, &world_from_body));
+        let cloud = PointCloud::from_points(scan.points);
         scanner::io::write(&dir.join(format!("{name}.3d")), &cloud, Format::ThreeDtk)?;
         scanner::io::write_3dtk_pose(&dir.join(format!("{name}.pose")), &world_from_body)?;
-        journal.log(json!({"event": "scan", "station": index, "file": format!("{name}.3d"), "points": scan.len()}))?;
-        merged.extend(fusion::direct::transform(&scan.points, &world_from_body));
+        journal.log(json!({"event": "scan", "station": index, "file": format!("{name}.3d"), "points": points}))?;
         Ok(Some(format!("{name}.3d")))
     };
 
@@ -220,24 +221,14 @@ pub fn run(mission: &Mission, dir: &Path, quiet: bool) -> Result<RunSummary> {
     mission_bar.finish_and_clear();
     scan_bar.finish_and_clear();
 
+    let merged = PointCloud::from_points(merged);
     for format in &mission.output.formats {
         let path = dir.join(format!("cloud.{format}"));
-        scanner::io::write(&path, &PointCloud::from_points(merged.clone()), output_format(format)?)?;
+        scanner::io::write(&path, &merged, Format::from_path(&path)?)?;
     }
     let accepted = write_reports(mission, dir, &stations, started.elapsed().as_secs_f64())?;
     journal.log(json!({"event": "end", "accepted": accepted}))?;
     Ok(RunSummary { dir: dir.to_path_buf(), stations, points: merged.len(), accepted })
-}
-
-fn output_format(name: &str) -> Result<Format> {
-    Ok(match name {
-        "ply" => Format::Ply(PlyEncoding::BinaryLittleEndian),
-        "las" => Format::Las,
-        "e57" => Format::E57,
-        "pcd" => Format::Pcd(scanner::io::PcdData::Binary),
-        "xyz" => Format::Xyz,
-        other => bail!("unknown output format \"{other}\""),
-    })
 }
 
 /// Writes `report.json` and `stations.csv`; returns whether the mission's
