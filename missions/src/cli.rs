@@ -6,6 +6,8 @@ use std::path::PathBuf;
 use clap::{Parser, Subcommand};
 
 use crate::mission::Mission;
+use crate::recording::Viewer;
+use crate::runner::RunOptions;
 
 /// Survey large buildings with a team of robots that position each other.
 #[derive(Debug, Parser)]
@@ -42,6 +44,24 @@ pub enum Command {
         /// No progress bars.
         #[arg(long)]
         quiet: bool,
+        /// Continue the interrupted run in the --out directory from its journal.
+        #[arg(long)]
+        resume: bool,
+        /// Also stream the recording to a newly started Rerun viewer.
+        #[arg(long, conflicts_with = "connect")]
+        spawn: bool,
+        /// Also stream the recording to a running Rerun viewer.
+        #[arg(long, value_name = "URL", num_args = 0..=1,
+              default_missing_value = "rerun+http://127.0.0.1:9876/proxy")]
+        connect: Option<String>,
+        /// Inject a fault into a simulated device: DEVICE:after=N (stops
+        /// answering after N commands) or DEVICE:every=K (every K-th command
+        /// fails); DEVICE is drive, total-station, tilt or scanner. Repeatable.
+        #[arg(long, value_name = "FAULT")]
+        sim_fault: Vec<crate::backend::Fault>,
+        /// Abort the process after writing N journal events (crash test).
+        #[arg(long, value_name = "N", hide = true)]
+        abort_after_events: Option<usize>,
     },
     /// Align one scan file to another with ICP.
     Register(crate::register::RegisterArgs),
@@ -84,10 +104,16 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> anyhow::Result<Outcome> {
                 Outcome::AcceptanceFailed
             })
         }
-        Command::Run { mission, out: dir, quiet } => {
+        Command::Run { mission, out: dir, quiet, resume, spawn, connect, sim_fault, abort_after_events } => {
             let m = Mission::load(&mission)?;
             let dir = dir.unwrap_or_else(|| PathBuf::from("runs").join(&m.name));
-            let summary = crate::runner::run(&m, &dir, quiet)?;
+            let viewer = match (spawn, connect) {
+                (true, _) => Viewer::Spawn,
+                (false, Some(url)) => Viewer::Connect(url),
+                (false, None) => Viewer::None,
+            };
+            let options = RunOptions { quiet, resume, faults: sim_fault, abort_after_events, viewer };
+            let summary = crate::runner::run(&m, &dir, &options)?;
             crate::runner::write_summary(out, &m, &summary)?;
             out.flush()?;
             Ok(if summary.accepted { Outcome::Success } else { Outcome::AcceptanceFailed })

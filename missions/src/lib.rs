@@ -4,14 +4,18 @@
 //! into a typed, unit-converted [`Mission`]; every problem becomes a
 //! [`Diagnostic`] with file:line:column. The CLI ([`cli`]) dispatches the
 //! subcommands; [`predict`] renders covariance predictions; [`runner`] runs
-//! a mission on the simulator.
+//! a mission on the simulator ([`backend`]) with a [`journal`] and a Rerun
+//! [`recording`].
 #![warn(missing_docs)]
 
+pub mod backend;
 pub mod cli;
 pub mod diagnostics;
+pub mod journal;
 pub mod mission;
 pub mod predict;
 pub mod reader;
+pub mod recording;
 pub mod register;
 pub mod runner;
 

@@ -43,6 +43,11 @@ pub struct Backend {
     pub scene: String,
     /// Seed of every simulated device (`seed`, default 1).
     pub seed: u64,
+    /// Attempts after the first when a device command fails
+    /// (`max_retries`, default 2).
+    pub max_retries: u32,
+    /// Pause before each retry, seconds (`retry_delay_s`, default 0.5).
+    pub retry_delay_s: f64,
 }
 
 /// What the scanner does (`[scan]`).
@@ -76,6 +81,8 @@ impl Default for ScanPlan {
 pub struct Output {
     /// File extensions, e.g. `["ply", "las"]` (default `["ply"]`).
     pub formats: Vec<String>,
+    /// Write `mission.rrd` for the Rerun viewer (`rerun`, default true).
+    pub rerun: bool,
 }
 
 /// Cloud formats `[output] formats` accepts.
@@ -250,6 +257,9 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Parts> {
     });
     let scene = b.optional(r, "scene", |r, v, f| r.choice(v, f, &cps::geom::BUILTIN_SCENES).map(At::into_inner));
     let seed = b.optional(r, "seed", |r, v, f| r.integer_in(v, f, 0, 1 << 53));
+    let retries = b.optional(r, "max_retries", |r, v, f| r.integer_in(v, f, 0, 100));
+    let delay =
+        b.optional(r, "retry_delay_s", |r, v, f| r.number_in(v, f, 0.0, true, Some(3600.0)).map(At::into_inner));
     b.finish(r);
 
     let mut sc = root.table(r, "scan");
@@ -274,6 +284,7 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Parts> {
     let mut o = root.table(r, "output");
     let formats = o
         .optional(r, "formats", |r, v, f| r.array(v, f, |r, e, f| r.choice(e, f, &OUTPUT_FORMATS).map(At::into_inner)));
+    let rerun = o.optional(r, "rerun", |r, v, f| r.boolean(v, f));
     o.finish(r);
 
     let (plan, spans) = plan?;
@@ -286,7 +297,12 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Parts> {
         acceptance: Acceptance { max_final_sigma_xy_m: max_xy?, max_station_error_m: max_err? },
         backend: {
             kind?;
-            Backend { scene: scene?.unwrap_or_else(|| "hall".into()), seed: seed?.unwrap_or(1) }
+            Backend {
+                scene: scene?.unwrap_or_else(|| "hall".into()),
+                seed: seed?.unwrap_or(1),
+                max_retries: retries?.map_or(2, |n| n as u32),
+                retry_delay_s: delay?.unwrap_or(0.5),
+            }
         },
         scan: ScanPlan {
             every_n_stations: every?.map_or(d.every_n_stations, |n| n as usize),
@@ -294,7 +310,7 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Parts> {
             resolution: resolution?.unwrap_or(d.resolution),
             body_from_head_m: lever?.unwrap_or(d.body_from_head_m),
         },
-        output: Output { formats: formats?.unwrap_or_else(|| vec!["ply".into()]) },
+        output: Output { formats: formats?.unwrap_or_else(|| vec!["ply".into()]), rerun: rerun?.unwrap_or(true) },
         spans,
     })
 }

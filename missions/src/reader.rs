@@ -142,6 +142,17 @@ impl<'s> Reader<'s> {
         Some(Spanned::new(v.span(), [*xs[0].get_ref(), *xs[1].get_ref(), *xs[2].get_ref()]))
     }
 
+    /// Reads a boolean.
+    pub fn boolean(&mut self, v: &Spanned<DeValue<'_>>, field: &str) -> Option<bool> {
+        match v.get_ref() {
+            DeValue::Boolean(b) => Some(*b),
+            other => {
+                self.problem(&v.span(), field, format!("expected true or false, found {}", kind(other)));
+                None
+            }
+        }
+    }
+
     /// Reads a string.
     pub fn string(&mut self, v: &Spanned<DeValue<'_>>, field: &str) -> Option<At<String>> {
         match v.get_ref() {

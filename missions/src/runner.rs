@@ -3,35 +3,56 @@
 //! pose, a journal of every command and reading, and the outputs.
 //!
 //! Outputs in the run directory:
-//! - `journal.jsonl` — one JSON object per line (`"v": 1`), appended and
-//!   flushed as each command is given and each reading taken;
+//! - `mission.toml` — the mission as run (a resume must use the same);
+//! - `journal.jsonl` — see [`crate::journal`]: every command with its
+//!   reading and the simulator's state after it, flushed as it happens;
 //! - `scans/scanNNN.3d` + `.pose` — each scan in the body frame with its
 //!   CPS `world_from_body` (3DTK layout), written before the journal
 //!   references it;
 //! - `report.json`, `stations.csv` — per-station estimate, covariance,
 //!   prediction, truth and error;
-//! - `cloud.<format>` — the merged world-frame cloud in each `[output]` format.
+//! - `cloud.<format>` — the merged world-frame cloud in each `[output]` format;
+//! - `mission.rrd` — the Rerun recording ([`crate::recording`]).
+//!
+//! `--resume` replays the journal: each recorded reading is used as it was
+//! and the simulated world is put back to its recorded state after each
+//! step, so the run continues exactly where it stopped.
 
-use std::fs::File;
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
 use cps::{FixOptions, ParentPose, TeamState, observe};
 use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
-use nalgebra::{Isometry3, Matrix4, Point3, Translation3, UnitQuaternion};
+use nalgebra::{Matrix4, Point3};
+use planner::{Dance, DanceCycle, Prediction};
 use scanner::io::{Format, PointCloud};
-use scanner::sim::{
-    LmsConfig, LmsRangeMode, OdometryError, Robot, SimDrive, SimHead, SimLms, SimTilt, SimTotalStation, SimWorld,
-};
-use scanner::{Drive, HeadKind, PlanarPose, Target, TiltSensor, TotalStation, scan_3d};
+use scanner::sim::Robot;
+use scanner::{PlanarPose, Target, Tilt, TsMeasurement, TsStatus};
+use serde::{Deserialize, Serialize, de::DeserializeOwned};
 use serde_json::{Value, json};
 
+use crate::backend::{DeviceKind, Fault, SimTeam};
+use crate::journal::Journal;
 use crate::mission::Mission;
+use crate::recording::{DRIVE_SPEED_M_PER_S, MEASURE_S, Recorder, TILT_S, Viewer};
 
-/// Journal schema version.
-pub const JOURNAL_VERSION: u32 = 1;
+/// How to run.
+#[derive(Debug, Clone, Default)]
+pub struct RunOptions {
+    /// No progress bars.
+    pub quiet: bool,
+    /// Continue the run whose journal is in the directory.
+    pub resume: bool,
+    /// Faults to inject into the simulated devices.
+    pub faults: Vec<Fault>,
+    /// Abort the process after writing this many journal events (a crash
+    /// at a chosen point, for testing `--resume`).
+    pub abort_after_events: Option<usize>,
+    /// A live viewer to stream to besides `mission.rrd`.
+    pub viewer: Viewer,
+}
 
 /// One parent station of a finished run.
 #[derive(Debug, Clone, PartialEq)]
@@ -63,18 +84,57 @@ pub struct RunSummary {
     pub points: usize,
     /// Whether the mission's acceptance tolerances hold.
     pub accepted: bool,
+    /// Journal events replayed from an earlier, interrupted run.
+    pub replayed: usize,
 }
 
-/// Appends JSON lines and flushes each one.
-struct Journal(File);
+/// A drive's report, as journaled.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+struct Driven {
+    distance_m: f64,
+}
 
-impl Journal {
-    fn log(&mut self, mut event: Value) -> Result<()> {
-        event["v"] = json!(JOURNAL_VERSION);
-        let mut line = serde_json::to_string(&event)?;
-        line.push('\n');
-        self.0.write_all(line.as_bytes()).and_then(|()| self.0.flush()).context("writing journal.jsonl")
+/// A total-station measurement in the instrument's convention, as journaled.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+struct Measured {
+    slope_raw_m: f64,
+    hz_rad: f64,
+    v_rad: f64,
+    reduced_accuracy: bool,
+}
+
+impl Measured {
+    fn from(m: TsMeasurement) -> Self {
+        Self {
+            slope_raw_m: m.slope_raw_m,
+            hz_rad: m.hz_rad,
+            v_rad: m.v_rad,
+            reduced_accuracy: m.status == TsStatus::ReducedAccuracy,
+        }
     }
+
+    fn measurement(&self) -> TsMeasurement {
+        TsMeasurement {
+            slope_raw_m: self.slope_raw_m,
+            hz_rad: self.hz_rad,
+            v_rad: self.v_rad,
+            status: if self.reduced_accuracy { TsStatus::ReducedAccuracy } else { TsStatus::Ok },
+        }
+    }
+}
+
+/// A tilt reading, as journaled.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+struct Tilted {
+    roll_rad: f64,
+    pitch_rad: f64,
+}
+
+/// A scan written to the run directory, as journaled.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+struct Scanned {
+    file: String,
+    points: usize,
 }
 
 fn pose_json(p: &ParentPose) -> Value {
@@ -89,146 +149,373 @@ fn planar(p: &ParentPose) -> PlanarPose {
     PlanarPose { x_m: p.position.x, y_m: p.position.y, heading_rad: p.heading_rad }
 }
 
-fn bars(quiet: bool) -> MultiProgress {
-    MultiProgress::with_draw_target(if quiet { ProgressDrawTarget::hidden() } else { ProgressDrawTarget::stderr() })
+/// The journal, the devices and the retry policy: every command of the run
+/// goes through [`Steps::step`].
+struct Steps {
+    journal: Journal,
+    sim: SimTeam,
+    rec: Recorder,
+    max_retries: u32,
+    retry_delay: Duration,
+    resume_hint: String,
+    bar: ProgressBar,
+    replayed: usize,
 }
 
-/// Runs `mission` on the simulator into `dir` (created; an existing journal
-/// there is an error, so a finished run is never overwritten).
-pub fn run(mission: &Mission, dir: &Path, quiet: bool) -> Result<RunSummary> {
+impl Steps {
+    /// One device command. While the journal holds recorded steps, the next
+    /// one (which must be this command) is used as it was and the simulated
+    /// world is put back to its recorded state after it. Otherwise the
+    /// device is commanded — again after a failure, up to the mission's
+    /// retries — and the reading is journaled with the simulator's state.
+    fn step<T: Serialize + DeserializeOwned>(
+        &mut self,
+        key: Value,
+        device: DeviceKind,
+        mut command: impl FnMut(&mut SimTeam) -> scanner::Result<T>,
+    ) -> Result<T> {
+        self.bar.inc(1);
+        if let Some(event) = self.journal.next_recorded(&key)? {
+            self.replayed += 1;
+            self.sim.restore(&event["sim"]).context("restoring the simulator from the journal")?;
+            return serde_json::from_value(event["data"].clone())
+                .with_context(|| format!("journal event {event}: unreadable data"));
+        }
+        let mut attempt = 0;
+        loop {
+            match command(&mut self.sim) {
+                Ok(data) => {
+                    let mut event = key;
+                    event["data"] = serde_json::to_value(&data)?;
+                    event["sim"] = self.sim.checkpoint();
+                    self.journal.append(event)?;
+                    return Ok(data);
+                }
+                Err(e) if attempt < self.max_retries => {
+                    attempt += 1;
+                    self.journal.append(json!({"event": "retry", "device": device.name(), "attempt": attempt,
+                        "error": e.to_string(), "step": key}))?;
+                    self.rec
+                        .event(rerun::TextLogLevel::WARN, format!("{e}: retry {attempt} of {}", self.max_retries))?;
+                    std::thread::sleep(self.retry_delay);
+                }
+                Err(e) => {
+                    self.journal.append(json!({"event": "stop", "device": device.name(), "error": e.to_string(),
+                        "step": key}))?;
+                    self.rec.event(rerun::TextLogLevel::ERROR, format!("{e}: mission stopped"))?;
+                    bail!(
+                        "{} failed {} time(s), last: {e}. The mission stopped cleanly; the journal keeps every \
+                         reading so far. Once the device answers, continue with: {}",
+                        device.name(),
+                        attempt + 1,
+                        self.resume_hint
+                    );
+                }
+            }
+        }
+    }
+
+    /// A result the run derives (a fix, the end): journaled live; on replay
+    /// the recorded one must be there.
+    fn note(&mut self, key: Value, data: Value) -> Result<()> {
+        if self.journal.next_recorded(&key)?.is_some() {
+            self.replayed += 1;
+            return Ok(());
+        }
+        let mut event = key;
+        event["data"] = data;
+        self.journal.append(event)
+    }
+}
+
+/// A mission being run.
+struct Run<'m> {
+    mission: &'m Mission,
+    dance: Dance,
+    prediction: Prediction,
+    dir: PathBuf,
+    steps: Steps,
+    team: TeamState,
+    scan_bar: ProgressBar,
+    merged: Vec<Point3<f32>>,
+    stations: Vec<StationRecord>,
+}
+
+/// Runs `mission` on the simulator into `dir`: a new run (an existing
+/// journal there is an error, so a run is never overwritten), or with
+/// `resume` the continuation of the run whose journal is there.
+pub fn run(mission: &Mission, dir: &Path, options: &RunOptions) -> Result<RunSummary> {
     let started = Instant::now();
     let dance = crate::predict::dance(mission)?;
     let prediction = crate::predict::prediction(mission)?;
     std::fs::create_dir_all(dir.join("scans")).with_context(|| format!("creating {}", dir.display()))?;
     let journal_path = dir.join("journal.jsonl");
-    if journal_path.exists() {
-        bail!("{} already holds a run ({}); choose another --out directory", dir.display(), journal_path.display());
+    let mission_copy = dir.join("mission.toml");
+    let mut journal = if options.resume {
+        let (mut journal, start) = Journal::resume(&journal_path)?;
+        journal.abort_after(options.abort_after_events);
+        let as_run =
+            std::fs::read_to_string(&mission_copy).with_context(|| format!("reading {}", mission_copy.display()))?;
+        if as_run != mission.source.text || start["seed"] != json!(mission.backend.seed) {
+            bail!(
+                "{} is not the mission this run started with ({}); resume with that file",
+                mission.source.file.display(),
+                mission_copy.display()
+            );
+        }
+        journal
+    } else {
+        let mut journal = Journal::create(&journal_path)?;
+        journal.abort_after(options.abort_after_events);
+        std::fs::write(&mission_copy, &mission.source.text)
+            .with_context(|| format!("writing {}", mission_copy.display()))?;
+        journal.append(json!({"event": "start", "mission": mission.name, "seed": mission.backend.seed,
+            "scene": mission.backend.scene, "stations": dance.stations.len(), "children": mission.children}))?;
+        journal
+    };
+    if options.resume {
+        journal.append(json!({"event": "resume"}))?;
     }
-    let mut journal =
-        Journal(File::create(&journal_path).with_context(|| format!("creating {}", journal_path.display()))?);
-    let (inst, seed) = (&mission.total_station, mission.backend.seed);
-    journal.log(json!({"event": "start", "mission": mission.name, "seed": seed, "scene": mission.backend.scene,
-        "stations": dance.stations.len(), "children": mission.children}))?;
 
-    // The simulated world: the parent truly at station 0, the children at
-    // their first formation points.
-    let scene = cps::geom::builtin(&mission.backend.scene)?;
-    let start = dance.station_pose(0);
-    let first = dance.cycles.first().map(|c| c.children.clone()).unwrap_or_default();
-    let world = SimWorld::new(scene, start, first.clone());
-    let odometry = OdometryError::default();
-    let mut parent_drive = SimDrive::new(world.clone(), Robot::Parent, planar(&start), odometry, seed)?;
-    let mut child_drives = first
-        .iter()
-        .enumerate()
-        .map(|(j, p)| {
-            let at = PlanarPose { x_m: p.x, y_m: p.y, heading_rad: 0.0 };
-            SimDrive::new(world.clone(), Robot::Child(j), at, odometry, seed)
-        })
-        .collect::<scanner::Result<Vec<_>>>()?;
-    let mut total_station = SimTotalStation::new(world.clone(), inst.clone(), seed);
-    let mut tilt = SimTilt::new(world.clone(), 0.01f64.to_radians(), seed);
-    let body_from_head =
-        Isometry3::from_parts(Translation3::from(mission.scan.body_from_head_m), UnitQuaternion::identity());
-    let lms_config = LmsConfig { resolution: mission.scan.resolution, mode: LmsRangeMode::Mm32, sigma_range_m: 0.005 };
-    let mut lms = SimLms::new(world.clone(), lms_config, HeadKind::RotatingTable, body_from_head, seed);
-    let mut head = SimHead::new(world.clone(), HeadKind::RotatingTable);
+    let sim = SimTeam::new(mission, &dance, options.faults.clone())?;
+    let robots: Vec<String> = std::iter::once("parent".to_string()).chain(mission.children.iter().cloned()).collect();
+    let rrd = mission.output.rerun.then(|| dir.join("mission.rrd"));
+    let mut rec = Recorder::new(&mission.name, rrd.as_deref(), &options.viewer, robots)?;
+    rec.scene(sim.scene())?;
 
-    let mut team = TeamState::new(start, mission.plan.start_covariance, dance.n_children())?;
-    let progress = bars(quiet);
+    let progress = MultiProgress::with_draw_target(if options.quiet {
+        ProgressDrawTarget::hidden()
+    } else {
+        ProgressDrawTarget::stderr()
+    });
     let style = ProgressStyle::with_template("{prefix:>8} [{bar:40}] {pos}/{len} {msg}")
         .map_err(|e| anyhow::anyhow!("progress style: {e}"))?
         .progress_chars("=> ");
-    let mission_bar = progress.add(ProgressBar::new(dance.cycles.len() as u64).with_style(style.clone()));
-    mission_bar.set_prefix("cycles");
+    let n = mission.children.len() as u64;
+    let scans = (0..dance.stations.len()).filter(|k| scan_station(mission, *k)).count() as u64;
+    let total_steps = dance.cycles.len() as u64 * (3 * n + 1) + 2 * scans;
+    let bar = progress.add(ProgressBar::new(total_steps).with_style(style.clone()));
+    bar.set_prefix("steps");
     let scan_bar = progress.add(ProgressBar::new(mission.scan.slices as u64).with_style(style));
     scan_bar.set_prefix("scan");
 
-    let mut merged = Vec::new();
-    let mut stations = Vec::with_capacity(dance.stations.len());
-    let record = |index: usize, team: &TeamState, predicted: Matrix4<f64>, scan: Option<String>| {
-        let truth = world.truth().parent;
-        let pose = team.parent();
+    let resume_hint = format!("cps-survey run {} --out {} --resume", mission.source.file.display(), dir.display());
+    let team = TeamState::new(dance.station_pose(0), mission.plan.start_covariance, dance.n_children())?;
+    let steps = Steps {
+        journal,
+        sim,
+        rec,
+        max_retries: mission.backend.max_retries,
+        retry_delay: Duration::from_secs_f64(mission.backend.retry_delay_s),
+        resume_hint,
+        bar,
+        replayed: 0,
+    };
+    let mut run = Run {
+        mission,
+        dance,
+        prediction,
+        dir: dir.to_path_buf(),
+        steps,
+        team,
+        scan_bar,
+        merged: Vec::new(),
+        stations: Vec::new(),
+    };
+    run.steps.rec.event(rerun::TextLogLevel::INFO, format!("mission \"{}\" starts", mission.name))?;
+    run.station(0, mission.plan.start_covariance, None)?;
+    for k in 0..run.dance.cycles.len() {
+        run.cycle(k)?;
+    }
+    run.finish(started)
+}
+
+/// Whether the scanner scans at station `k`.
+fn scan_station(mission: &Mission, k: usize) -> bool {
+    let every = mission.scan.every_n_stations;
+    every != 0 && k.is_multiple_of(every)
+}
+
+impl Run<'_> {
+    /// One dance cycle: the children move to the formation and are measured
+    /// from the standing parent; the parent moves and fixes itself from
+    /// them; then the station's scan.
+    fn cycle(&mut self, k: usize) -> Result<()> {
+        let cycle: DanceCycle = self.dance.cycles[k].clone();
+        let predicted = self.prediction.cycles[k].clone();
+        let inst = &self.mission.total_station;
+        let from = self.team.parent();
+        for (j, at) in cycle.children.iter().enumerate() {
+            let goal = PlanarPose { x_m: at.x, y_m: at.y, heading_rad: 0.0 };
+            let robot = &self.mission.children[j];
+            let driven: Driven = self.steps.step(
+                json!({"event": "drive", "cycle": cycle.cycle, "robot": robot, "target": [goal.x_m, goal.y_m, goal.heading_rad]}),
+                DeviceKind::Drive,
+                |sim| sim.drive(Robot::Child(j), &goal).map(|o| Driven { distance_m: o.distance_m }),
+            )?;
+            self.steps.rec.advance(driven.distance_m / DRIVE_SPEED_M_PER_S);
+            let target = Target { child: j, predicted: observe(&from, at)? };
+            let m: Measured = self.steps.step(
+                json!({"event": "measure", "cycle": cycle.cycle, "phase": "placement", "child": j}),
+                DeviceKind::TotalStation,
+                |sim| sim.measure(&target).map(Measured::from),
+            )?;
+            self.team.place_child(j, &m.measurement().to_reading(inst), inst)?;
+            self.steps.rec.advance(MEASURE_S);
+            let placed = self.team.child(j).context("a placed child has a position")?;
+            self.steps.rec.sight_lines("placement", &from.position, &[(placed, None)])?;
+            self.log_team(Some(&predicted.covariance), &predicted.children_covariance)?;
+        }
+
+        let nominal = self.dance.station_pose(cycle.to);
+        let goal = planar(&nominal);
+        let driven: Driven = self.steps.step(
+            json!({"event": "drive", "cycle": cycle.cycle, "robot": "parent", "target": [goal.x_m, goal.y_m, goal.heading_rad]}),
+            DeviceKind::Drive,
+            |sim| sim.drive(Robot::Parent, &goal).map(|o| Driven { distance_m: o.distance_m }),
+        )?;
+        self.steps.rec.advance(driven.distance_m / DRIVE_SPEED_M_PER_S);
+        let mut readings = Vec::with_capacity(cycle.children.len());
+        for (j, at) in cycle.children.iter().enumerate() {
+            let target = Target { child: j, predicted: observe(&nominal, at)? };
+            let m: Measured = self.steps.step(
+                json!({"event": "measure", "cycle": cycle.cycle, "phase": "fix", "child": j}),
+                DeviceKind::TotalStation,
+                |sim| sim.measure(&target).map(Measured::from),
+            )?;
+            self.steps.rec.advance(MEASURE_S);
+            readings.push((j, m.measurement().to_reading(inst)));
+        }
+        let fix = self.team.fix_parent(&readings, inst, &FixOptions::default())?;
+        let pose = self.team.parent();
+        self.steps.note(
+            json!({"event": "fix", "cycle": cycle.cycle, "station": cycle.to}),
+            json!({"pose": pose_json(&pose), "covariance": matrix_json(&self.team.parent_covariance()),
+                "sigma0_squared": fix.sigma0_squared, "redundancy": fix.redundancy}),
+        )?;
+
+        // Sight lines coloured by each child's largest |w|; a blunder is logged.
+        let reliability = fix.reliability();
+        let mut lines = Vec::with_capacity(readings.len());
+        for (k, (j, _)) in readings.iter().enumerate() {
+            let w = reliability.w_statistics[3 * k..3 * k + 3]
+                .iter()
+                .flatten()
+                .copied()
+                .max_by(|a, b| a.abs().total_cmp(&b.abs()));
+            if let Some(w) = w.filter(|w| w.abs() > crate::recording::W_CRITICAL) {
+                self.steps.rec.event(
+                    rerun::TextLogLevel::WARN,
+                    format!(
+                        "cycle {}: the measurement of {} has |w| = {:.2} > {}: a possible blunder",
+                        cycle.cycle,
+                        self.mission.children[*j],
+                        w.abs(),
+                        crate::recording::W_CRITICAL
+                    ),
+                )?;
+            }
+            lines.push((self.team.child(*j).context("a sighted child is placed")?, w));
+        }
+        self.steps.rec.sight_lines("fix", &pose.position, &lines)?;
+        self.steps.rec.fix_metrics(fix.sigma0_squared);
+        self.log_team(Some(&predicted.covariance), &predicted.children_covariance)?;
+        self.station(cycle.to, predicted.covariance, Some(&predicted.children_covariance))
+    }
+
+    /// Logs the team's estimate, truth and ellipsoids to the recording.
+    fn log_team(&mut self, predicted: Option<&Matrix4<f64>>, children: &[nalgebra::Matrix3<f64>]) -> Result<()> {
+        let truth = self.steps.sim.truth();
+        self.steps.rec.team(&self.team, &truth, predicted.map(|p| (p, children)))
+    }
+
+    /// The parent stands at station `index`: the scan if one is due, then
+    /// the station's record.
+    fn station(
+        &mut self,
+        index: usize,
+        predicted: Matrix4<f64>,
+        children: Option<&[nalgebra::Matrix3<f64>]>,
+    ) -> Result<()> {
+        if children.is_none() {
+            self.log_team(None, &[])?;
+        }
+        let scan = if scan_station(self.mission, index) { Some(self.scan(index)?) } else { None };
+        let truth = self.steps.sim.truth().parent;
+        let pose = self.team.parent();
         let error_xy_m = (pose.position.xy() - truth.position.xy()).norm();
-        StationRecord {
+        let covariance = self.team.parent_covariance();
+        self.steps.rec.trajectory(&pose, &truth)?;
+        self.steps.rec.station_metrics(&covariance, &predicted, error_xy_m);
+        self.stations.push(StationRecord {
             index,
             pose,
-            covariance: team.parent_covariance(),
+            covariance,
             predicted_covariance: predicted,
             truth,
             error_xy_m,
             scan,
-        }
-    };
-    let mut take_scan = |index: usize, team: &TeamState, journal: &mut Journal| -> Result<Option<String>> {
-        let every = mission.scan.every_n_stations;
-        if every == 0 || !index.is_multiple_of(every) {
-            return Ok(None);
-        }
-        let tilt_reading = tilt.read()?;
-        journal.log(json!({"event": "tilt", "station": index, "roll_rad": tilt_reading.roll_rad,
-            "pitch_rad": tilt_reading.pitch_rad}))?;
-        scan_bar.reset();
-        let scan = scan_3d(&mut head, &mut lms, mission.scan.slices, &body_from_head, &mut |done, _| {
-            scan_bar.set_position(done as u64);
+        });
+        Ok(())
+    }
+
+    /// Reads the tilt, takes a 3D scan, writes it to `scans/` and fuses it
+    /// directly with the CPS pose; returns the scan file's name.
+    fn scan(&mut self, index: usize) -> Result<String> {
+        let tilt: Tilted = self.steps.step(json!({"event": "tilt", "station": index}), DeviceKind::Tilt, |sim| {
+            sim.tilt().map(|t| Tilted { roll_rad: t.roll_rad, pitch_rad: t.pitch_rad })
         })?;
-        let world_from_body = tilt_reading.world_from_body(&team.parent());
+        self.steps.rec.advance(TILT_S);
+        let world_from_body =
+            Tilt { roll_rad: tilt.roll_rad, pitch_rad: tilt.pitch_rad }.world_from_body(&self.team.parent());
         let name = format!("scans/scan{index:03}");
-        let points = scan.len();
-        merged.extend(fusion::direct::transform(&scan.points, &world_from_body));
-        let cloud = PointCloud::from_points(scan.points);
-        scanner::io::write(&dir.join(format!("{name}.3d")), &cloud, Format::ThreeDtk)?;
-        scanner::io::write_3dtk_pose(&dir.join(format!("{name}.pose")), &world_from_body)?;
-        journal.log(json!({"event": "scan", "station": index, "file": format!("{name}.3d"), "points": points}))?;
-        Ok(Some(format!("{name}.3d")))
-    };
-
-    let scan = take_scan(0, &team, &mut journal)?;
-    stations.push(record(0, &team, mission.plan.start_covariance, scan));
-    for (cycle, predicted) in dance.cycles.iter().zip(&prediction.cycles) {
-        let from = team.parent();
-        // The children move to the formation and are measured from the standing parent.
-        for (j, target) in cycle.children.iter().enumerate() {
-            let goal = PlanarPose { x_m: target.x, y_m: target.y, heading_rad: 0.0 };
-            let odo = child_drives[j].move_to(&goal)?;
-            journal.log(json!({"event": "drive", "robot": mission.children[j], "cycle": cycle.cycle,
-                "target": [goal.x_m, goal.y_m, goal.heading_rad], "distance_m": odo.distance_m}))?;
-            let m = total_station.measure(&Target { child: j, predicted: observe(&from, target)? })?;
-            journal.log(json!({"event": "measure", "cycle": cycle.cycle, "phase": "placement", "child": j,
-                "slope_raw_m": m.slope_raw_m, "hz_rad": m.hz_rad, "v_rad": m.v_rad}))?;
-            team.place_child(j, &m.to_reading(inst), inst)?;
+        let (dir, slices, bar) = (&self.dir, self.mission.scan.slices, &self.scan_bar);
+        let mut taken = None;
+        let scanned: Scanned =
+            self.steps.step(json!({"event": "scan", "station": index}), DeviceKind::Scanner, |sim| {
+                bar.reset();
+                let scan = sim.scan(slices, &mut |done, _| bar.set_position(done as u64))?;
+                let cloud = PointCloud::from_points(scan.points);
+                scanner::io::write(&dir.join(format!("{name}.3d")), &cloud, Format::ThreeDtk)?;
+                scanner::io::write_3dtk_pose(&dir.join(format!("{name}.pose")), &world_from_body)?;
+                let points = cloud.len();
+                taken = Some(cloud);
+                Ok(Scanned { file: format!("{name}.3d"), points })
+            })?;
+        let cloud = match taken {
+            Some(cloud) => cloud,
+            None => scanner::io::read(&self.dir.join(&scanned.file))?,
+        };
+        if cloud.len() != scanned.points {
+            bail!("{}: {} points, but the journal recorded {}", scanned.file, cloud.len(), scanned.points);
         }
-        // The parent moves to the next station and fixes itself from the children.
-        let nominal = dance.station_pose(cycle.to);
-        let odo = parent_drive.move_to(&planar(&nominal))?;
-        journal.log(json!({"event": "drive", "robot": "parent", "cycle": cycle.cycle,
-            "target": [nominal.position.x, nominal.position.y, nominal.heading_rad], "distance_m": odo.distance_m}))?;
-        let mut readings = Vec::with_capacity(cycle.children.len());
-        for (j, target) in cycle.children.iter().enumerate() {
-            let m = total_station.measure(&Target { child: j, predicted: observe(&nominal, target)? })?;
-            journal.log(json!({"event": "measure", "cycle": cycle.cycle, "phase": "fix", "child": j,
-                "slope_raw_m": m.slope_raw_m, "hz_rad": m.hz_rad, "v_rad": m.v_rad}))?;
-            readings.push((j, m.to_reading(inst)));
-        }
-        let fix = team.fix_parent(&readings, inst, &FixOptions::default())?;
-        journal.log(json!({"event": "fix", "cycle": cycle.cycle, "station": cycle.to,
-            "pose": pose_json(&team.parent()), "covariance": matrix_json(&team.parent_covariance()),
-            "sigma0_squared": fix.sigma0_squared}))?;
-        let scan = take_scan(cycle.to, &team, &mut journal)?;
-        stations.push(record(cycle.to, &team, predicted.covariance, scan));
-        mission_bar.inc(1);
+        let world = fusion::direct::transform(&cloud.points, &world_from_body);
+        self.steps.rec.advance(slices as f64 / (75.0 * self.mission.scan.resolution.degrees()));
+        self.steps.rec.scan("direct", &format!("scan{index:03}"), &world)?;
+        self.merged.extend(world);
+        Ok(scanned.file)
     }
-    mission_bar.finish_and_clear();
-    scan_bar.finish_and_clear();
 
-    let merged = PointCloud::from_points(merged);
-    for format in &mission.output.formats {
-        let path = dir.join(format!("cloud.{format}"));
-        scanner::io::write(&path, &merged, Format::from_path(&path)?)?;
+    /// The merged cloud, the reports, the recording's series and the end
+    /// of the journal.
+    fn finish(mut self, started: Instant) -> Result<RunSummary> {
+        self.steps.bar.finish_and_clear();
+        self.scan_bar.finish_and_clear();
+        let merged = PointCloud::from_points(std::mem::take(&mut self.merged));
+        for format in &self.mission.output.formats {
+            let path = self.dir.join(format!("cloud.{format}"));
+            scanner::io::write(&path, &merged, Format::from_path(&path)?)?;
+        }
+        let accepted = write_reports(self.mission, &self.dir, &self.stations, started.elapsed().as_secs_f64())?;
+        self.steps.rec.event(
+            rerun::TextLogLevel::INFO,
+            format!("mission ends: acceptance {}", if accepted { "passed" } else { "FAILED" }),
+        )?;
+        self.steps.note(json!({"event": "end"}), json!({"accepted": accepted}))?;
+        let Steps { rec, replayed, .. } = self.steps;
+        rec.finish()?;
+        Ok(RunSummary { dir: self.dir, stations: self.stations, points: merged.len(), accepted, replayed })
     }
-    let accepted = write_reports(mission, dir, &stations, started.elapsed().as_secs_f64())?;
-    journal.log(json!({"event": "end", "accepted": accepted}))?;
-    Ok(RunSummary { dir: dir.to_path_buf(), stations, points: merged.len(), accepted })
 }
 
 /// Writes `report.json` and `stations.csv`; returns whether the mission's
@@ -331,6 +618,14 @@ pub fn write_summary(out: &mut dyn Write, mission: &Mission, s: &RunSummary) -> 
             if st.scan.is_some() { "yes" } else { "-" }
         )?;
     }
-    writeln!(out, "outputs in {} (report.json, stations.csv, journal.jsonl, scans/, cloud.*)", s.dir.display())?;
+    if s.replayed > 0 {
+        writeln!(out, "resumed: {} journal events replayed", s.replayed)?;
+    }
+    writeln!(
+        out,
+        "outputs in {} (report.json, stations.csv, journal.jsonl, scans/, cloud.*{})",
+        s.dir.display(),
+        if mission.output.rerun { ", mission.rrd — view with: rerun mission.rrd" } else { "" }
+    )?;
     writeln!(out, "acceptance: {}", if s.accepted { "passed" } else { "FAILED" })
 }

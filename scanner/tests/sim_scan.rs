@@ -78,3 +78,46 @@ fn reduced_points_of_a_hall_scan() {
     // Means of points on a plane stay on it; at edges they cut corners by < cell/2.
     assert!(median_distance(&cloud, &world_from_body) <= SIGMA_M);
 }
+
+/// A drive and a total station restored from a checkpoint (noise position,
+/// believed and true pose, world truth) continue exactly as the originals:
+/// the next move and the next measurement are bit-identical.
+#[test]
+fn restored_devices_continue_the_same_noise() {
+    use cps::{Instrument, Reading};
+    use nalgebra::Point3;
+    use scanner::sim::{NoiseStream, OdometryError, Robot, SimDrive, SimTotalStation};
+    use scanner::{Drive, PlanarPose, Target, TotalStation};
+
+    let make = || {
+        let world = SimWorld::new(
+            builtin("hall").expect("hall"),
+            ParentPose::new(4.0, 4.0, 1.4, 0.0),
+            vec![Point3::new(8.0, 2.0, 0.5)],
+        );
+        let start = PlanarPose { x_m: 8.0, y_m: 2.0, heading_rad: 0.0 };
+        let drive = SimDrive::new(world.clone(), Robot::Child(0), start, OdometryError::default(), 3).expect("drive");
+        let ts = SimTotalStation::new(world.clone(), Instrument::default(), 3);
+        (world, drive, ts)
+    };
+    let target = Target { child: 0, predicted: Reading { slope_m: 4.0, azimuth_rad: 0.0, elevation_rad: 0.0 } };
+    let (world, mut drive, mut ts) = make();
+    for k in 0..3 {
+        drive.move_to(&PlanarPose { x_m: 9.0 + k as f64, y_m: 2.5, heading_rad: 0.1 }).expect("move");
+        ts.measure(&target).expect("measure");
+    }
+    let (truth, believed, true_pose) = (world.truth(), drive.believed_pose(), drive.true_pose());
+    let (drive_words, ts_words) = (drive.noise_position(), ts.noise_position());
+    assert!(drive_words > 0 && ts_words > 0);
+    let goal = PlanarPose { x_m: 13.0, y_m: 3.0, heading_rad: 0.2 };
+    drive.move_to(&goal).expect("move");
+    let expected = (world.truth(), ts.measure(&target).expect("measure"));
+
+    let (world2, mut drive2, mut ts2) = make();
+    world2.set_truth(truth);
+    drive2.restore(believed, true_pose);
+    drive2.set_noise_position(drive_words);
+    ts2.set_noise_position(ts_words);
+    drive2.move_to(&goal).expect("move");
+    assert_eq!((world2.truth(), ts2.measure(&target).expect("measure")), expected);
+}

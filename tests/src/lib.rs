@@ -65,3 +65,21 @@ where
     };
     Run { code: exit_code(&result), stdout: String::from_utf8_lossy(&out).into_owned(), stderr }
 }
+
+/// Rows per entity path in a Rerun `.rrd` file, read back with Rerun's own
+/// decoder: `(path, rows, static)` summed over the file's chunks.
+pub fn rrd_rows(path: &Path) -> Result<std::collections::BTreeMap<String, (usize, bool)>, String> {
+    use rerun::external::re_log_encoding::DecoderApp;
+    use rerun::external::re_log_types::LogMsg;
+    let file = std::fs::File::open(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let mut rows = std::collections::BTreeMap::new();
+    for msg in DecoderApp::decode_lazy(std::io::BufReader::new(file)) {
+        let msg = msg.map_err(|e| format!("{}: {e}", path.display()))?;
+        if let LogMsg::ArrowMsg(_, arrow) = msg {
+            let chunk = rerun::log::Chunk::from_arrow_msg(&arrow).map_err(|e| format!("{}: {e}", path.display()))?;
+            let entry = rows.entry(chunk.entity_path().to_string()).or_insert((0, chunk.is_static()));
+            entry.0 += chunk.num_rows();
+        }
+    }
+    Ok(rows)
+}

@@ -51,6 +51,11 @@ impl Bvh {
         self.primitives.len()
     }
 
+    /// Every primitive with its object index (in the hierarchy's order).
+    pub fn primitives(&self) -> impl Iterator<Item = (&Primitive, usize)> + '_ {
+        self.primitives.iter().zip(self.objects.iter().copied())
+    }
+
     /// True when there are no primitives.
     pub fn is_empty(&self) -> bool {
         self.primitives.is_empty()

@@ -63,7 +63,7 @@ pub struct SimDrive {
     believed: PlanarPose,
     true_pose: PlanarPose,
     name: String,
-    rng: ChaCha8Rng,
+    pub(super) rng: ChaCha8Rng,
 }
 
 impl SimDrive {
@@ -101,6 +101,19 @@ impl SimDrive {
     /// The robot's true planar pose.
     pub fn true_pose(&self) -> PlanarPose {
         self.true_pose
+    }
+
+    /// Where the robot believes it is (its last commanded pose).
+    pub fn believed_pose(&self) -> PlanarPose {
+        self.believed
+    }
+
+    /// Puts the drive back into a recorded state: the pose it believed and
+    /// its true pose (the world's truth is restored separately with
+    /// [`SimWorld::set_truth`]).
+    pub fn restore(&mut self, believed: PlanarPose, true_pose: PlanarPose) {
+        self.believed = believed;
+        self.true_pose = true_pose;
     }
 }
 

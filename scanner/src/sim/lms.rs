@@ -100,7 +100,7 @@ pub struct SimLms {
     config: LmsConfig,
     head: HeadKind,
     body_from_head: Isometry3<f64>,
-    rng: ChaCha8Rng,
+    pub(super) rng: ChaCha8Rng,
 }
 
 impl SimLms {

@@ -82,6 +82,30 @@ pub(crate) mod stream {
     pub const CHILD_DRIVE: u64 = 16;
 }
 
+/// A simulated device's position in its noise stream. A journaled run
+/// records it after every reading so that `--resume` continues with exactly
+/// the noise an uninterrupted run would have drawn.
+pub trait NoiseStream {
+    /// The number of 32-bit words drawn from the stream so far.
+    fn noise_position(&self) -> u128;
+    /// Continues the stream at `words` drawn words.
+    fn set_noise_position(&mut self, words: u128);
+}
+
+macro_rules! noise_stream {
+    ($($device:ty),*) => {$(
+        impl NoiseStream for $device {
+            fn noise_position(&self) -> u128 {
+                self.rng.get_word_pos()
+            }
+            fn set_noise_position(&mut self, words: u128) {
+                self.rng.set_word_pos(words);
+            }
+        }
+    )*};
+}
+noise_stream!(SimTilt, SimDrive, SimLms, SimTotalStation);
+
 pub(crate) fn rng(seed: u64, stream: u64) -> ChaCha8Rng {
     let mut r = ChaCha8Rng::seed_from_u64(seed);
     r.set_stream(stream);

@@ -16,7 +16,7 @@ use crate::error::{Result, ScannerError};
 pub struct SimTotalStation {
     world: SimWorld,
     instrument: Instrument,
-    rng: ChaCha8Rng,
+    pub(super) rng: ChaCha8Rng,
 }
 
 impl SimTotalStation {

@@ -1,0 +1,442 @@
+//! `mission.rrd`: the run as a Rerun recording a surveyor reads at a glance.
+//!
+//! Timelines `step` (one tick per journal step) and `sim_time` (nominal
+//! seconds: drives at [`DRIVE_SPEED_M_PER_S`], [`MEASURE_S`] per total-station
+//! measurement, [`TILT_S`] per tilt reading, the LMS's own slice rate per
+//! scan). Entities:
+//!
+//! | path | archetype | when |
+//! |---|---|---|
+//! | `world` | `ViewCoordinates` RIGHT_HAND_Z_UP | static |
+//! | `world/scene` | `Mesh3D` of the scene's surfaces | static |
+//! | `world/robots/<name>` | `Transform3D` of the estimate | every step |
+//! | `world/robots/<name>/body` | `Boxes3D` (parent) / `Points3D` (child) | static |
+//! | `world/truth/<name>` (+ `/body`, dimmer) | true pose (sim) | every step |
+//! | `world/trajectories/<name>/{estimate,truth}` | `LineStrips3D` | every parent fix |
+//! | `world/uncertainty/<name>/{achieved,predicted}_95pct` | `Ellipsoids3D`, 95 % (3D χ²) | every step |
+//! | `world/sight_lines/{placement,fix}` | `LineStrips3D`; fix lines coloured by Baarda \|w\| | each measurement |
+//! | `world/scans/direct/scanNNN` | `Points3D`, voxel-thinned for display | each scan |
+//! | `metrics/{sigma_xy_m,predicted_sigma_xy_m,sigma_heading_rad,error_xy_m}` | `Scalars`, column-wise | each station |
+//! | `metrics/fix_sigma0_squared` | `Scalars`, column-wise | each parent fix |
+//! | `log` | `TextLog` of mission events, warnings for retries and blunders | as they happen |
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use cps::geom::{Primitive, Scene};
+use cps::{ParentPose, TeamState};
+use nalgebra::{Matrix3, Matrix4, Point3, SymmetricEigen, UnitQuaternion, Vector3};
+use rerun::{RecordingStream, RecordingStreamBuilder};
+
+/// Nominal drive speed for `sim_time`, m/s.
+pub const DRIVE_SPEED_M_PER_S: f64 = 0.3;
+/// Nominal duration of a total-station measurement (ATR lock, distance), s.
+pub const MEASURE_S: f64 = 4.0;
+/// Nominal duration of a tilt reading, s.
+pub const TILT_S: f64 = 1.0;
+/// √χ²₃(0.95): the 95 % ellipsoid's half axes are this many σ.
+pub const CHI3_95_SCALE: f64 = 2.795_483_482_915_108;
+/// Voxel for the display copy of each scan, metres.
+pub const DISPLAY_VOXEL_M: f64 = 0.05;
+/// Baarda's critical value for α₀ = 0.1 % (two-sided).
+pub const W_CRITICAL: f64 = 3.29;
+
+/// Where the recording goes besides `mission.rrd`.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub enum Viewer {
+    /// The file only.
+    #[default]
+    None,
+    /// Start a viewer (`rerun` on the PATH) and stream to it too.
+    Spawn,
+    /// Stream to a running viewer at this URL too
+    /// (e.g. `rerun+http://127.0.0.1:9876/proxy`).
+    Connect(String),
+}
+
+/// The time series gathered during the run, sent column-wise at the end.
+#[derive(Debug, Default)]
+struct Series {
+    station_steps: Vec<i64>,
+    sigma_xy_m: Vec<f64>,
+    predicted_sigma_xy_m: Vec<f64>,
+    sigma_heading_rad: Vec<f64>,
+    error_xy_m: Vec<f64>,
+    fix_steps: Vec<i64>,
+    sigma0_squared: Vec<f64>,
+}
+
+/// Logs a run to Rerun; a disabled recorder does nothing.
+#[derive(Debug)]
+pub struct Recorder {
+    rec: Option<RecordingStream>,
+    step: i64,
+    sim_time_s: f64,
+    robots: Vec<String>,
+    series: Series,
+    trajectories: BTreeMap<&'static str, Vec<[f32; 3]>>,
+}
+
+fn rr<T, E: std::error::Error + Send + Sync + 'static>(r: Result<T, E>) -> Result<T> {
+    r.context("logging to the Rerun recording")
+}
+
+fn p32(p: &Point3<f64>) -> [f32; 3] {
+    [p.x as f32, p.y as f32, p.z as f32]
+}
+
+/// The 95 % ellipsoid of a 3×3 position covariance: half sizes along the
+/// eigenvectors and the rotation to them.
+pub fn ellipsoid_95(cov: &Matrix3<f64>) -> ([f32; 3], rerun::Quaternion) {
+    let eig = SymmetricEigen::new(*cov);
+    let mut v = eig.eigenvectors;
+    if v.determinant() < 0.0 {
+        v.column_mut(2).neg_mut();
+    }
+    let q = UnitQuaternion::from_matrix(&v).coords;
+    let h = eig.eigenvalues.map(|l| (CHI3_95_SCALE * l.max(0.0).sqrt()) as f32);
+    ([h.x, h.y, h.z], rerun::Quaternion::from_xyzw([q.x as f32, q.y as f32, q.z as f32, q.w as f32]))
+}
+
+/// Colour of a fix sight line by Baarda's |w|: green below 2, amber up to
+/// the critical value, red above; grey when nothing checks the observation.
+pub fn w_colour(w: Option<f64>) -> rerun::Color {
+    match w.map(f64::abs) {
+        None => rerun::Color::from_rgb(150, 150, 150),
+        Some(w) if w < 2.0 => rerun::Color::from_rgb(40, 200, 80),
+        Some(w) if w <= W_CRITICAL => rerun::Color::from_rgb(240, 170, 30),
+        Some(_) => rerun::Color::from_rgb(230, 40, 40),
+    }
+}
+
+/// Colour by height within `[lo, hi]` (blue → green → red).
+fn height_colour(z: f32, lo: f32, hi: f32) -> rerun::Color {
+    let t = ((z - lo) / (hi - lo).max(1e-3)).clamp(0.0, 1.0);
+    let (r, g, b) = if t < 0.5 { (0.0, 2.0 * t, 1.0 - 2.0 * t) } else { (2.0 * t - 1.0, 2.0 - 2.0 * t, 0.0) };
+    rerun::Color::from_rgb((40.0 + 215.0 * r) as u8, (40.0 + 215.0 * g) as u8, (40.0 + 215.0 * b) as u8)
+}
+
+/// The scene's surfaces as one triangle mesh (cylinders with 32 facets,
+/// spheres as 16 × 32 facets).
+pub fn scene_mesh(scene: &Scene) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+    let mut vertices: Vec<[f32; 3]> = Vec::new();
+    let mut triangles = Vec::new();
+    let mut quad = |vs: &mut Vec<[f32; 3]>, a: Point3<f64>, b: Point3<f64>, c: Point3<f64>, d: Point3<f64>| {
+        let k = vs.len() as u32;
+        vs.extend([p32(&a), p32(&b), p32(&c), p32(&d)]);
+        triangles.push([k, k + 1, k + 2]);
+        triangles.push([k, k + 2, k + 3]);
+    };
+    for (primitive, _) in scene.bvh().primitives() {
+        match primitive {
+            Primitive::Triangle([a, b, c]) => quad(&mut vertices, *a, *b, *c, *c),
+            Primitive::Cylinder { a, b, radius_m } => {
+                let axis = b - a;
+                let u = axis.cross(&if axis.x.abs() < 0.9 * axis.norm() { Vector3::x() } else { Vector3::y() });
+                let u = u.normalize() * *radius_m;
+                let v = axis.normalize().cross(&u);
+                let n = 32;
+                let ring = |k: usize| {
+                    let t = std::f64::consts::TAU * k as f64 / n as f64;
+                    u * t.cos() + v * t.sin()
+                };
+                for k in 0..n {
+                    let (r0, r1) = (ring(k), ring(k + 1));
+                    quad(&mut vertices, a + r0, a + r1, b + r1, b + r0);
+                }
+            }
+            Primitive::Sphere { center, radius_m } => {
+                let (nu, nv) = (32, 16);
+                let at = |i: usize, j: usize| {
+                    let (phi, theta) =
+                        (std::f64::consts::TAU * i as f64 / nu as f64, std::f64::consts::PI * j as f64 / nv as f64);
+                    center + *radius_m * Vector3::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos())
+                };
+                for i in 0..nu {
+                    for j in 0..nv {
+                        quad(&mut vertices, at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1));
+                    }
+                }
+            }
+        }
+    }
+    (vertices, triangles)
+}
+
+impl Recorder {
+    /// A recorder that logs nothing.
+    pub fn disabled() -> Self {
+        Self {
+            rec: None,
+            step: 0,
+            sim_time_s: 0.0,
+            robots: Vec::new(),
+            series: Series::default(),
+            trajectories: BTreeMap::new(),
+        }
+    }
+
+    /// Records to `file` (when given) and to `viewer`; with neither, a
+    /// disabled recorder. `robots` are the parent's and the children's names.
+    pub fn new(mission: &str, file: Option<&Path>, viewer: &Viewer, robots: Vec<String>) -> Result<Self> {
+        let builder = RecordingStreamBuilder::new("cps-survey").recording_name(mission);
+        let file_sink = || -> Result<rerun::sink::FileSink> {
+            let path = file.context("no file")?;
+            rerun::sink::FileSink::new(path).with_context(|| format!("creating {}", path.display()))
+        };
+        let grpc = |url: &str| -> Result<rerun::sink::GrpcSink> {
+            let uri =
+                url.parse().with_context(|| format!("viewer URL {url}: expected rerun+http://HOST:PORT/proxy"))?;
+            Ok(rerun::sink::GrpcSink::new(uri))
+        };
+        let url = match viewer {
+            Viewer::None => None,
+            Viewer::Spawn => {
+                rerun::spawn(&rerun::SpawnOptions::default())
+                    .context("starting the Rerun viewer (is `rerun` on the PATH?)")?;
+                Some(format!("rerun+http://127.0.0.1:{}/proxy", rerun::DEFAULT_SERVER_PORT))
+            }
+            Viewer::Connect(url) => Some(url.clone()),
+        };
+        let rec = match (file, url) {
+            (None, None) => return Ok(Self::disabled()),
+            (Some(_), None) => rr(builder.set_sinks((file_sink()?,)))?,
+            (None, Some(url)) => rr(builder.set_sinks((grpc(&url)?,)))?,
+            (Some(_), Some(url)) => rr(builder.set_sinks((file_sink()?, grpc(&url)?)))?,
+        };
+        Ok(Self { rec: Some(rec), robots, ..Self::disabled() })
+    }
+
+    /// True when something is recorded.
+    pub fn enabled(&self) -> bool {
+        self.rec.is_some()
+    }
+
+    /// Static content: axes convention, the scene, the robots' bodies.
+    pub fn scene(&mut self, scene: &Scene) -> Result<()> {
+        let Some(rec) = &self.rec else { return Ok(()) };
+        rr(rec.log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP()))?;
+        let (vertices, triangles) = scene_mesh(scene);
+        rr(rec.log_static(
+            "world/scene",
+            &rerun::Mesh3D::new(vertices)
+                .with_triangle_indices(triangles)
+                .with_albedo_factor(rerun::datatypes::Rgba32::from_unmultiplied_rgba(200, 200, 210, 60)),
+        ))?;
+        for (k, name) in self.robots.iter().enumerate() {
+            for (root, alpha) in [("robots", 255), ("truth", 90)] {
+                let path = format!("world/{root}/{name}/body");
+                if k == 0 {
+                    let colour = rerun::Color::from_unmultiplied_rgba(60, 120, 230, alpha);
+                    rr(rec.log_static(
+                        path,
+                        &rerun::Boxes3D::from_half_sizes([[0.35_f32, 0.25, 0.2]]).with_colors([colour]),
+                    ))?;
+                } else {
+                    let colour = rerun::Color::from_unmultiplied_rgba(240, 140, 40, alpha);
+                    rr(rec.log_static(
+                        path,
+                        &rerun::Points3D::new([[0.0_f32, 0.0, 0.0]]).with_radii([0.08_f32]).with_colors([colour]),
+                    ))?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Advances both timelines: one step, `seconds` of nominal time.
+    pub fn advance(&mut self, seconds: f64) {
+        self.step += 1;
+        self.sim_time_s += seconds;
+        if let Some(rec) = &self.rec {
+            rec.set_time_sequence("step", self.step);
+            rec.set_duration_secs("sim_time", self.sim_time_s);
+        }
+    }
+
+    /// Every robot's estimated and true pose and 95 % ellipsoids (achieved,
+    /// and predicted when given: the parent's 4×4 and each child's 3×3).
+    pub fn team(
+        &mut self,
+        team: &TeamState,
+        truth: &scanner::sim::Truth,
+        predicted: Option<(&Matrix4<f64>, &[Matrix3<f64>])>,
+    ) -> Result<()> {
+        let Some(rec) = &self.rec else { return Ok(()) };
+        let transform = |p: &Point3<f64>, heading: f64| {
+            rerun::Transform3D::from_translation_rotation(
+                p32(p),
+                rerun::Quaternion::from_xyzw([0.0, 0.0, (heading / 2.0).sin() as f32, (heading / 2.0).cos() as f32]),
+            )
+        };
+        let parent = team.parent();
+        let mut poses = vec![(parent.position, parent.heading_rad, truth.parent.position, truth.parent.heading_rad)];
+        for j in 0..team.n_children() {
+            let est = team.child(j).unwrap_or(truth.children[j]);
+            poses.push((est, 0.0, truth.children[j], 0.0));
+        }
+        for (k, (name, (est, heading, true_p, true_heading))) in self.robots.iter().zip(&poses).enumerate() {
+            rr(rec.log(format!("world/robots/{name}"), &transform(est, *heading)))?;
+            rr(rec.log(format!("world/truth/{name}"), &transform(true_p, *true_heading)))?;
+            let achieved = if k == 0 {
+                team.parent_covariance().fixed_view::<3, 3>(0, 0).into_owned()
+            } else {
+                team.child_covariance(k - 1)
+            };
+            let mut ellipsoids = vec![("achieved_95pct", achieved, rerun::Color::from_rgb(60, 120, 230))];
+            if let Some((p, children)) = predicted {
+                let c =
+                    if k == 0 { Some(p.fixed_view::<3, 3>(0, 0).into_owned()) } else { children.get(k - 1).copied() };
+                if let Some(c) = c {
+                    ellipsoids.push(("predicted_95pct", c, rerun::Color::from_rgb(230, 200, 40)));
+                }
+            }
+            for (what, cov, colour) in ellipsoids {
+                let (half, q) = ellipsoid_95(&cov);
+                rr(rec.log(
+                    format!("world/uncertainty/{name}/{what}"),
+                    &rerun::Ellipsoids3D::from_centers_and_half_sizes([p32(est)], [half])
+                        .with_quaternions([q])
+                        .with_colors([colour])
+                        .with_fill_mode(rerun::FillMode::MajorWireframe),
+                ))?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Sight lines from the parent to children; `w` per line (fix phase)
+    /// colours them, `None` (placement: nothing checks it) is grey.
+    pub fn sight_lines(&mut self, phase: &str, from: &Point3<f64>, to: &[(Point3<f64>, Option<f64>)]) -> Result<()> {
+        let Some(rec) = &self.rec else { return Ok(()) };
+        let strips: Vec<[[f32; 3]; 2]> = to.iter().map(|(p, _)| [p32(from), p32(p)]).collect();
+        let colours: Vec<rerun::Color> = to.iter().map(|(_, w)| w_colour(*w)).collect();
+        rr(rec.log(
+            format!("world/sight_lines/{phase}"),
+            &rerun::LineStrips3D::new(strips).with_colors(colours).with_radii([0.01_f32]),
+        ))
+    }
+
+    /// Adds the parent's estimated and true position to its trajectories.
+    pub fn trajectory(&mut self, estimate: &ParentPose, truth: &ParentPose) -> Result<()> {
+        let Some(rec) = &self.rec else { return Ok(()) };
+        let parent = self.robots.first().map_or("parent", String::as_str);
+        for (what, p, colour) in [
+            ("estimate", estimate, rerun::Color::from_rgb(60, 120, 230)),
+            ("truth", truth, rerun::Color::from_unmultiplied_rgba(60, 120, 230, 90)),
+        ] {
+            let line = self.trajectories.entry(what).or_default();
+            line.push(p32(&p.position));
+            rr(rec.log(
+                format!("world/trajectories/{parent}/{what}"),
+                &rerun::LineStrips3D::new([line.clone()]).with_colors([colour]).with_radii([0.02_f32]),
+            ))?;
+        }
+        Ok(())
+    }
+
+    /// One scan in the world frame, thinned to [`DISPLAY_VOXEL_M`] and
+    /// coloured by height; `kind` is `direct` or `icp`.
+    pub fn scan(&mut self, kind: &str, name: &str, world_points: &[Point3<f32>]) -> Result<()> {
+        let Some(rec) = &self.rec else { return Ok(()) };
+        let thin = scanner::reduced_points(world_points, DISPLAY_VOXEL_M)?;
+        let (lo, hi) = thin.iter().fold((f32::MAX, f32::MIN), |(lo, hi), p| (lo.min(p.z), hi.max(p.z)));
+        let colours: Vec<rerun::Color> = thin.iter().map(|p| height_colour(p.z, lo, hi)).collect();
+        rr(rec.log(
+            format!("world/scans/{kind}/{name}"),
+            &rerun::Points3D::new(thin.iter().map(|p| [p.x, p.y, p.z])).with_colors(colours).with_radii([0.015_f32]),
+        ))
+    }
+
+    /// A mission event in the text log.
+    pub fn event(&mut self, level: &'static str, text: impl Into<String>) -> Result<()> {
+        let Some(rec) = &self.rec else { return Ok(()) };
+        rr(rec.log("log", &rerun::TextLog::new(text.into()).with_level(level)))
+    }
+
+    /// A parent station's figures, for the `metrics/` series.
+    pub fn station_metrics(&mut self, covariance: &Matrix4<f64>, predicted: &Matrix4<f64>, error_xy_m: f64) {
+        let s = &mut self.series;
+        s.station_steps.push(self.step);
+        s.sigma_xy_m.push(cps::sigma_xy2(covariance).sqrt());
+        s.predicted_sigma_xy_m.push(cps::sigma_xy2(predicted).sqrt());
+        s.sigma_heading_rad.push(covariance[(3, 3)].max(0.0).sqrt());
+        s.error_xy_m.push(error_xy_m);
+    }
+
+    /// A parent fix's variance factor σ0², for `metrics/fix_sigma0_squared`.
+    pub fn fix_metrics(&mut self, sigma0_squared: f64) {
+        self.series.fix_steps.push(self.step);
+        self.series.sigma0_squared.push(sigma0_squared);
+    }
+
+    /// Sends the time series column-wise and flushes the recording.
+    pub fn finish(self) -> Result<()> {
+        let Some(rec) = &self.rec else { return Ok(()) };
+        let s = &self.series;
+        let columns = |path: &str, steps: &[i64], values: &[f64]| -> Result<()> {
+            rr(rec.send_columns(
+                path,
+                [rerun::TimeColumn::new_sequence("step", steps.to_vec())],
+                rr(rerun::Scalars::new(values.iter().copied()).columns_of_unit_batches())?,
+            ))
+        };
+        columns("metrics/sigma_xy_m", &s.station_steps, &s.sigma_xy_m)?;
+        columns("metrics/predicted_sigma_xy_m", &s.station_steps, &s.predicted_sigma_xy_m)?;
+        columns("metrics/sigma_heading_rad", &s.station_steps, &s.sigma_heading_rad)?;
+        columns("metrics/error_xy_m", &s.station_steps, &s.error_xy_m)?;
+        columns("metrics/fix_sigma0_squared", &s.fix_steps, &s.sigma0_squared)?;
+        rr(rec.flush_blocking())?;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The 95 % ellipsoid's axes are √(χ²₃ · eigenvalue) along the
+    /// eigenvectors: a covariance rotated by 30° about z gives back the
+    /// rotation and the half sizes.
+    #[test]
+    fn ellipsoid_axes_follow_the_covariance() {
+        let r = nalgebra::Rotation3::from_axis_angle(&Vector3::z_axis(), 30f64.to_radians());
+        let d = Matrix3::from_diagonal(&Vector3::new(4e-4, 1e-4, 9e-6));
+        let cov = r.matrix() * d * r.matrix().transpose();
+        let (half, q) = ellipsoid_95(&cov);
+        let q =
+            UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q.0[3], q.0[0], q.0[1], q.0[2]).cast::<f64>());
+        let mut expected = [0.02, 0.01, 0.003].map(|s| s * CHI3_95_SCALE);
+        expected.sort_by(f64::total_cmp);
+        let mut got = half.map(f64::from);
+        got.sort_by(f64::total_cmp);
+        for (g, e) in got.iter().zip(expected) {
+            assert!((g - e).abs() < 1e-6, "{got:?} vs {expected:?}");
+        }
+        // Each axis of the rotated frame, scaled by its half size, lies on the
+        // ellipsoid xᵀ Σ⁻¹ x = χ².
+        let inv = cov.try_inverse().expect("invertible");
+        for (k, h) in half.iter().enumerate() {
+            let x = q * (Vector3::ith(k, 1.0) * f64::from(*h));
+            let m = (x.transpose() * inv * x)[(0, 0)];
+            assert!((m - CHI3_95_SCALE.powi(2)).abs() < 1e-4 * m, "axis {k}: {m}");
+        }
+        assert_eq!(w_colour(None), rerun::Color::from_rgb(150, 150, 150));
+        assert_ne!(w_colour(Some(-4.0)), w_colour(Some(1.0)));
+    }
+
+    #[test]
+    fn the_scene_mesh_covers_every_primitive() {
+        let scene = cps::geom::builtin("sewer").expect("sewer");
+        let (v, t) = scene_mesh(&scene);
+        assert!(!t.is_empty());
+        assert!(t.iter().flatten().all(|&i| (i as usize) < v.len()));
+        // Every vertex lies on the scene's surfaces (facets of a cylinder
+        // have their vertices on it).
+        for p in v.iter().step_by(7) {
+            let d = scene.bvh().distance(&Point3::new(p[0], p[1], p[2]).cast()).0;
+            assert!(d < 1e-4, "{p:?} is {d} m off the scene");
+        }
+    }
+}
