@@ -67,10 +67,21 @@ struct Series {
     sigma0_squared: Vec<f64>,
 }
 
-/// Logs a run to Rerun; a disabled recorder does nothing.
+/// A scan to thin and log on the recorder's worker thread.
+#[derive(Debug)]
+struct ScanJob {
+    path: String,
+    points: Vec<Point3<f32>>,
+    step: i64,
+    sim_time_s: f64,
+}
+
+/// Logs a run to Rerun; a disabled recorder does nothing. Scans are thinned
+/// and logged on a worker thread, so the mission does not wait for them.
 #[derive(Debug)]
 pub struct Recorder {
     rec: Option<RecordingStream>,
+    scans: Option<(std::sync::mpsc::Sender<ScanJob>, std::thread::JoinHandle<Result<()>>)>,
     step: i64,
     sim_time_s: f64,
     robots: Vec<String>,
@@ -115,6 +126,17 @@ fn height_colour(z: f32, lo: f32, hi: f32) -> rerun::Color {
     let t = ((z - lo) / (hi - lo).max(1e-3)).clamp(0.0, 1.0);
     let (r, g, b) = if t < 0.5 { (0.0, 2.0 * t, 1.0 - 2.0 * t) } else { (2.0 * t - 1.0, 2.0 - 2.0 * t, 0.0) };
     rerun::Color::from_rgb((40.0 + 215.0 * r) as u8, (40.0 + 215.0 * g) as u8, (40.0 + 215.0 * b) as u8)
+}
+
+/// Logs a scan thinned to [`DISPLAY_VOXEL_M`], coloured by height.
+fn log_scan(rec: &RecordingStream, path: String, points: &[Point3<f32>]) -> Result<()> {
+    let thin = scanner::reduced_points(points, DISPLAY_VOXEL_M)?;
+    let (lo, hi) = thin.iter().fold((f32::MAX, f32::MIN), |(lo, hi), p| (lo.min(p.z), hi.max(p.z)));
+    let colours: Vec<rerun::Color> = thin.iter().map(|p| height_colour(p.z, lo, hi)).collect();
+    rr(rec.log(
+        path,
+        &rerun::Points3D::new(thin.iter().map(|p| [p.x, p.y, p.z])).with_colors(colours).with_radii([0.015_f32]),
+    ))
 }
 
 /// The scene's surfaces as one triangle mesh (cylinders with 32 facets,
@@ -169,6 +191,7 @@ impl Recorder {
     pub fn disabled() -> Self {
         Self {
             rec: None,
+            scans: None,
             step: 0,
             sim_time_s: 0.0,
             robots: Vec::new(),
@@ -205,7 +228,21 @@ impl Recorder {
             (None, Some(url)) => rr(builder.set_sinks((grpc(&url)?,)))?,
             (Some(_), Some(url)) => rr(builder.set_sinks((file_sink()?, grpc(&url)?)))?,
         };
-        Ok(Self { rec: Some(rec), robots, ..Self::disabled() })
+        let (send, receive) = std::sync::mpsc::channel::<ScanJob>();
+        let worker_rec = rec.clone();
+        let worker = std::thread::Builder::new()
+            .name("rerun-scans".into())
+            .spawn(move || -> Result<()> {
+                for job in receive {
+                    // Time is per thread in Rerun: set it for each scan.
+                    worker_rec.set_time_sequence("step", job.step);
+                    worker_rec.set_duration_secs("sim_time", job.sim_time_s);
+                    log_scan(&worker_rec, job.path, &job.points)?;
+                }
+                Ok(())
+            })
+            .context("starting the recording's scan thread")?;
+        Ok(Self { rec: Some(rec), scans: Some((send, worker)), robots, ..Self::disabled() })
     }
 
     /// True when something is recorded.
@@ -337,16 +374,21 @@ impl Recorder {
     }
 
     /// One scan in the world frame, thinned to [`DISPLAY_VOXEL_M`] and
-    /// coloured by height; `kind` is `direct` or `icp`.
-    pub fn scan(&mut self, kind: &str, name: &str, world_points: &[Point3<f32>]) -> Result<()> {
-        let Some(rec) = &self.rec else { return Ok(()) };
-        let thin = scanner::reduced_points(world_points, DISPLAY_VOXEL_M)?;
-        let (lo, hi) = thin.iter().fold((f32::MAX, f32::MIN), |(lo, hi), p| (lo.min(p.z), hi.max(p.z)));
-        let colours: Vec<rerun::Color> = thin.iter().map(|p| height_colour(p.z, lo, hi)).collect();
-        rr(rec.log(
-            format!("world/scans/{kind}/{name}"),
-            &rerun::Points3D::new(thin.iter().map(|p| [p.x, p.y, p.z])).with_colors(colours).with_radii([0.015_f32]),
-        ))
+    /// coloured by height (on the worker thread); `kind` is `direct` or `icp`.
+    pub fn scan(&mut self, kind: &str, name: &str, world_points: Vec<Point3<f32>>) -> Result<()> {
+        let Some((send, _)) = &self.scans else { return Ok(()) };
+        let job = ScanJob {
+            path: format!("world/scans/{kind}/{name}"),
+            points: world_points,
+            step: self.step,
+            sim_time_s: self.sim_time_s,
+        };
+        if send.send(job).is_err() {
+            // The worker stopped on an error; `finish` reports it.
+            self.scans.take().map(|(_, worker)| worker.join());
+            anyhow::bail!("the recording's scan thread stopped");
+        }
+        Ok(())
     }
 
     /// A mission event in the text log.
@@ -371,8 +413,13 @@ impl Recorder {
         self.series.sigma0_squared.push(sigma0_squared);
     }
 
-    /// Sends the time series column-wise and flushes the recording.
-    pub fn finish(self) -> Result<()> {
+    /// Waits for the scans, sends the time series column-wise and flushes
+    /// the recording.
+    pub fn finish(mut self) -> Result<()> {
+        if let Some((send, worker)) = self.scans.take() {
+            drop(send);
+            worker.join().map_err(|_| anyhow::anyhow!("the recording's scan thread panicked"))??;
+        }
         let Some(rec) = &self.rec else { return Ok(()) };
         let s = &self.series;
         let columns = |path: &str, steps: &[i64], values: &[f64]| -> Result<()> {

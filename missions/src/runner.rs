@@ -228,6 +228,30 @@ impl Steps {
     }
 }
 
+/// Where the wall time went, seconds (positioning is the rest of `wall_s`).
+#[derive(Debug, Default, Clone, Copy, Serialize)]
+struct Timings {
+    /// Simulating the 3D scans.
+    scan_s: f64,
+    /// Writing `scans/`.
+    scan_files_s: f64,
+    /// Direct fusion of the scans.
+    fusion_s: f64,
+    /// Writing the merged cloud files.
+    cloud_files_s: f64,
+    /// Recording `mission.rrd` (on the mission's thread; scans are thinned
+    /// and logged on a worker, waited for at the end).
+    recording_s: f64,
+}
+
+/// Adds the seconds `f` takes to `total`.
+fn timed<T>(total: &mut f64, f: impl FnOnce() -> T) -> T {
+    let t = Instant::now();
+    let out = f();
+    *total += t.elapsed().as_secs_f64();
+    out
+}
+
 /// A mission being run.
 struct Run<'m> {
     mission: &'m Mission,
@@ -239,6 +263,7 @@ struct Run<'m> {
     scan_bar: ProgressBar,
     merged: Vec<Point3<f32>>,
     stations: Vec<StationRecord>,
+    timings: Timings,
 }
 
 /// Runs `mission` on the simulator into `dir`: a new run (an existing
@@ -321,6 +346,7 @@ pub fn run(mission: &Mission, dir: &Path, options: &RunOptions) -> Result<RunSum
         scan_bar,
         merged: Vec::new(),
         stations: Vec::new(),
+        timings: Timings::default(),
     };
     run.steps.rec.event(rerun::TextLogLevel::INFO, format!("mission \"{}\" starts", mission.name))?;
     run.station(0, mission.plan.start_covariance, None)?;
@@ -469,29 +495,34 @@ impl Run<'_> {
         let world_from_body =
             Tilt { roll_rad: tilt.roll_rad, pitch_rad: tilt.pitch_rad }.world_from_body(&self.team.parent());
         let name = format!("scans/scan{index:03}");
-        let (dir, slices, bar) = (&self.dir, self.mission.scan.slices, &self.scan_bar);
+        let (dir, slices, bar, t) = (&self.dir, self.mission.scan.slices, &self.scan_bar, &mut self.timings);
         let mut taken = None;
         let scanned: Scanned =
             self.steps.step(json!({"event": "scan", "station": index}), DeviceKind::Scanner, |sim| {
                 bar.reset();
-                let scan = sim.scan(slices, &mut |done, _| bar.set_position(done as u64))?;
+                let scan = timed(&mut t.scan_s, || sim.scan(slices, &mut |done, _| bar.set_position(done as u64)))?;
                 let cloud = PointCloud::from_points(scan.points);
-                scanner::io::write(&dir.join(format!("{name}.3d")), &cloud, Format::ThreeDtk)?;
-                scanner::io::write_3dtk_pose(&dir.join(format!("{name}.pose")), &world_from_body)?;
+                timed(&mut t.scan_files_s, || {
+                    scanner::io::write(&dir.join(format!("{name}.3d")), &cloud, Format::ThreeDtk)?;
+                    scanner::io::write_3dtk_pose(&dir.join(format!("{name}.pose")), &world_from_body)
+                })?;
                 let points = cloud.len();
                 taken = Some(cloud);
                 Ok(Scanned { file: format!("{name}.3d"), points })
             })?;
         let cloud = match taken {
             Some(cloud) => cloud,
-            None => scanner::io::read(&self.dir.join(&scanned.file))?,
+            None => timed(&mut self.timings.scan_files_s, || scanner::io::read(&self.dir.join(&scanned.file)))?,
         };
         if cloud.len() != scanned.points {
             bail!("{}: {} points, but the journal recorded {}", scanned.file, cloud.len(), scanned.points);
         }
-        let world = fusion::direct::transform(&cloud.points, &world_from_body);
+        let world = timed(&mut self.timings.fusion_s, || fusion::direct::transform(&cloud.points, &world_from_body));
         self.steps.rec.advance(slices as f64 / (75.0 * self.mission.scan.resolution.degrees()));
-        self.steps.rec.scan("direct", &format!("scan{index:03}"), &world)?;
+        if self.steps.rec.enabled() {
+            let rec = &mut self.steps.rec;
+            timed(&mut self.timings.recording_s, || rec.scan("direct", &format!("scan{index:03}"), world.clone()))?;
+        }
         self.merged.extend(world);
         Ok(scanned.file)
     }
@@ -502,31 +533,57 @@ impl Run<'_> {
         self.steps.bar.finish_and_clear();
         self.scan_bar.finish_and_clear();
         let merged = PointCloud::from_points(std::mem::take(&mut self.merged));
-        for format in &self.mission.output.formats {
-            let path = self.dir.join(format!("cloud.{format}"));
-            scanner::io::write(&path, &merged, Format::from_path(&path)?)?;
-        }
-        let accepted = write_reports(self.mission, &self.dir, &self.stations, started.elapsed().as_secs_f64())?;
+        timed(&mut self.timings.cloud_files_s, || -> Result<()> {
+            for format in &self.mission.output.formats {
+                let path = self.dir.join(format!("cloud.{format}"));
+                scanner::io::write(&path, &merged, Format::from_path(&path)?)?;
+            }
+            Ok(())
+        })?;
+        let accepted = mission_accepted(self.mission, &self.stations);
         self.steps.rec.event(
             rerun::TextLogLevel::INFO,
             format!("mission ends: acceptance {}", if accepted { "passed" } else { "FAILED" }),
         )?;
+        let Steps { rec, .. } = &mut self.steps;
+        let recording = std::mem::replace(rec, Recorder::disabled());
+        timed(&mut self.timings.recording_s, || recording.finish())?;
+        write_reports(
+            self.mission,
+            &self.dir,
+            &self.stations,
+            accepted,
+            started.elapsed().as_secs_f64(),
+            &self.timings,
+        )?;
         self.steps.note(json!({"event": "end"}), json!({"accepted": accepted}))?;
-        let Steps { rec, replayed, .. } = self.steps;
-        rec.finish()?;
+        let replayed = self.steps.replayed;
         Ok(RunSummary { dir: self.dir, stations: self.stations, points: merged.len(), accepted, replayed })
     }
 }
 
-/// Writes `report.json` and `stations.csv`; returns whether the mission's
-/// acceptance tolerances hold.
-fn write_reports(mission: &Mission, dir: &Path, stations: &[StationRecord], seconds: f64) -> Result<bool> {
+/// Whether the mission's acceptance tolerances hold.
+fn mission_accepted(mission: &Mission, stations: &[StationRecord]) -> bool {
+    let sigma_xy = stations.last().map_or(0.0, |s| cps::sigma_xy2(&s.covariance).sqrt());
+    let max_error = stations.iter().map(|s| s.error_xy_m).fold(0.0, f64::max);
+    mission.acceptance.max_final_sigma_xy_m.is_none_or(|m| sigma_xy <= m)
+        && mission.acceptance.max_station_error_m.is_none_or(|m| max_error <= m)
+}
+
+/// Writes `report.json` and `stations.csv`.
+fn write_reports(
+    mission: &Mission,
+    dir: &Path,
+    stations: &[StationRecord],
+    accepted: bool,
+    wall_s: f64,
+    timings: &Timings,
+) -> Result<()> {
     let last = stations.last().context("a run has at least the start station")?;
     let distance_m: f64 = stations.windows(2).map(|w| (w[1].truth.position - w[0].truth.position).norm()).sum();
     let sigma_xy2 = cps::sigma_xy2(&last.covariance);
-    let max_error = stations.iter().map(|s| s.error_xy_m).fold(0.0, f64::max);
-    let accepted = mission.acceptance.max_final_sigma_xy_m.is_none_or(|m| sigma_xy2.sqrt() <= m)
-        && mission.acceptance.max_station_error_m.is_none_or(|m| max_error <= m);
+    let mut timings = serde_json::to_value(timings)?;
+    timings["wall_s"] = json!(wall_s);
     let report = json!({
         "mission": mission.name,
         "seed": mission.backend.seed,
@@ -548,7 +605,7 @@ fn write_reports(mission: &Mission, dir: &Path, stations: &[StationRecord], seco
             "drift_percent": if distance_m > 0.0 { 100.0 * last.error_xy_m / distance_m } else { 0.0 },
         },
         "accepted": accepted,
-        "timings": {"wall_seconds": seconds},
+        "timings": timings,
     });
     std::fs::write(dir.join("report.json"), serde_json::to_string_pretty(&report)? + "\n")
         .with_context(|| format!("writing {}", dir.join("report.json").display()))?;
@@ -578,8 +635,7 @@ fn write_reports(mission: &Mission, dir: &Path, stations: &[StationRecord], seco
         );
     }
     std::fs::write(dir.join("stations.csv"), csv)
-        .with_context(|| format!("writing {}", dir.join("stations.csv").display()))?;
-    Ok(accepted)
+        .with_context(|| format!("writing {}", dir.join("stations.csv").display()))
 }
 
 /// The points of `cloud` within `tolerance_m` of the scene's surfaces, as a

@@ -219,6 +219,16 @@ const CASES: &[Case] = &[
     ("unknown scene", ("[plan]", "[backend]\nscene = \"moon\"\n[plan]"), "15:9", "backend.scene", "\"corridor\""),
     ("fractional seed", ("[plan]", "[backend]\nseed = 1.5\n[plan]"), "15:8", "backend.seed", "whole number"),
     ("one slice", ("[plan]", "[scan]\nslices = 1\n[plan]"), "15:10", "scan.slices", "out of range"),
+    ("negative retries", ("[plan]", "[backend]\nmax_retries = -1\n[plan]"), "15:15", "backend.max_retries", "≥ 0"),
+    ("too many retries", ("[plan]", "[backend]\nmax_retries = 1000\n[plan]"), "15:15", "backend.max_retries", "≤ 100"),
+    (
+        "text retry delay",
+        ("[plan]", "[backend]\nretry_delay_s = \"1s\"\n[plan]"),
+        "15:17",
+        "backend.retry_delay_s",
+        "number",
+    ),
+    ("rerun as text", ("[plan]", "[output]\nrerun = \"yes\"\n[plan]"), "15:9", "output.rerun", "true or false"),
     (
         "negative scan interval",
         ("[plan]", "[scan]\nevery_n_stations = -1\n[plan]"),

@@ -82,9 +82,9 @@ fn hall_runs_end_to_end() {
     assert_eq!(count("fix"), 7);
     assert_eq!(count("scan"), 8);
     for e in events.iter().filter(|e| e["event"] == "scan") {
-        let file = out.join(e["file"].as_str().expect("file"));
+        let file = out.join(e["data"]["file"].as_str().expect("file"));
         let cloud = scanner::io::read(&file).expect("the scan file reads");
-        assert_eq!(cloud.len() as u64, e["points"].as_u64().expect("points"));
+        assert_eq!(cloud.len() as u64, e["data"]["points"].as_u64().expect("points"));
         assert!(file.with_extension("pose").exists());
     }
 
