@@ -9,8 +9,7 @@ use cps::ParentPose;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
 use planner::Dance;
 use scanner::sim::{
-    LmsConfig, LmsRangeMode, NoiseStream, OdometryError, Robot, SimDrive, SimHead, SimLms, SimTilt, SimTotalStation,
-    SimWorld, Truth,
+    LmsConfig, LmsRangeMode, NoiseStream, Robot, SimDrive, SimHead, SimLms, SimTilt, SimTotalStation, SimWorld, Truth,
 };
 use scanner::{
     Drive, HeadKind, Odometry, PlanarPose, Scan, ScannerError, Target, Tilt, TiltSensor, TotalStation, TsMeasurement,
@@ -116,7 +115,7 @@ impl SimTeam {
         let start = dance.station_pose(0);
         let first = dance.cycles.first().map(|c| c.children.clone()).unwrap_or_default();
         let world = SimWorld::new(scene, start, first.clone());
-        let odometry = OdometryError::default();
+        let odometry = mission.backend.odometry;
         let parent = SimDrive::new(world.clone(), Robot::Parent, planar(&start), odometry, seed)?;
         let children = first
             .iter()

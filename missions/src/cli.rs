@@ -63,6 +63,18 @@ pub enum Command {
         #[arg(long, value_name = "N", hide = true)]
         abort_after_events: Option<usize>,
     },
+    /// Simulate a mission's positioning N times and compare the spread with
+    /// the prediction (exit 1 when the final NEES is outside its interval).
+    Montecarlo {
+        /// The mission file (TOML).
+        mission: PathBuf,
+        /// Number of seeded trials (≥ 2).
+        #[arg(long, default_value_t = 1000)]
+        trials: usize,
+        /// Print one JSON object instead of the table.
+        #[arg(long)]
+        json: bool,
+    },
     /// Align one scan file to another with ICP.
     Register(crate::register::RegisterArgs),
 }
@@ -117,6 +129,17 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> anyhow::Result<Outcome> {
             crate::runner::write_summary(out, &m, &summary)?;
             out.flush()?;
             Ok(if summary.accepted { Outcome::Success } else { Outcome::AcceptanceFailed })
+        }
+        Command::Montecarlo { mission, trials, json } => {
+            let m = Mission::load(&mission)?;
+            let mc = crate::montecarlo::run(&m, trials)?;
+            if json {
+                crate::montecarlo::write_json(out, &m, &mc)?;
+            } else {
+                crate::montecarlo::write_table(out, &m, &mc)?;
+            }
+            out.flush()?;
+            Ok(if mc.consistent() { Outcome::Success } else { Outcome::AcceptanceFailed })
         }
         Command::Register(args) => {
             crate::register::register(&args, out)?;

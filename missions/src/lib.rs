@@ -13,6 +13,7 @@ pub mod cli;
 pub mod diagnostics;
 pub mod journal;
 pub mod mission;
+pub mod montecarlo;
 pub mod predict;
 pub mod reader;
 pub mod recording;

@@ -48,6 +48,8 @@ pub struct Backend {
     pub max_retries: u32,
     /// Pause before each retry, seconds (`retry_delay_s`, default 0.5).
     pub retry_delay_s: f64,
+    /// The simulated drives' odometry error (`odometry_*`, `terrain_tilt_sigma_deg`).
+    pub odometry: scanner::sim::OdometryError,
 }
 
 /// What the scanner does (`[scan]`).
@@ -260,6 +262,16 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Parts> {
     let retries = b.optional(r, "max_retries", |r, v, f| r.integer_in(v, f, 0, 100));
     let delay =
         b.optional(r, "retry_delay_s", |r, v, f| r.number_in(v, f, 0.0, true, Some(3600.0)).map(At::into_inner));
+    let within = |min: f64, max: f64| {
+        move |r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, f: &str| {
+            r.number_in(v, f, min, true, Some(max)).map(At::into_inner)
+        }
+    };
+    let odo_scale = b.optional(r, "odometry_scale_error_percent", within(-50.0, 50.0));
+    let odo_sigma_d = b.optional(r, "odometry_sigma_distance_mm_per_sqrt_m", within(0.0, 1000.0));
+    let odo_drift = b.optional(r, "odometry_heading_drift_mrad_per_m", within(-1000.0, 1000.0));
+    let odo_sigma_h = b.optional(r, "odometry_sigma_heading_mrad_per_sqrt_m", within(0.0, 1000.0));
+    let terrain = b.optional(r, "terrain_tilt_sigma_deg", within(0.0, 10.0));
     b.finish(r);
 
     let mut sc = root.table(r, "scan");
@@ -302,6 +314,16 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Parts> {
                 seed: seed?.unwrap_or(1),
                 max_retries: retries?.map_or(2, |n| n as u32),
                 retry_delay_s: delay?.unwrap_or(0.5),
+                odometry: {
+                    let d = scanner::sim::OdometryError::default();
+                    scanner::sim::OdometryError {
+                        scale_error: odo_scale?.map_or(d.scale_error, |p| p / 100.0),
+                        sigma_distance_m_per_sqrt_m: odo_sigma_d?.map_or(d.sigma_distance_m_per_sqrt_m, |v| v / 1e3),
+                        heading_drift_rad_per_m: odo_drift?.map_or(d.heading_drift_rad_per_m, |v| v / 1e3),
+                        sigma_heading_rad_per_sqrt_m: odo_sigma_h?.map_or(d.sigma_heading_rad_per_sqrt_m, |v| v / 1e3),
+                        terrain_tilt_sigma_rad: terrain?.map_or(d.terrain_tilt_sigma_rad, f64::to_radians),
+                    }
+                },
             }
         },
         scan: ScanPlan {

@@ -228,6 +228,13 @@ const CASES: &[Case] = &[
         "backend.retry_delay_s",
         "number",
     ),
+    (
+        "scale error too large",
+        ("[plan]", "[backend]\nodometry_scale_error_percent = 80\n[plan]"),
+        "15:32",
+        "backend.odometry_scale_error_percent",
+        "≤ 50",
+    ),
     ("rerun as text", ("[plan]", "[output]\nrerun = \"yes\"\n[plan]"), "15:9", "output.rerun", "true or false"),
     (
         "negative scan interval",

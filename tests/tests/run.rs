@@ -117,3 +117,38 @@ fn acceptance_failure_exits_1_with_outputs_written() {
     assert_eq!(report["accepted"], false);
     assert!(report["stations"].as_array().expect("stations").iter().all(|s| s["scan"].is_null()), "no scans");
 }
+
+/// `[backend]` odometry settings reach the simulated drives: with every
+/// error zero the parent truly stands at the planned stations, and a 2 %
+/// scale error puts the last one 2 % of 28 m further down the hall.
+#[test]
+fn odometry_settings_drive_the_simulator() {
+    let text = std::fs::read_to_string(example("hall.toml")).expect("hall.toml");
+    let truth_x = |extra: &str| -> Vec<f64> {
+        let mission = temp_mission(
+            &text
+                .replace("every_n_stations = 1", "every_n_stations = 0")
+                .replace("seed = 1", &format!("seed = 1\n{extra}")),
+        );
+        let dir = tempfile::tempdir().expect("tempdir");
+        let run = run_into(&mission.path, dir.path());
+        assert_eq!(run.code, 0, "{}", run.stderr);
+        let report: Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.path().join("report.json")).expect("report"))
+                .expect("JSON");
+        report["stations"]
+            .as_array()
+            .expect("stations")
+            .iter()
+            .map(|s| s["truth"]["x_m"].as_f64().expect("x"))
+            .collect()
+    };
+    let perfect = "odometry_scale_error_percent = 0\nodometry_sigma_distance_mm_per_sqrt_m = 0\n\
+                   odometry_heading_drift_mrad_per_m = 0\nodometry_sigma_heading_mrad_per_sqrt_m = 0\nterrain_tilt_sigma_deg = 0";
+    for (k, x) in truth_x(perfect).iter().enumerate() {
+        assert!((x - (2.0 + 4.0 * k as f64)).abs() < 1e-9, "station {k}: {x}");
+    }
+    let long = perfect.replace("odometry_scale_error_percent = 0", "odometry_scale_error_percent = 2");
+    let last = *truth_x(&long).last().expect("stations");
+    assert!((last - (30.0 + 0.02 * 28.0)).abs() < 1e-9, "{last}");
+}
