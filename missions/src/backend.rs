@@ -102,10 +102,6 @@ pub struct SimTeam {
     commands: [usize; 4],
 }
 
-fn planar(p: &ParentPose) -> PlanarPose {
-    PlanarPose { x_m: p.position.x, y_m: p.position.y, heading_rad: p.heading_rad }
-}
-
 impl SimTeam {
     /// The team standing where `dance` starts: the parent truly at station
     /// 0, the children at their first formation points.
@@ -116,7 +112,7 @@ impl SimTeam {
         let first = dance.cycles.first().map(|c| c.children.clone()).unwrap_or_default();
         let world = SimWorld::new(scene, start, first.clone());
         let odometry = mission.backend.odometry;
-        let parent = SimDrive::new(world.clone(), Robot::Parent, planar(&start), odometry, seed)?;
+        let parent = SimDrive::new(world.clone(), Robot::Parent, PlanarPose::from(&start), odometry, seed)?;
         let children = first
             .iter()
             .enumerate()

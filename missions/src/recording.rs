@@ -204,8 +204,7 @@ impl Recorder {
     /// disabled recorder. `robots` are the parent's and the children's names.
     pub fn new(mission: &str, file: Option<&Path>, viewer: &Viewer, robots: Vec<String>) -> Result<Self> {
         let builder = RecordingStreamBuilder::new("cps-survey").recording_name(mission);
-        let file_sink = || -> Result<rerun::sink::FileSink> {
-            let path = file.context("no file")?;
+        let file_sink = |path: &Path| -> Result<rerun::sink::FileSink> {
             rerun::sink::FileSink::new(path).with_context(|| format!("creating {}", path.display()))
         };
         let grpc = |url: &str| -> Result<rerun::sink::GrpcSink> {
@@ -224,9 +223,9 @@ impl Recorder {
         };
         let rec = match (file, url) {
             (None, None) => return Ok(Self::disabled()),
-            (Some(_), None) => rr(builder.set_sinks((file_sink()?,)))?,
+            (Some(path), None) => rr(builder.set_sinks((file_sink(path)?,)))?,
             (None, Some(url)) => rr(builder.set_sinks((grpc(&url)?,)))?,
-            (Some(_), Some(url)) => rr(builder.set_sinks((file_sink()?, grpc(&url)?)))?,
+            (Some(path), Some(url)) => rr(builder.set_sinks((file_sink(path)?, grpc(&url)?)))?,
         };
         let (send, receive) = std::sync::mpsc::channel::<ScanJob>();
         let worker_rec = rec.clone();

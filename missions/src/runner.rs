@@ -145,10 +145,6 @@ fn matrix_json(m: &Matrix4<f64>) -> Value {
     json!((0..4).map(|i| (0..4).map(|j| m[(i, j)]).collect::<Vec<_>>()).collect::<Vec<_>>())
 }
 
-fn planar(p: &ParentPose) -> PlanarPose {
-    PlanarPose { x_m: p.position.x, y_m: p.position.y, heading_rad: p.heading_rad }
-}
-
 /// The journal, the devices and the retry policy: every command of the run
 /// goes through [`Steps::step`].
 struct Steps {
@@ -394,7 +390,7 @@ impl Run<'_> {
         }
 
         let nominal = self.dance.station_pose(cycle.to);
-        let goal = planar(&nominal);
+        let goal = PlanarPose::from(&nominal);
         let driven: Driven = self.steps.step(
             json!({"event": "drive", "cycle": cycle.cycle, "robot": "parent", "target": [goal.x_m, goal.y_m, goal.heading_rad]}),
             DeviceKind::Drive,
@@ -545,8 +541,7 @@ impl Run<'_> {
             rerun::TextLogLevel::INFO,
             format!("mission ends: acceptance {}", if accepted { "passed" } else { "FAILED" }),
         )?;
-        let Steps { rec, .. } = &mut self.steps;
-        let recording = std::mem::replace(rec, Recorder::disabled());
+        let recording = std::mem::replace(&mut self.steps.rec, Recorder::disabled());
         timed(&mut self.timings.recording_s, || recording.finish())?;
         write_reports(
             self.mission,

@@ -207,6 +207,13 @@ pub struct PlanarPose {
     pub heading_rad: f64,
 }
 
+impl From<&ParentPose> for PlanarPose {
+    /// The horizontal part of a CPS pose: x, y and heading.
+    fn from(p: &ParentPose) -> Self {
+        Self { x_m: p.position.x, y_m: p.position.y, heading_rad: p.heading_rad }
+    }
+}
+
 /// What a drive reports after a move: the pose it believes it reached by
 /// dead reckoning and the distance it travelled.
 #[derive(Debug, Clone, Copy, PartialEq)]
