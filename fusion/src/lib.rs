@@ -7,12 +7,15 @@
 //!   [`icp::IcpResult`]);
 //! - [`multiview`]: pairwise, incremental and simultaneous matching of many
 //!   scans ([`multiview::register_views`]);
+//! - [`graph`]: scan poses adjusted to absolute priors (the CPS poses) and
+//!   relative ICP matches together ([`graph::optimize`], [`graph::cps_prior`]);
 //! - [`pipe`]: tube fitting into scanned pipes and the deviation map
 //!   ([`pipe::fit_pipe`], [`pipe::anomalies`]).
 #![warn(missing_docs)]
 
 pub mod direct;
 pub mod error;
+pub mod graph;
 pub mod icp;
 pub mod multiview;
 pub mod pipe;
