@@ -27,11 +27,12 @@
 
 use std::collections::VecDeque;
 
-use nalgebra::{Isometry3, Point3};
+use nalgebra::{Isometry3, Matrix6, Point3};
 use rayon::prelude::*;
 
 use crate::error::{FusionError, Result};
-use crate::icp::{IcpConfig, IcpResult, Kernel, Method, Target, align};
+use crate::graph::Edge;
+use crate::icp::{IcpConfig, IcpResult, Kernel, Method, Prior, Target, align};
 
 /// How each new scan is registered.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -126,17 +127,7 @@ pub fn register_views(
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<MultiviewResult> {
     check(scans, guesses, config)?;
-    let k = if config.icp.method == Method::PointToPlane { config.icp.normal_neighbours.max(3) } else { 0 };
-    let prepared: Vec<Prepared> = scans
-        .par_iter()
-        .enumerate()
-        .map(|(i, points)| -> Result<Prepared> {
-            let source = scanner::reduced_points(points, config.source_voxel_m).map_err(|e| in_scan(i, e.into()))?;
-            let model = scanner::reduced_points(points, config.target_voxel_m).map_err(|e| in_scan(i, e.into()))?;
-            let local = Target::new(&model, k).map_err(|e| in_scan(i, e))?;
-            Ok(Prepared { source, local })
-        })
-        .collect::<Result<_>>()?;
+    let prepared = prepare(scans, config)?;
     let n = scans.len();
     let mut m = Matcher {
         prepared,
@@ -170,6 +161,134 @@ pub fn register_views(
         matches: m.matches,
         settled: m.settled,
     })
+}
+
+/// What [`register_with_priors`] returns.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PriorFusionResult {
+    /// The adjusted pose of every scan.
+    pub world_from_scan: Vec<Isometry3<f64>>,
+    /// Each pose's 6×6 covariance (ξ = (ω, v), left perturbation, world frame).
+    pub covariance: Vec<Matrix6<f64>>,
+    /// The ICP matches that became edges: (target scan, source scan, result).
+    pub matches: Vec<(usize, usize, IcpResult)>,
+    /// χ² of the final adjustment and its redundancy.
+    pub chi2: f64,
+    /// 6 × (priors + edges) − 6 × scans.
+    pub redundancy: usize,
+}
+
+/// Scans with an absolute prior each (the CPS pose and its covariance) and
+/// ICP between overlapping scans, adjusted together in a pose graph
+/// ([`crate::graph`]): each scan is matched against up to `max_partners`
+/// earlier scans with the most overlap (more than
+/// [`min_pairs`](MultiviewConfig::min_pairs) correspondences), every match
+/// is an edge whose covariance is the ICP covariance times
+/// `edge_variance_factor` (ICP's covariance treats point errors as
+/// independent, which can make it optimistic), and the graph is solved.
+/// That is one round per entry of `schedule`, the ICP correspondence
+/// distance of the round (coarse to fine); each round's matches start from
+/// the previous round's adjusted poses.
+pub fn register_with_priors(
+    scans: &[Vec<Point3<f32>>],
+    priors: &[Prior],
+    config: &MultiviewConfig,
+    max_partners: usize,
+    edge_variance_factor: f64,
+    schedule: &[f64],
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<PriorFusionResult> {
+    let guesses: Vec<Isometry3<f64>> = priors.iter().map(|p| p.target_from_source).collect();
+    check(scans, &guesses, config)?;
+    FusionError::require_positive("edge variance factor", edge_variance_factor)?;
+    if config.icp.method != Method::PointToPlane {
+        return Err(FusionError::OutOfRange {
+            what: "ICP method with priors".into(),
+            value: 0.0,
+            expected: "point-to-plane".into(),
+        });
+    }
+    for d in schedule {
+        FusionError::require_positive("correspondence distance of a round (m)", *d)?;
+    }
+    let mut prepared = prepare(scans, config)?;
+    let n = scans.len();
+    let mut poses = guesses;
+    let total = schedule.len() * n;
+    let mut result = None;
+    for (round, distance) in schedule.iter().enumerate() {
+        let round_config =
+            MultiviewConfig { icp: IcpConfig { max_correspondence_m: *distance, ..config.icp }, ..*config };
+        let m = Matcher {
+            prepared,
+            config: &round_config,
+            poses,
+            last_match: vec![None; n],
+            partners: vec![Vec::new(); n],
+            matches: 0,
+            settled: true,
+        };
+        let mut matches = Vec::new();
+        for c in 0..n {
+            progress(round * n + c + 1, total);
+            let mut overlaps: Vec<(usize, usize)> = (0..c).map(|j| (j, m.overlap(c, j))).collect();
+            overlaps.retain(|&(_, pairs)| pairs > config.min_pairs);
+            overlaps.sort_by_key(|&(j, pairs)| std::cmp::Reverse((pairs, j)));
+            overlaps.truncate(max_partners);
+            let found: Vec<(usize, IcpResult)> = overlaps
+                .par_iter()
+                .map(|&(j, _)| {
+                    let init = m.poses[j].inverse() * m.poses[c];
+                    align(&m.prepared[c].source, &m.prepared[j].local, &init, &round_config.icp)
+                        .map(|r| (j, r))
+                        .map_err(|e| in_scan(c, e))
+                })
+                .collect::<Result<_>>()?;
+            for (j, r) in found {
+                matches.push((j, c, r));
+            }
+        }
+        let edges: Vec<Edge> = matches
+            .iter()
+            .map(|(t, s, r)| Edge {
+                target: *t,
+                source: *s,
+                target_from_source: r.target_from_source,
+                information: r.information / edge_variance_factor,
+            })
+            .collect();
+        let with_priors: Vec<Option<Prior>> = priors.iter().copied().map(Some).collect();
+        let g = crate::graph::optimize(&m.poses, &with_priors, &edges, 20)?;
+        prepared = m.prepared;
+        poses = g.world_from_scan.clone();
+        result = Some(PriorFusionResult {
+            world_from_scan: g.world_from_scan,
+            covariance: g.covariance,
+            matches,
+            chi2: g.chi2,
+            redundancy: g.redundancy,
+        });
+    }
+    result.ok_or_else(|| FusionError::OutOfRange {
+        what: "rounds in the schedule".into(),
+        value: 0.0,
+        expected: "at least one correspondence distance".into(),
+    })
+}
+
+/// Reduced points and the model target of every scan, in parallel.
+fn prepare(scans: &[Vec<Point3<f32>>], config: &MultiviewConfig) -> Result<Vec<Prepared>> {
+    let k = if config.icp.method == Method::PointToPlane { config.icp.normal_neighbours.max(3) } else { 0 };
+    scans
+        .par_iter()
+        .enumerate()
+        .map(|(i, points)| -> Result<Prepared> {
+            let source = scanner::reduced_points(points, config.source_voxel_m).map_err(|e| in_scan(i, e.into()))?;
+            let model = scanner::reduced_points(points, config.target_voxel_m).map_err(|e| in_scan(i, e.into()))?;
+            let local = Target::new(&model, k).map_err(|e| in_scan(i, e))?;
+            Ok(Prepared { source, local })
+        })
+        .collect()
 }
 
 struct Matcher<'a> {

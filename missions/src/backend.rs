@@ -144,7 +144,12 @@ impl SimTeam {
         self.world.truth()
     }
 
-    /// The scene.
+    /// Where the parent's drive believes it stands (its odometry).
+    pub fn parent_believed(&self) -> PlanarPose {
+        self.parent.believed_pose()
+    }
+
+    /// The scene the team stands in.
     pub fn scene(&self) -> &cps::geom::Scene {
         self.world.scene()
     }

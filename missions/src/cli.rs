@@ -75,8 +75,25 @@ pub enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Re-fuse a finished (or interrupted) run's scans from its journal into
+    /// RUN_DIR/fusion/<mode>/, without re-running it.
+    Fuse {
+        /// The run directory (holds mission.toml, journal.jsonl and scans/).
+        run_dir: PathBuf,
+        /// direct, icp or cps-icp (default: the mission's [fusion] mode).
+        #[arg(long, value_parser = parse_mode)]
+        mode: Option<crate::mission::FusionMode>,
+        /// Print one JSON object instead of the table.
+        #[arg(long)]
+        json: bool,
+    },
     /// Align one scan file to another with ICP.
     Register(crate::register::RegisterArgs),
+}
+
+fn parse_mode(s: &str) -> Result<crate::mission::FusionMode, String> {
+    crate::mission::FusionMode::from_name(s)
+        .ok_or_else(|| format!("unknown fusion mode \"{s}\"; expected one of {}", crate::mission::FUSION_MODES.join(", ")))
 }
 
 /// How a command that ran ended.
@@ -140,6 +157,11 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> anyhow::Result<Outcome> {
             }
             out.flush()?;
             Ok(if mc.consistent() { Outcome::Success } else { Outcome::AcceptanceFailed })
+        }
+        Command::Fuse { run_dir, mode, json } => {
+            crate::fuse::fuse_run(&run_dir, mode, json, out)?;
+            out.flush()?;
+            Ok(Outcome::Success)
         }
         Command::Register(args) => {
             crate::register::register(&args, out)?;

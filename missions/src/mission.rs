@@ -53,11 +53,14 @@ pub struct Backend {
 }
 
 /// What the scanner does (`[scan]`).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct ScanPlan {
     /// Scan at every n-th parent station, 0 = never (`every_n_stations`,
     /// default 1; station 0 is the start).
     pub every_n_stations: usize,
+    /// Scan exactly at these stations instead (`stations`, ascending,
+    /// distinct; exclusive with `every_n_stations`).
+    pub stations: Option<Vec<usize>>,
     /// Table steps per 360° (`slices`, default 180).
     pub slices: usize,
     /// LMS angular resolution (`resolution_deg`: 1, 0.5 or 0.25; default 1).
@@ -71,9 +74,98 @@ impl Default for ScanPlan {
     fn default() -> Self {
         Self {
             every_n_stations: 1,
+            stations: None,
             slices: 180,
             resolution: scanner::sim::LmsResolution::One,
             body_from_head_m: Vector3::new(0.0, 0.0, 0.4),
+        }
+    }
+}
+
+impl ScanPlan {
+    /// Whether the scanner scans at station `k`.
+    pub fn scans_at(&self, k: usize) -> bool {
+        match &self.stations {
+            Some(list) => list.binary_search(&k).is_ok(),
+            None => self.every_n_stations != 0 && k.is_multiple_of(self.every_n_stations),
+        }
+    }
+}
+
+/// How the scans become one cloud (`[fusion] mode`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FusionMode {
+    /// Each scan with its CPS pose and tilt (seed 003's direct transformation).
+    Direct,
+    /// Scan matching alone: simultaneous matching (seed 000 §4.2) from the
+    /// odometry's pose guesses, the first scan fixed at its CPS pose.
+    Icp,
+    /// The CPS pose of each scan as a prior, ICP between overlapping scans,
+    /// adjusted together in a pose graph.
+    CpsIcp,
+}
+
+impl FusionMode {
+    /// The mode's name in mission files and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            FusionMode::Direct => "direct",
+            FusionMode::Icp => "icp",
+            FusionMode::CpsIcp => "cps-icp",
+        }
+    }
+
+    /// The mode called `name`.
+    pub fn from_name(name: &str) -> Option<Self> {
+        [FusionMode::Direct, FusionMode::Icp, FusionMode::CpsIcp].into_iter().find(|m| m.name() == name)
+    }
+}
+
+/// Mode names `[fusion] mode` accepts.
+pub const FUSION_MODES: [&str; 3] = ["direct", "icp", "cps-icp"];
+
+/// Fusion settings (`[fusion]`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FusionPlan {
+    /// The mode (`mode`, default `"direct"`).
+    pub mode: FusionMode,
+    /// Reduced-points cell of the scans matched (`voxel_m`, default 0.2); the
+    /// model side uses half of it.
+    pub voxel_m: f64,
+    /// ICP correspondence distance of the first, coarse pass
+    /// (`max_correspondence_m`, default 0.5).
+    pub max_correspondence_m: f64,
+    /// … and of the second, fine pass from the first's result
+    /// (`fine_correspondence_m`, default 0.1; ≤ `max_correspondence_m`).
+    pub fine_correspondence_m: f64,
+    /// ICP iteration cap per match (`max_iterations`, default 50).
+    pub max_iterations: usize,
+    /// Huber kernel width (`huber_m`, default 0.02; 0 = plain least squares).
+    pub huber_m: f64,
+    /// Two scans overlap with more correspondences than this (`min_pairs`,
+    /// default 250, as in seed 000).
+    pub min_pairs: usize,
+    /// `cps-icp`: each scan is matched against at most this many earlier
+    /// scans (`max_partners`, default 4).
+    pub max_partners: usize,
+    /// `cps-icp`: ICP covariances are multiplied by this before the
+    /// adjustment (`icp_variance_factor`, default 1; raise it when the
+    /// scans' errors are correlated, e.g. by a miscalibrated scanner).
+    pub icp_variance_factor: f64,
+}
+
+impl Default for FusionPlan {
+    fn default() -> Self {
+        Self {
+            mode: FusionMode::Direct,
+            voxel_m: 0.2,
+            max_correspondence_m: 0.5,
+            fine_correspondence_m: 0.1,
+            max_iterations: 50,
+            huber_m: 0.02,
+            min_pairs: 250,
+            max_partners: 4,
+            icp_variance_factor: 1.0,
         }
     }
 }
@@ -102,6 +194,8 @@ pub struct Spans {
     pub stride_m: Range<usize>,
     /// Each `formation_m` offset.
     pub formation_m: Vec<Range<usize>>,
+    /// `[scan] stations`, when given.
+    pub scan_stations: Option<Range<usize>>,
 }
 
 /// A validated mission.
@@ -123,6 +217,8 @@ pub struct Mission {
     pub backend: Backend,
     /// The scanner's settings.
     pub scan: ScanPlan,
+    /// How the scans are fused.
+    pub fusion: FusionPlan,
     /// The outputs.
     pub output: Output,
     /// Spans for later diagnostics.
@@ -187,10 +283,22 @@ impl Mission {
         let parsed = read_mission(&mut r, &mut root);
         root.finish(&mut r);
         match parsed {
-            Some(Parts { name, children, total_station, plan, acceptance, backend, scan, output, spans })
+            Some(Parts { name, children, total_station, plan, acceptance, backend, scan, fusion, output, spans })
                 if r.problems.is_empty() =>
             {
-                Ok(Mission { source, name, children, total_station, plan, acceptance, backend, scan, output, spans })
+                Ok(Mission {
+                    source,
+                    name,
+                    children,
+                    total_station,
+                    plan,
+                    acceptance,
+                    backend,
+                    scan,
+                    fusion,
+                    output,
+                    spans,
+                })
             }
             _ => Err(invalid(&source, r.problems)),
         }
@@ -210,6 +318,7 @@ struct Parts {
     acceptance: Acceptance,
     backend: Backend,
     scan: ScanPlan,
+    fusion: FusionPlan,
     output: Output,
     spans: Spans,
 }
@@ -291,7 +400,52 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Parts> {
         }
     });
     let lever = sc.optional(r, "body_from_head_m", |r, v, f| r.point3(v, f).map(|p| Vector3::from(*p.get_ref())));
+    let listed = sc.optional(r, "stations", |r, v, f| {
+        let list = r.array(v, f, |r, e, f| r.integer_in(e, f, 0, 1_000_000).map(|k| k as usize))?;
+        if list.windows(2).any(|w| w[1] <= w[0]) {
+            r.problem(&v.span(), f, "expected station indices in ascending order, each once");
+            return None;
+        }
+        Some((list, v.span()))
+    });
+    if sc.has("stations") && sc.has("every_n_stations") {
+        let span = sc.get("stations").map_or(sc.span(), |v| v.span());
+        r.problem(&span, "scan.stations", "give either stations or every_n_stations, not both");
+    }
     sc.finish(r);
+
+    let mut fu = root.table(r, "fusion");
+    let mode = fu.optional(r, "mode", |r, v, f| {
+        r.choice(v, f, &FUSION_MODES).and_then(|m| FusionMode::from_name(m.get_ref()))
+    });
+    let positive_at_most = |max: f64| {
+        move |r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, f: &str| {
+            r.number_in(v, f, 0.0, false, Some(max)).map(At::into_inner)
+        }
+    };
+    let voxel = fu.optional(r, "voxel_m", positive_at_most(10.0));
+    let max_corr = fu.optional(r, "max_correspondence_m", positive_at_most(100.0));
+    let fine_corr = fu.optional(r, "fine_correspondence_m", |r, v, f| {
+        r.number_in(v, f, 0.0, false, Some(100.0)).map(|x| (*x.get_ref(), x.span()))
+    });
+    let icp_iterations = fu.optional(r, "max_iterations", |r, v, f| r.integer_in(v, f, 1, 10_000));
+    let huber = fu.optional(r, "huber_m", within(0.0, 10.0));
+    let min_pairs = fu.optional(r, "min_pairs", |r, v, f| r.integer_in(v, f, 6, 100_000_000));
+    let partners = fu.optional(r, "max_partners", |r, v, f| r.integer_in(v, f, 1, 1000));
+    let variance_factor = fu.optional(r, "icp_variance_factor", positive_at_most(1e6));
+    let fd = FusionPlan::default();
+    let (max_corr, fine_corr) = (max_corr?, fine_corr?);
+    let coarse = max_corr.unwrap_or(fd.max_correspondence_m);
+    let fine = match fine_corr {
+        Some((fine, span)) if fine > coarse => {
+            let message = format!("value {fine} is out of range; expected ≤ max_correspondence_m = {coarse}");
+            r.problem(&span, "fusion.fine_correspondence_m", message);
+            None
+        }
+        Some((fine, _)) => Some(fine),
+        None => Some(fd.fine_correspondence_m.min(coarse)),
+    };
+    fu.finish(r);
 
     let mut o = root.table(r, "output");
     let formats = o
@@ -299,7 +453,9 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Parts> {
     let rerun = o.optional(r, "rerun", |r, v, f| r.boolean(v, f));
     o.finish(r);
 
-    let (plan, spans) = plan?;
+    let (plan, mut spans) = plan?;
+    let listed = listed?;
+    spans.scan_stations = listed.as_ref().map(|(_, span)| span.clone());
     let d = ScanPlan::default();
     Some(Parts {
         name: name?,
@@ -328,9 +484,21 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Parts> {
         },
         scan: ScanPlan {
             every_n_stations: every?.map_or(d.every_n_stations, |n| n as usize),
+            stations: listed.map(|(list, _)| list),
             slices: slices?.map_or(d.slices, |n| n as usize),
             resolution: resolution?.unwrap_or(d.resolution),
             body_from_head_m: lever?.unwrap_or(d.body_from_head_m),
+        },
+        fusion: FusionPlan {
+            mode: mode?.unwrap_or(fd.mode),
+            voxel_m: voxel?.unwrap_or(fd.voxel_m),
+            max_correspondence_m: coarse,
+            fine_correspondence_m: fine?,
+            max_iterations: icp_iterations?.map_or(fd.max_iterations, |n| n as usize),
+            huber_m: huber?.unwrap_or(fd.huber_m),
+            min_pairs: min_pairs?.map_or(fd.min_pairs, |n| n as usize),
+            max_partners: partners?.map_or(fd.max_partners, |n| n as usize),
+            icp_variance_factor: variance_factor?.unwrap_or(fd.icp_variance_factor),
         },
         output: Output { formats: formats?.unwrap_or_else(|| vec!["ply".into()]), rerun: rerun?.unwrap_or(true) },
         spans,
@@ -470,6 +638,7 @@ fn read_plan(r: &mut Reader<'_>, t: &mut Table<'_, '_>, n_children: Option<usize
         route_m: route.iter().map(|p| p.span()).collect(),
         stride_m: stride.1.clone(),
         formation_m: formation.iter().map(|p| p.span()).collect(),
+        scan_stations: None,
     };
     let plan = Plan {
         route_m: route.iter().map(|p| Point3::from(*p.get_ref())).collect(),

@@ -22,6 +22,16 @@ fn dance_or_diagnostics(mission: &Mission) -> Result<Dance, Diagnostics> {
     if !violations.is_empty() {
         return Err(plan_diagnostics(mission, violations));
     }
+    if let (Some(list), Some(span)) = (&mission.scan.stations, &mission.spans.scan_stations)
+        && let Some(k) = list.iter().find(|k| **k >= dance.stations.len())
+    {
+        let message = format!(
+            "station {k} does not exist; expected indices 0 to {} (the plan has {} stations)",
+            dance.stations.len() - 1,
+            dance.stations.len()
+        );
+        return Err(Diagnostics(vec![mission.diagnostic(span, "scan.stations", message)]));
+    }
     Ok(dance)
 }
 

@@ -16,8 +16,10 @@
 //! | `world/uncertainty/<name>/{achieved,predicted}_95pct` | `Ellipsoids3D`, 95 % (3D χ²) | every step |
 //! | `world/sight_lines/{placement,fix}` | `LineStrips3D`; fix lines coloured by Baarda \|w\| | each measurement |
 //! | `world/scans/direct/scanNNN` | `Points3D`, voxel-thinned for display | each scan |
+//! | `world/scans/icp/scanNNN` | the same at the ICP-refined pose, at its direct twin's time | ICP fusion modes |
 //! | `metrics/{sigma_xy_m,predicted_sigma_xy_m,sigma_heading_rad,error_xy_m}` | `Scalars`, column-wise | each station |
 //! | `metrics/fix_sigma0_squared` | `Scalars`, column-wise | each parent fix |
+//! | `metrics/icp_rmse_m` | `Scalars`, column-wise, at each scan's step | ICP fusion modes |
 //! | `log` | `TextLog` of mission events, warnings for retries and blunders | as they happen |
 
 use std::collections::BTreeMap;
@@ -65,6 +67,8 @@ struct Series {
     error_xy_m: Vec<f64>,
     fix_steps: Vec<i64>,
     sigma0_squared: Vec<f64>,
+    icp_steps: Vec<i64>,
+    icp_rmse_m: Vec<f64>,
 }
 
 /// A scan to thin and log on the recorder's worker thread.
@@ -375,13 +379,20 @@ impl Recorder {
     /// One scan in the world frame, thinned to [`DISPLAY_VOXEL_M`] and
     /// coloured by height (on the worker thread); `kind` is `direct` or `icp`.
     pub fn scan(&mut self, kind: &str, name: &str, world_points: Vec<Point3<f32>>) -> Result<()> {
+        let now = self.now();
+        self.scan_at(kind, name, world_points, now)
+    }
+
+    /// The current (step, sim_time) position on the timelines.
+    pub fn now(&self) -> (i64, f64) {
+        (self.step, self.sim_time_s)
+    }
+
+    /// Like [`Recorder::scan`], at an earlier time `at` from [`Recorder::now`]
+    /// (an ICP-refined scan shown where its direct twin was taken).
+    pub fn scan_at(&mut self, kind: &str, name: &str, world_points: Vec<Point3<f32>>, at: (i64, f64)) -> Result<()> {
         let Some((send, _)) = &self.scans else { return Ok(()) };
-        let job = ScanJob {
-            path: format!("world/scans/{kind}/{name}"),
-            points: world_points,
-            step: self.step,
-            sim_time_s: self.sim_time_s,
-        };
+        let job = ScanJob { path: format!("world/scans/{kind}/{name}"), points: world_points, step: at.0, sim_time_s: at.1 };
         if send.send(job).is_err() {
             // The worker stopped on an error; `finish` reports it.
             self.scans.take().map(|(_, worker)| worker.join());
@@ -412,6 +423,12 @@ impl Recorder {
         self.series.sigma0_squared.push(sigma0_squared);
     }
 
+    /// A scan's ICP residual at step `at`, for `metrics/icp_rmse_m`.
+    pub fn icp_metrics(&mut self, at: i64, rmse_m: f64) {
+        self.series.icp_steps.push(at);
+        self.series.icp_rmse_m.push(rmse_m);
+    }
+
     /// Waits for the scans, sends the time series column-wise and flushes
     /// the recording.
     pub fn finish(mut self) -> Result<()> {
@@ -433,6 +450,9 @@ impl Recorder {
         columns("metrics/sigma_heading_rad", &s.station_steps, &s.sigma_heading_rad)?;
         columns("metrics/error_xy_m", &s.station_steps, &s.error_xy_m)?;
         columns("metrics/fix_sigma0_squared", &s.fix_steps, &s.sigma0_squared)?;
+        if !s.icp_steps.is_empty() {
+            columns("metrics/icp_rmse_m", &s.icp_steps, &s.icp_rmse_m)?;
+        }
         rr(rec.flush_blocking())?;
         Ok(())
     }

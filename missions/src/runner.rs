@@ -34,8 +34,9 @@ use serde::{Deserialize, Serialize, de::DeserializeOwned};
 use serde_json::{Value, json};
 
 use crate::backend::{DeviceKind, Fault, SimTeam};
+use crate::fuse::{Fused, ScanView};
 use crate::journal::Journal;
-use crate::mission::Mission;
+use crate::mission::{FusionMode, Mission};
 use crate::recording::{DRIVE_SPEED_M_PER_S, MEASURE_S, Recorder, TILT_S, Viewer};
 
 /// How to run.
@@ -86,6 +87,8 @@ pub struct RunSummary {
     pub accepted: bool,
     /// Journal events replayed from an earlier, interrupted run.
     pub replayed: usize,
+    /// The fusion's figures as in `report.json`'s `fusion`.
+    pub fusion: Value,
 }
 
 /// A drive's report, as journaled.
@@ -258,6 +261,10 @@ struct Run<'m> {
     team: TeamState,
     scan_bar: ProgressBar,
     merged: Vec<Point3<f32>>,
+    /// Every scan with its poses (body points kept for the ICP modes) and
+    /// where it sits on the recording's timelines.
+    views: Vec<ScanView>,
+    scan_times: Vec<(i64, f64)>,
     stations: Vec<StationRecord>,
     timings: Timings,
 }
@@ -313,7 +320,7 @@ pub fn run(mission: &Mission, dir: &Path, options: &RunOptions) -> Result<RunSum
         .map_err(|e| anyhow::anyhow!("progress style: {e}"))?
         .progress_chars("=> ");
     let n = mission.children.len() as u64;
-    let scans = (0..dance.stations.len()).filter(|k| scan_station(mission, *k)).count() as u64;
+    let scans = (0..dance.stations.len()).filter(|k| mission.scan.scans_at(*k)).count() as u64;
     let total_steps = dance.cycles.len() as u64 * (3 * n + 1) + 2 * scans;
     let bar = progress.add(ProgressBar::new(total_steps).with_style(style.clone()));
     bar.set_prefix("steps");
@@ -341,6 +348,8 @@ pub fn run(mission: &Mission, dir: &Path, options: &RunOptions) -> Result<RunSum
         team,
         scan_bar,
         merged: Vec::new(),
+        views: Vec::new(),
+        scan_times: Vec::new(),
         stations: Vec::new(),
         timings: Timings::default(),
     };
@@ -350,12 +359,6 @@ pub fn run(mission: &Mission, dir: &Path, options: &RunOptions) -> Result<RunSum
         run.cycle(k)?;
     }
     run.finish(started)
-}
-
-/// Whether the scanner scans at station `k`.
-fn scan_station(mission: &Mission, k: usize) -> bool {
-    let every = mission.scan.every_n_stations;
-    every != 0 && k.is_multiple_of(every)
 }
 
 impl Run<'_> {
@@ -462,7 +465,7 @@ impl Run<'_> {
         if children.is_none() {
             self.log_team(None, &[])?;
         }
-        let scan = if scan_station(self.mission, index) { Some(self.scan(index)?) } else { None };
+        let scan = if self.mission.scan.scans_at(index) { Some(self.scan(index)?) } else { None };
         let truth = self.steps.sim.truth().parent;
         let pose = self.team.parent();
         let error_xy_m = (pose.position.xy() - truth.position.xy()).norm();
@@ -519,15 +522,68 @@ impl Run<'_> {
             let rec = &mut self.steps.rec;
             timed(&mut self.timings.recording_s, || rec.scan("direct", &format!("scan{index:03}"), world.clone()))?;
         }
-        self.merged.extend(world);
+        let truth = self.steps.sim.truth();
+        let believed = self.steps.sim.parent_believed();
+        let nominal_z = self.dance.station_pose(index).position.z;
+        let view = ScanView {
+            station: index,
+            file: scanned.file.clone(),
+            // Direct fusion merges as it goes; the ICP modes need every scan at the end.
+            body: if self.mission.fusion.mode == FusionMode::Direct { Vec::new() } else { cloud.points },
+            pose: self.team.parent(),
+            covariance: self.team.parent_covariance(),
+            tilt: Tilt { roll_rad: tilt.roll_rad, pitch_rad: tilt.pitch_rad },
+            odometry: ParentPose::new(believed.x_m, believed.y_m, nominal_z, believed.heading_rad),
+            truth: Some(truth.tilt.world_from_body(&truth.parent)),
+        };
+        self.views.push(view);
+        self.scan_times.push(self.steps.rec.now());
+        if self.mission.fusion.mode == FusionMode::Direct {
+            self.merged.extend(world);
+        }
         Ok(scanned.file)
+    }
+
+    /// Fuses the scans by the mission's `[fusion] mode` (direct fusion has
+    /// merged them already), logs the refined scans and their ICP RMSE.
+    fn fuse(&mut self) -> Result<Fused> {
+        let views = &self.views;
+        let mode = self.mission.fusion.mode;
+        let bar = &self.scan_bar;
+        bar.set_prefix("fusion");
+        let fused = timed(&mut self.timings.fusion_s, || {
+            crate::fuse::fuse(views, mode, &self.mission.fusion, &mut |done, total| {
+                bar.set_length(total as u64);
+                bar.set_position(done as u64);
+            })
+        })?;
+        if mode == FusionMode::Direct {
+            return Ok(fused);
+        }
+        self.merged = timed(&mut self.timings.fusion_s, || crate::fuse::merged(views, &fused));
+        let rec = &mut self.steps.rec;
+        if rec.enabled() {
+            timed(&mut self.timings.recording_s, || -> Result<()> {
+                for ((view, at), f) in views.iter().zip(&self.scan_times).zip(&fused.scans) {
+                    let world = fusion::direct::transform(&view.body, &f.world_from_body);
+                    rec.scan_at("icp", &format!("scan{:03}", view.station), world, *at)?;
+                    if let Some(rmse) = f.rmse_m {
+                        rec.icp_metrics(at.0, rmse);
+                    }
+                }
+                Ok(())
+            })?;
+        }
+        Ok(fused)
     }
 
     /// The merged cloud, the reports, the recording's series and the end
     /// of the journal.
     fn finish(mut self, started: Instant) -> Result<RunSummary> {
         self.steps.bar.finish_and_clear();
+        let fused = self.fuse()?;
         self.scan_bar.finish_and_clear();
+        let fusion = crate::fuse::report_json(&self.views, &fused);
         let merged = PointCloud::from_points(std::mem::take(&mut self.merged));
         timed(&mut self.timings.cloud_files_s, || -> Result<()> {
             for format in &self.mission.output.formats {
@@ -547,13 +603,14 @@ impl Run<'_> {
             self.mission,
             &self.dir,
             &self.stations,
+            fusion.clone(),
             accepted,
             started.elapsed().as_secs_f64(),
             &self.timings,
         )?;
         self.steps.note(json!({"event": "end"}), json!({"accepted": accepted}))?;
         let replayed = self.steps.replayed;
-        Ok(RunSummary { dir: self.dir, stations: self.stations, points: merged.len(), accepted, replayed })
+        Ok(RunSummary { dir: self.dir, stations: self.stations, points: merged.len(), accepted, replayed, fusion })
     }
 }
 
@@ -570,6 +627,7 @@ fn write_reports(
     mission: &Mission,
     dir: &Path,
     stations: &[StationRecord],
+    fusion: Value,
     accepted: bool,
     wall_s: f64,
     timings: &Timings,
@@ -599,6 +657,7 @@ fn write_reports(
             "error_xy_m": last.error_xy_m,
             "drift_percent": if distance_m > 0.0 { 100.0 * last.error_xy_m / distance_m } else { 0.0 },
         },
+        "fusion": fusion,
         "accepted": accepted,
         "timings": timings,
     });
@@ -667,6 +726,20 @@ pub fn write_summary(out: &mut dyn Write, mission: &Mission, s: &RunSummary) -> 
             1e3 * cps::sigma_xy2(&st.predicted_covariance).sqrt(),
             1e3 * st.error_xy_m,
             if st.scan.is_some() { "yes" } else { "-" }
+        )?;
+    }
+    if let (Some(mode), Some(rms), Some(direct)) = (
+        s.fusion["mode"].as_str(),
+        s.fusion["rms_error_xy_m"].as_f64(),
+        s.fusion["direct_rms_error_xy_m"].as_f64(),
+    ) && mode != "direct"
+    {
+        writeln!(
+            out,
+            "fusion {mode}: {} ICP matches; RMS horizontal error of the scan poses {:.2} mm (direct: {:.2} mm)",
+            s.fusion["matches"],
+            1e3 * rms,
+            1e3 * direct
         )?;
     }
     if s.replayed > 0 {
