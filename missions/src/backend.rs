@@ -12,8 +12,7 @@ use scanner::sim::{
     LmsConfig, LmsRangeMode, NoiseStream, Robot, SimDrive, SimHead, SimLms, SimTilt, SimTotalStation, SimWorld, Truth,
 };
 use scanner::{
-    Drive, HeadKind, Odometry, PlanarPose, Scan, ScannerError, Target, Tilt, TiltSensor, TotalStation, TsMeasurement,
-    scan_3d,
+    Drive, Odometry, PlanarPose, Scan, ScannerError, Target, Tilt, TiltSensor, TotalStation, TsMeasurement, scan_3d,
 };
 use serde_json::{Value, json};
 
@@ -93,7 +92,7 @@ pub struct SimTeam {
     world: SimWorld,
     parent: SimDrive,
     children: Vec<SimDrive>,
-    total_station: SimTotalStation,
+    total_station: Option<SimTotalStation>,
     tilt: SimTilt,
     lms: SimLms,
     head: SimHead,
@@ -107,7 +106,7 @@ impl SimTeam {
     /// 0, the children at their first formation points.
     pub fn new(mission: &Mission, dance: &Dance, faults: Vec<Fault>) -> Result<Self> {
         let seed = mission.backend.seed;
-        let scene = cps::geom::builtin(&mission.backend.scene)?;
+        let scene = mission.scene()?;
         let start = dance.station_pose(0);
         let first = dance.cycles.first().map(|c| c.children.clone()).unwrap_or_default();
         let world = SimWorld::new(scene, start, first.clone());
@@ -126,10 +125,10 @@ impl SimTeam {
         let lms_config =
             LmsConfig { resolution: mission.scan.resolution, mode: LmsRangeMode::Mm32, sigma_range_m: 0.005 };
         Ok(Self {
-            total_station: SimTotalStation::new(world.clone(), mission.total_station.clone(), seed),
+            total_station: mission.total_station.clone().map(|i| SimTotalStation::new(world.clone(), i, seed)),
             tilt: SimTilt::new(world.clone(), 0.01f64.to_radians(), seed),
-            lms: SimLms::new(world.clone(), lms_config, HeadKind::RotatingTable, body_from_head, seed),
-            head: SimHead::new(world.clone(), HeadKind::RotatingTable),
+            lms: SimLms::new(world.clone(), lms_config, mission.scan.head, body_from_head, seed),
+            head: SimHead::new(world.clone(), mission.scan.head),
             world,
             parent,
             children,
@@ -198,7 +197,13 @@ impl SimTeam {
     /// Measures a child with the total station.
     pub fn measure(&mut self, target: &Target) -> scanner::Result<TsMeasurement> {
         self.command(DeviceKind::TotalStation, "simulated total station")?;
-        self.total_station.measure(target)
+        match &mut self.total_station {
+            Some(ts) => ts.measure(target),
+            None => Err(ScannerError::Device {
+                device: "total station".into(),
+                message: "the team has no total station (no children)".into(),
+            }),
+        }
     }
 
     /// Reads the tilt sensor.
@@ -235,7 +240,7 @@ impl SimTeam {
             },
             "drives": drives,
             "noise": {
-                "total_station": words(self.total_station.noise_position()),
+                "total_station": self.total_station.as_ref().map(|t| words(t.noise_position())),
                 "tilt": words(self.tilt.noise_position()),
                 "scanner": words(self.lms.noise_position()),
             },
@@ -279,7 +284,9 @@ impl SimTeam {
             d.set_noise_position(from_words(&saved["noise"])?);
         }
         let n = &c["noise"];
-        self.total_station.set_noise_position(from_words(&n["total_station"])?);
+        if let Some(ts) = &mut self.total_station {
+            ts.set_noise_position(from_words(&n["total_station"])?);
+        }
         self.tilt.set_noise_position(from_words(&n["tilt"])?);
         self.lms.set_noise_position(from_words(&n["scanner"])?);
         Ok(())

@@ -92,8 +92,9 @@ pub enum Command {
 }
 
 fn parse_mode(s: &str) -> Result<crate::mission::FusionMode, String> {
-    crate::mission::FusionMode::from_name(s)
-        .ok_or_else(|| format!("unknown fusion mode \"{s}\"; expected one of {}", crate::mission::FUSION_MODES.join(", ")))
+    crate::mission::FusionMode::from_name(s).ok_or_else(|| {
+        format!("unknown fusion mode \"{s}\"; expected one of {}", crate::mission::FUSION_MODES.join(", "))
+    })
 }
 
 /// How a command that ran ended.

@@ -207,7 +207,12 @@ pub fn load_run(dir: &Path) -> Result<(Mission, Vec<ScanView>)> {
     if !mission_path.exists() {
         bail!("{} is not a run directory: {} is missing", dir.display(), mission_path.display());
     }
-    let mission = Mission::load(&mission_path)?;
+    let scene_copy = dir.join("scene.toml");
+    let mission = if scene_copy.exists() {
+        Mission::load_with_scene(&mission_path, &scene_copy)?
+    } else {
+        Mission::load(&mission_path)?
+    };
     let dance = crate::predict::dance(&mission)?;
     let (lines, _) = crate::journal::read(&dir.join("journal.jsonl"))?;
     let mut pose = (dance.station_pose(0), mission.plan.start_covariance);
@@ -241,7 +246,8 @@ pub fn load_run(dir: &Path) -> Result<(Mission, Vec<ScanView>)> {
                     .as_str()
                     .with_context(|| format!("journal line {}: scan event without a file", l.line))?
                     .to_string();
-                let tilt = tilt.take().with_context(|| format!("journal line {}: scan without a tilt reading", l.line))?;
+                let tilt =
+                    tilt.take().with_context(|| format!("journal line {}: scan without a tilt reading", l.line))?;
                 let cloud = scanner::io::read(&dir.join(&file)).with_context(|| format!("reading {file}"))?;
                 let sim = &e["sim"];
                 let truth = sim["truth"]["parent"].as_array().filter(|a| a.len() == 4).and_then(|p| {
@@ -340,7 +346,14 @@ pub fn report_json(views: &[ScanView], fused: &Fused) -> Value {
 
 /// A table: one row per scan.
 pub fn write_table(out: &mut dyn Write, views: &[ScanView], fused: &Fused) -> std::io::Result<()> {
-    writeln!(out, "fusion {}: {} scans, {} ICP matches, {:.2} s", fused.mode.name(), views.len(), fused.matches, fused.seconds)?;
+    writeln!(
+        out,
+        "fusion {}: {} scans, {} ICP matches, {:.2} s",
+        fused.mode.name(),
+        views.len(),
+        fused.matches,
+        fused.seconds
+    )?;
     writeln!(
         out,
         "{:>7} {:>10} {:>10} {:>9} {:>8} {:>11} {:>11} {:>11}",

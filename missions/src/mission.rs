@@ -4,7 +4,7 @@
 //! at once, each with file:line:column (see the README's mission reference).
 
 use std::ops::Range;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use cps::{DistanceErrorModel, Instrument, RAD_PER_ARCSEC};
 use nalgebra::{Matrix4, Point3, Vector3, Vector4};
@@ -39,8 +39,11 @@ pub struct Acceptance {
 /// Where the devices come from (`[backend]`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Backend {
-    /// Built-in scene of the simulator (`scene`, default `"hall"`).
+    /// The simulator's scene: a built-in name (`scene`, default `"hall"`),
+    /// or the path of `scene_file` as written.
     pub scene: String,
+    /// `scene_file`: the file's resolved path and text (checked to parse).
+    pub scene_file: Option<(PathBuf, String)>,
     /// Seed of every simulated device (`seed`, default 1).
     pub seed: u64,
     /// Attempts after the first when a device command fails
@@ -68,6 +71,8 @@ pub struct ScanPlan {
     /// Scan head centre in the body frame (`body_from_head_m`, default
     /// [0, 0, 0.4]), metres.
     pub body_from_head_m: Vector3<f64>,
+    /// The head (`head`: `"rotating-table"`, default, or `"pitching"`).
+    pub head: scanner::HeadKind,
 }
 
 impl Default for ScanPlan {
@@ -78,6 +83,7 @@ impl Default for ScanPlan {
             slices: 180,
             resolution: scanner::sim::LmsResolution::One,
             body_from_head_m: Vector3::new(0.0, 0.0, 0.4),
+            head: scanner::HeadKind::RotatingTable,
         }
     }
 }
@@ -207,8 +213,9 @@ pub struct Mission {
     pub name: String,
     /// Child names, team order.
     pub children: Vec<String>,
-    /// The parent's total station.
-    pub total_station: Instrument,
+    /// The parent's total station; `None` for a robot alone (no children),
+    /// which positions itself by odometry.
+    pub total_station: Option<Instrument>,
     /// The dance.
     pub plan: Plan,
     /// Tolerances.
@@ -265,6 +272,27 @@ impl Mission {
 
     /// Validates a mission from its text.
     pub fn parse(source: Source) -> Result<Self, MissionError> {
+        Self::parse_with_scene(source, None)
+    }
+
+    /// Reads and validates a mission file whose `scene_file`, if it has one,
+    /// is read from `scene_file` instead (a run directory's copy).
+    pub fn load_with_scene(path: &Path, scene_file: &Path) -> Result<Self, MissionError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|source| MissionError::Io { file: path.display().to_string(), source })?;
+        Self::parse_with_scene(Source::new(path, text), Some(scene_file))
+    }
+
+    /// The built-in scene or the scene file's scene.
+    pub fn scene(&self) -> cps::Result<cps::geom::Scene> {
+        match &self.backend.scene_file {
+            Some((_, text)) => cps::geom::parse_scene_toml(text),
+            None => cps::geom::builtin(&self.backend.scene),
+        }
+    }
+
+    /// Validates a mission; `scene_file` overrides where its `scene_file` is read.
+    fn parse_with_scene(source: Source, scene_file: Option<&Path>) -> Result<Self, MissionError> {
         let invalid = |source: &Source, problems: Vec<Diagnostic>| MissionError::Invalid {
             file: source.file.display().to_string(),
             problems: Diagnostics(problems),
@@ -280,7 +308,7 @@ impl Mission {
         };
         let mut r = Reader::new(&source);
         let mut root = Table::root(&doc);
-        let parsed = read_mission(&mut r, &mut root);
+        let parsed = read_mission(&mut r, &mut root, scene_file);
         root.finish(&mut r);
         match parsed {
             Some(Parts { name, children, total_station, plan, acceptance, backend, scan, fusion, output, spans })
@@ -313,7 +341,7 @@ impl Mission {
 struct Parts {
     name: String,
     children: Vec<String>,
-    total_station: Instrument,
+    total_station: Option<Instrument>,
     plan: Plan,
     acceptance: Acceptance,
     backend: Backend,
@@ -323,7 +351,7 @@ struct Parts {
     spans: Spans,
 }
 
-fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Parts> {
+fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>, scene_override: Option<&Path>) -> Option<Parts> {
     let mut mission = root.table(r, "mission");
     let name = mission.required(r, "name", "a mission name (string)", |r, v, f| {
         let s = r.string(v, f)?;
@@ -339,10 +367,20 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Parts> {
     let children = team.required(r, "children", "the child robots' names, e.g. [\"c1\", \"c2\"]", read_children);
     team.finish(r);
 
+    let solo = children.as_ref().is_some_and(Vec::is_empty);
     let mut instruments = root.table(r, "instruments");
-    let mut ts = instruments.table(r, "total_station");
-    let total_station = read_total_station(r, &mut ts);
-    ts.finish(r);
+    let total_station = if solo {
+        if let Some(v) = instruments.get("total_station") {
+            let message = "the team has no children, so the total station has nothing to measure; remove this table";
+            r.problem(&v.span(), "instruments.total_station", message);
+        }
+        Some(None)
+    } else {
+        let mut ts = instruments.table(r, "total_station");
+        let total_station = read_total_station(r, &mut ts);
+        ts.finish(r);
+        total_station.map(Some)
+    };
     instruments.finish(r);
 
     let mut plan_t = root.table(r, "plan");
@@ -367,6 +405,30 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Parts> {
         Some(())
     });
     let scene = b.optional(r, "scene", |r, v, f| r.choice(v, f, &cps::geom::BUILTIN_SCENES).map(At::into_inner));
+    let scene_file = b.optional(r, "scene_file", |r, v, f| {
+        let name = r.string(v, f)?;
+        let written = PathBuf::from(name.get_ref());
+        let path = match scene_override {
+            Some(p) => p.to_path_buf(),
+            None => r.source.file.parent().unwrap_or(Path::new("")).join(&written),
+        };
+        let text = match std::fs::read_to_string(&path) {
+            Ok(text) => text,
+            Err(e) => {
+                r.problem(&name.span(), f, format!("cannot read scene file {}: {e}", path.display()));
+                return None;
+            }
+        };
+        if let Err(e) = cps::geom::parse_scene_toml(&text) {
+            r.problem(&name.span(), f, format!("scene file {}: {e}", path.display()));
+            return None;
+        }
+        Some((name.into_inner(), path, text))
+    });
+    if b.has("scene") && b.has("scene_file") {
+        let span = b.get("scene_file").map_or(b.span(), |v| v.span());
+        r.problem(&span, "backend.scene_file", "give either scene or scene_file, not both");
+    }
     let seed = b.optional(r, "seed", |r, v, f| r.integer_in(v, f, 0, 1 << 53));
     let retries = b.optional(r, "max_retries", |r, v, f| r.integer_in(v, f, 0, 100));
     let delay =
@@ -400,6 +462,14 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Parts> {
         }
     });
     let lever = sc.optional(r, "body_from_head_m", |r, v, f| r.point3(v, f).map(|p| Vector3::from(*p.get_ref())));
+    let head = sc.optional(r, "head", |r, v, f| {
+        let h = r.choice(v, f, &["rotating-table", "pitching"])?;
+        Some(if h.get_ref() == "pitching" {
+            scanner::HeadKind::PitchingMount
+        } else {
+            scanner::HeadKind::RotatingTable
+        })
+    });
     let listed = sc.optional(r, "stations", |r, v, f| {
         let list = r.array(v, f, |r, e, f| r.integer_in(e, f, 0, 1_000_000).map(|k| k as usize))?;
         if list.windows(2).any(|w| w[1] <= w[0]) {
@@ -416,7 +486,13 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Parts> {
 
     let mut fu = root.table(r, "fusion");
     let mode = fu.optional(r, "mode", |r, v, f| {
-        r.choice(v, f, &FUSION_MODES).and_then(|m| FusionMode::from_name(m.get_ref()))
+        let m = r.choice(v, f, &FUSION_MODES)?;
+        let mode = FusionMode::from_name(m.get_ref())?;
+        if mode == FusionMode::CpsIcp && solo {
+            r.problem(&m.span(), f, "cps-icp needs CPS poses, but the team has no children; expected direct or icp");
+            return None;
+        }
+        Some(mode)
     });
     let positive_at_most = |max: f64| {
         move |r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, f: &str| {
@@ -466,7 +542,12 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Parts> {
         backend: {
             kind?;
             Backend {
-                scene: scene?.unwrap_or_else(|| "hall".into()),
+                scene: match (&scene_file, scene?) {
+                    (Some(Some((written, _, _))), _) => written.clone(),
+                    (_, Some(name)) => name,
+                    _ => "hall".into(),
+                },
+                scene_file: scene_file?.map(|(_, path, text)| (path, text)),
                 seed: seed?.unwrap_or(1),
                 max_retries: retries?.map_or(2, |n| n as u32),
                 retry_delay_s: delay?.unwrap_or(0.5),
@@ -488,6 +569,7 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Parts> {
             slices: slices?.map_or(d.slices, |n| n as usize),
             resolution: resolution?.unwrap_or(d.resolution),
             body_from_head_m: lever?.unwrap_or(d.body_from_head_m),
+            head: head?.unwrap_or(d.head),
         },
         fusion: FusionPlan {
             mode: mode?.unwrap_or(fd.mode),
@@ -507,8 +589,9 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Parts> {
 
 fn read_children(r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, field: &str) -> Option<Vec<String>> {
     let names = r.array(v, field, |r, e, f| r.string(e, f))?;
-    if names.len() < 2 {
-        r.problem(&v.span(), field, format!("the team has {} child(ren); a parent fix needs at least 2", names.len()));
+    if names.len() == 1 {
+        let message = "the team has 1 child; a parent fix needs at least 2 (or none: a robot alone, by odometry)";
+        r.problem(&v.span(), field, message);
         return None;
     }
     let mut ok = true;
@@ -593,7 +676,7 @@ fn read_plan(r: &mut Reader<'_>, t: &mut Table<'_, '_>, n_children: Option<usize
     let stride = t.required(r, "stride_m", "the distance between parent stations in metres (> 0)", |r, v, f| {
         r.number_in(v, f, 0.0, false, None).map(|x| (*x.get_ref(), x.span()))
     });
-    let formation = t.required(r, "formation_m", "one offset [forward, left, up] in metres per child", |r, v, f| {
+    let read_formation = |r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, f: &str| {
         let offsets = r.array(v, f, |r, e, f| r.point3(e, f))?;
         if let Some(n) = n_children
             && offsets.len() != n
@@ -616,7 +699,15 @@ fn read_plan(r: &mut Reader<'_>, t: &mut Table<'_, '_>, n_children: Option<usize
             }
         }
         Some(offsets)
-    });
+    };
+    let formation = if n_children == Some(0) {
+        if let Some(v) = t.get("formation_m") {
+            r.problem(&v.span(), "plan.formation_m", "the team has no children to place; remove formation_m");
+        }
+        Some(Vec::new())
+    } else {
+        t.required(r, "formation_m", "one offset [forward, left, up] in metres per child", read_formation)
+    };
     let start_sigma = t.optional(r, "start_sigma_m", |r, v, f| {
         let p = r.point3(v, f)?;
         let mut ok = true;

@@ -46,7 +46,13 @@ pub fn run(mission: &Mission, trials: usize) -> Result<MonteCarlo> {
     }
     let dance = crate::predict::dance(mission)?;
     let seed = mission.backend.seed;
-    let stations = monte_carlo(&dance, &mission.total_station, &mission.plan.start_covariance, trials, seed)
+    let Some(instrument) = &mission.total_station else {
+        anyhow::bail!(
+            "mission \"{}\" has no children: montecarlo simulates the CPS dance, and a robot alone has none",
+            mission.name
+        );
+    };
+    let stations = monte_carlo(&dance, instrument, &mission.plan.start_covariance, trials, seed)
         .with_context(|| format!("Monte Carlo of mission \"{}\"", mission.name))?;
     Ok(MonteCarlo { trials, seed, stations, nees_interval: nees_interval(NEES_DIM, trials) })
 }

@@ -17,11 +17,18 @@ pub fn dance(mission: &Mission) -> Result<Dance, MissionError> {
 fn dance_or_diagnostics(mission: &Mission) -> Result<Dance, Diagnostics> {
     let plan = &mission.plan;
     let stations = planner::stations(&plan.route_m, plan.stride_m).map_err(|e| plan_diagnostics(mission, vec![e]))?;
-    let dance = planner::leapfrog(stations, &plan.formation_m).map_err(|e| plan_diagnostics(mission, vec![e]))?;
-    let violations = dance.range_violations(&mission.total_station);
-    if !violations.is_empty() {
-        return Err(plan_diagnostics(mission, violations));
-    }
+    let dance = match &mission.total_station {
+        None => planner::solo(stations),
+        Some(instrument) => {
+            let dance =
+                planner::leapfrog(stations, &plan.formation_m).map_err(|e| plan_diagnostics(mission, vec![e]))?;
+            let violations = dance.range_violations(instrument);
+            if !violations.is_empty() {
+                return Err(plan_diagnostics(mission, violations));
+            }
+            dance
+        }
+    };
     if let (Some(list), Some(span)) = (&mission.scan.stations, &mission.spans.scan_stations)
         && let Some(k) = list.iter().find(|k| **k >= dance.stations.len())
     {
@@ -35,11 +42,22 @@ fn dance_or_diagnostics(mission: &Mission) -> Result<Dance, Diagnostics> {
     Ok(dance)
 }
 
-/// Predicts the mission's accuracy.
+/// Predicts the mission's accuracy: the CPS dance, or for a robot alone
+/// its dead reckoning (the random part of the `[backend]` odometry error).
 pub fn prediction(mission: &Mission) -> Result<Prediction, MissionError> {
     let dance = dance(mission)?;
-    planner::predict(&dance, &mission.total_station, &mission.plan.start_covariance)
-        .map_err(|e| MissionError::invalid(mission, plan_diagnostics(mission, vec![e])))
+    match &mission.total_station {
+        Some(instrument) => planner::predict(&dance, instrument, &mission.plan.start_covariance)
+            .map_err(|e| MissionError::invalid(mission, plan_diagnostics(mission, vec![e]))),
+        None => {
+            let o = &mission.backend.odometry;
+            let noise = planner::OdometryNoise {
+                sigma_distance_m_per_sqrt_m: o.sigma_distance_m_per_sqrt_m,
+                sigma_heading_rad_per_sqrt_m: o.sigma_heading_rad_per_sqrt_m,
+            };
+            Ok(planner::predict_odometry(&dance, &noise, &mission.plan.start_covariance))
+        }
+    }
 }
 
 /// Turns planner errors into diagnostics at the responsible field. Range

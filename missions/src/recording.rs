@@ -392,7 +392,8 @@ impl Recorder {
     /// (an ICP-refined scan shown where its direct twin was taken).
     pub fn scan_at(&mut self, kind: &str, name: &str, world_points: Vec<Point3<f32>>, at: (i64, f64)) -> Result<()> {
         let Some((send, _)) = &self.scans else { return Ok(()) };
-        let job = ScanJob { path: format!("world/scans/{kind}/{name}"), points: world_points, step: at.0, sim_time_s: at.1 };
+        let job =
+            ScanJob { path: format!("world/scans/{kind}/{name}"), points: world_points, step: at.0, sim_time_s: at.1 };
         if send.send(job).is_err() {
             // The worker stopped on an error; `finish` reports it.
             self.scans.take().map(|(_, worker)| worker.join());

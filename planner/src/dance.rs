@@ -58,6 +58,14 @@ pub fn leapfrog(stations: Vec<Station>, formation_m: &Formation) -> Result<Dance
     Ok(Dance { stations, cycles })
 }
 
+/// The schedule of a robot alone (no children, no total station): it
+/// drives from station to station; every cycle has no children.
+pub fn solo(stations: Vec<Station>) -> Dance {
+    let cycles =
+        (1..stations.len()).map(|to| DanceCycle { cycle: to, from: to - 1, to, children: Vec::new() }).collect();
+    Dance { stations, cycles }
+}
+
 impl Dance {
     /// Number of children in the team.
     pub fn n_children(&self) -> usize {

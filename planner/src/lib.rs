@@ -13,7 +13,7 @@ pub mod montecarlo;
 pub mod predict;
 pub mod route;
 
-pub use dance::{Dance, DanceCycle, Formation, leapfrog, run_dance};
+pub use dance::{Dance, DanceCycle, Formation, leapfrog, run_dance, solo};
 pub use error::{Phase, PlanError};
-pub use predict::{CyclePrediction, Prediction, predict};
+pub use predict::{CyclePrediction, OdometryNoise, Prediction, predict, predict_odometry};
 pub use route::{Station, stations};

@@ -86,3 +86,55 @@ pub fn predict(
     })?;
     Ok(Prediction { cycles })
 }
+
+/// The random part of a drive's odometry error: 1σ distance and heading
+/// errors that grow with the square root of the distance driven.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OdometryNoise {
+    /// Distance error per √m driven, metres.
+    pub sigma_distance_m_per_sqrt_m: f64,
+    /// Heading error per √m driven, radians.
+    pub sigma_heading_rad_per_sqrt_m: f64,
+}
+
+/// Dead reckoning: the covariance of a robot that positions itself by
+/// odometry alone along `dance`'s stations (a [`crate::solo`] schedule).
+///
+/// A move of d metres along direction φ, Δ = d (cos φ, sin φ), truly
+/// travels along the believed heading plus the heading error so far plus
+/// half the new one δh ~ N(0, σh² d), scaled by 1 + δs/d with
+/// δs ~ N(0, σd² d); the heading then errs by δh more. To first order the
+/// error e = (ex, ey, ez, eθ) becomes F e + G (δs, δh) with
+/// F = I + [0 0 0 −Δy; 0 0 0 Δx; 0; 0] and G = [cos φ −Δy/2; sin φ Δx/2; 0 0; 0 1].
+/// Systematic errors (a scale error, a heading drift) are not random and
+/// not in this covariance.
+pub fn predict_odometry(dance: &Dance, noise: &OdometryNoise, start_covariance: &Matrix4<f64>) -> Prediction {
+    let mut p = *start_covariance;
+    let mut cycles = Vec::with_capacity(dance.cycles.len());
+    for c in &dance.cycles {
+        let (a, b) = (&dance.stations[c.from], &dance.stations[c.to]);
+        let delta = b.position - a.position;
+        let d = delta.xy().norm();
+        let (dx, dy) = (delta.x, delta.y);
+        let (cos, sin) = if d > 0.0 { (dx / d, dy / d) } else { (1.0, 0.0) };
+        let mut f = Matrix4::identity();
+        f[(0, 3)] = -dy;
+        f[(1, 3)] = dx;
+        let g = nalgebra::Matrix4x2::new(cos, -dy / 2.0, sin, dx / 2.0, 0.0, 0.0, 0.0, 1.0);
+        let q = nalgebra::Matrix2::new(
+            noise.sigma_distance_m_per_sqrt_m.powi(2) * d,
+            0.0,
+            0.0,
+            noise.sigma_heading_rad_per_sqrt_m.powi(2) * d,
+        );
+        p = f * p * f.transpose() + g * q * g.transpose();
+        cycles.push(CyclePrediction {
+            cycle: c.cycle,
+            distance_m: b.distance_m,
+            parent: dance.station_pose(c.to),
+            covariance: p,
+            children_covariance: Vec::new(),
+        });
+    }
+    Prediction { cycles }
+}
