@@ -71,6 +71,11 @@ pub struct MultiviewConfig {
     /// Simultaneous matching: at most this many matches per new scan before
     /// its queue is abandoned (reported as not settled). Default 100.
     pub max_matches_per_scan: usize,
+    /// Correspondences between scans are counted within this distance
+    /// (for `min_pairs`). Default `None`: the ICP distance. A fine pass
+    /// after a coarse one keeps the coarse distance here, since fewer pairs
+    /// lie within a fine distance of scans that still overlap as much.
+    pub overlap_m: Option<f64>,
 }
 
 impl Default for MultiviewConfig {
@@ -88,6 +93,7 @@ impl Default for MultiviewConfig {
             moved_translation_m: 0.01,
             moved_rotation_rad: 0.05f64.to_radians(),
             max_matches_per_scan: 100,
+            overlap_m: None,
         }
     }
 }
@@ -172,6 +178,9 @@ pub struct PriorFusionResult {
     pub covariance: Vec<Matrix6<f64>>,
     /// The ICP matches that became edges: (target scan, source scan, result).
     pub matches: Vec<(usize, usize, IcpResult)>,
+    /// Matches of the last round that failed (target, source, the error):
+    /// they give no edge, and the scan keeps its prior and its other edges.
+    pub failed: Vec<(usize, usize, String)>,
     /// χ² of the final adjustment and its redundancy.
     pub chi2: f64,
     /// 6 × (priors + edges) − 6 × scans.
@@ -217,8 +226,11 @@ pub fn register_with_priors(
     let total = schedule.len() * n;
     let mut result = None;
     for (round, distance) in schedule.iter().enumerate() {
-        let round_config =
-            MultiviewConfig { icp: IcpConfig { max_correspondence_m: *distance, ..config.icp }, ..*config };
+        let round_config = MultiviewConfig {
+            icp: IcpConfig { max_correspondence_m: *distance, ..config.icp },
+            overlap_m: Some(config.overlap_m.unwrap_or(config.icp.max_correspondence_m)),
+            ..*config
+        };
         let m = Matcher {
             prepared,
             config: &round_config,
@@ -229,23 +241,25 @@ pub fn register_with_priors(
             settled: true,
         };
         let mut matches = Vec::new();
+        let mut failed = Vec::new();
         for c in 0..n {
             progress(round * n + c + 1, total);
             let mut overlaps: Vec<(usize, usize)> = (0..c).map(|j| (j, m.overlap(c, j))).collect();
             overlaps.retain(|&(_, pairs)| pairs > config.min_pairs);
             overlaps.sort_by_key(|&(j, pairs)| std::cmp::Reverse((pairs, j)));
             overlaps.truncate(max_partners);
-            let found: Vec<(usize, IcpResult)> = overlaps
+            let found: Vec<(usize, Result<IcpResult>)> = overlaps
                 .par_iter()
                 .map(|&(j, _)| {
                     let init = m.poses[j].inverse() * m.poses[c];
-                    align(&m.prepared[c].source, &m.prepared[j].local, &init, &round_config.icp)
-                        .map(|r| (j, r))
-                        .map_err(|e| in_scan(c, e))
+                    (j, align(&m.prepared[c].source, &m.prepared[j].local, &init, &round_config.icp))
                 })
-                .collect::<Result<_>>()?;
+                .collect();
             for (j, r) in found {
-                matches.push((j, c, r));
+                match r.and_then(|r| gate(&r, &priors[j], &priors[c], edge_variance_factor).map(|()| r)) {
+                    Ok(r) => matches.push((j, c, r)),
+                    Err(e) => failed.push((j, c, e.to_string())),
+                }
             }
         }
         let edges: Vec<Edge> = matches
@@ -265,6 +279,7 @@ pub fn register_with_priors(
             world_from_scan: g.world_from_scan,
             covariance: g.covariance,
             matches,
+            failed,
             chi2: g.chi2,
             redundancy: g.redundancy,
         });
@@ -274,6 +289,37 @@ pub fn register_with_priors(
         value: 0.0,
         expected: "at least one correspondence distance".into(),
     })
+}
+
+/// χ²₆ at 99.9 %: a match whose disagreement with the priors exceeds it
+/// is an outlier.
+pub const GATE_CHI2: f64 = 22.458;
+
+/// Checks that an ICP match between scans j (target) and c (source) agrees
+/// with their priors: e = ξ(Z · (Pⱼ⁻¹ P_c)⁻¹), whose covariance is the
+/// match's (times `factor`) plus Ad(Pⱼ⁻¹)(Σⱼ + Σ_c)Ad(Pⱼ⁻¹)ᵀ (the priors taken
+/// as independent), must give eᵀS⁻¹e ≤ [`GATE_CHI2`]. A match that converged
+/// into the wrong place (too little overlap, a degenerate geometry) fails.
+fn gate(r: &IcpResult, pj: &Prior, pc: &Prior, factor: f64) -> Result<()> {
+    let inv_j = pj.target_from_source.inverse();
+    let predicted = inv_j * pc.target_from_source;
+    let e = crate::graph::left_difference(&r.target_from_source, &predicted);
+    let ad = crate::graph::adjoint(&inv_j);
+    let cov = |info: &Matrix6<f64>| info.try_inverse().unwrap_or_else(|| Matrix6::from_diagonal_element(f64::INFINITY));
+    let match_cov = r.covariance().map(|c| c * factor).unwrap_or_else(|| Matrix6::from_diagonal_element(f64::INFINITY));
+    let s = match_cov + ad * (cov(&pj.information) + cov(&pc.information)) * ad.transpose();
+    let chi2 = s.try_inverse().map_or(f64::INFINITY, |si| (e.transpose() * si * e)[(0, 0)]);
+    if chi2.is_finite() && chi2 <= GATE_CHI2 {
+        Ok(())
+    } else {
+        Err(FusionError::Degenerate {
+            what: format!(
+                "the match disagrees with the priors (χ² = {chi2:.1} > {GATE_CHI2}, {:.3} m and {:.3}° apart); left out",
+                e.fixed_rows::<3>(3).norm(),
+                e.fixed_rows::<3>(0).norm().to_degrees()
+            ),
+        })
+    }
 }
 
 /// Reduced points and the model target of every scan, in parallel.
@@ -303,6 +349,11 @@ struct Matcher<'a> {
 }
 
 impl Matcher<'_> {
+    /// The distance correspondences are counted within for overlap.
+    fn overlap_distance(&self) -> f64 {
+        self.config.overlap_m.unwrap_or(self.config.icp.max_correspondence_m)
+    }
+
     /// Correspondences of scan `c`'s reduced points with scan `j`'s model
     /// at the current poses.
     fn overlap(&self, c: usize, j: usize) -> usize {
@@ -310,7 +361,7 @@ impl Matcher<'_> {
         self.prepared[j].local.correspondences(
             &self.prepared[c].source,
             &j_from_c,
-            self.config.icp.max_correspondence_m,
+            self.overlap_distance(),
         )
     }
 
@@ -359,7 +410,7 @@ impl Matcher<'_> {
         let members: Vec<usize> = (0..i).collect();
         let model = self.model(&members)?;
         let pairs =
-            model.correspondences(&self.prepared[i].source, &self.poses[i], self.config.icp.max_correspondence_m);
+            model.correspondences(&self.prepared[i].source, &self.poses[i], self.overlap_distance());
         if pairs <= self.config.min_pairs {
             return Err(self.no_overlap(i, pairs, "the metascan"));
         }
@@ -420,6 +471,9 @@ fn check(scans: &[Vec<Point3<f32>>], guesses: &[Isometry3<f64>], c: &MultiviewCo
     FusionError::require_positive("source voxel (m)", c.source_voxel_m)?;
     FusionError::require_positive("target voxel (m)", c.target_voxel_m)?;
     FusionError::require_positive("max correspondence distance (m)", c.icp.max_correspondence_m)?;
+    if let Some(d) = c.overlap_m {
+        FusionError::require_positive("overlap distance (m)", d)?;
+    }
     FusionError::require_non_negative("moved translation (m)", c.moved_translation_m)?;
     FusionError::require_non_negative("moved rotation (rad)", c.moved_rotation_rad)?;
     if c.max_matches_per_scan == 0 {

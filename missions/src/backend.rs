@@ -143,6 +143,21 @@ impl SimTeam {
         self.world.truth()
     }
 
+    /// The parent learns its pose from a CPS fix: its next drive starts from
+    /// there (the robot navigates by its estimate, so the odometry error
+    /// does not pile up over the mission).
+    pub fn relocalise_parent(&mut self, pose: &ParentPose) {
+        self.parent.relocalise(PlanarPose::from(pose), true);
+    }
+
+    /// A child learns its position from its placement measurement (and its
+    /// heading from the total station's tracking).
+    pub fn relocalise_child(&mut self, j: usize, at: &nalgebra::Point3<f64>) {
+        if let Some(c) = self.children.get_mut(j) {
+            c.relocalise(PlanarPose { x_m: at.x, y_m: at.y, heading_rad: 0.0 }, false);
+        }
+    }
+
     /// Where the parent's drive believes it stands (its odometry).
     pub fn parent_believed(&self) -> PlanarPose {
         self.parent.believed_pose()

@@ -130,6 +130,7 @@ pub fn fuse(
             let mut config = multiview_config(plan, Strategy::Simultaneous);
             let coarse = fusion::multiview::register_views(&scans, &guesses, &config, progress)
                 .context("ICP fusion (simultaneous matching, coarse pass)")?;
+            config.overlap_m = Some(plan.max_correspondence_m);
             config.icp.max_correspondence_m = plan.fine_correspondence_m;
             let r = fusion::multiview::register_views(&scans, &coarse.world_from_scan, &config, progress)
                 .context("ICP fusion (simultaneous matching, fine pass)")?;

@@ -400,6 +400,7 @@ impl Run<'_> {
             self.team.place_child(j, &m.measurement().to_reading(inst), inst)?;
             self.steps.rec.advance(MEASURE_S);
             let placed = self.team.child(j).context("a placed child has a position")?;
+            self.steps.sim.relocalise_child(j, &placed);
             self.steps.rec.sight_lines("placement", &from.position, &[(placed, None)])?;
             self.log_team(Some(&predicted.covariance), &predicted.children_covariance)?;
         }
@@ -425,6 +426,7 @@ impl Run<'_> {
         }
         let fix = self.team.fix_parent(&readings, inst, &FixOptions::default())?;
         let pose = self.team.parent();
+        self.steps.sim.relocalise_parent(&pose);
         self.steps.note(
             json!({"event": "fix", "cycle": cycle.cycle, "station": cycle.to}),
             json!({"pose": pose_json(&pose), "covariance": matrix_json(&self.team.parent_covariance()),

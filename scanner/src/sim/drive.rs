@@ -115,6 +115,17 @@ impl SimDrive {
         self.believed = believed;
         self.true_pose = true_pose;
     }
+
+    /// The robot learns where it is (from the CPS): it now believes
+    /// `believed`, and its next move starts from there. With
+    /// `keep_heading_error = false` it also learns its true heading (a child
+    /// whose heading the total station's tracking holds).
+    pub fn relocalise(&mut self, believed: PlanarPose, keep_heading_error: bool) {
+        self.believed = believed;
+        if !keep_heading_error {
+            self.believed.heading_rad = self.true_pose.heading_rad;
+        }
+    }
 }
 
 impl Drive for SimDrive {
