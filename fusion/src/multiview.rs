@@ -358,11 +358,7 @@ impl Matcher<'_> {
     /// at the current poses.
     fn overlap(&self, c: usize, j: usize) -> usize {
         let j_from_c = self.poses[j].inverse() * self.poses[c];
-        self.prepared[j].local.correspondences(
-            &self.prepared[c].source,
-            &j_from_c,
-            self.overlap_distance(),
-        )
+        self.prepared[j].local.correspondences(&self.prepared[c].source, &j_from_c, self.overlap_distance())
     }
 
     /// The model set M: the `members`' models in the world frame.
@@ -409,8 +405,7 @@ impl Matcher<'_> {
     fn incremental(&mut self, i: usize) -> Result<()> {
         let members: Vec<usize> = (0..i).collect();
         let model = self.model(&members)?;
-        let pairs =
-            model.correspondences(&self.prepared[i].source, &self.poses[i], self.overlap_distance());
+        let pairs = model.correspondences(&self.prepared[i].source, &self.poses[i], self.overlap_distance());
         if pairs <= self.config.min_pairs {
             return Err(self.no_overlap(i, pairs, "the metascan"));
         }

@@ -272,13 +272,65 @@ const CASES: &[Case] = &[
         "acceptance.max_station_error_m",
         "expected > 0",
     ),
+    ("unknown fusion mode", ("[plan]", "[fusion]\nmode = \"slam\"\n[plan]"), "15:8", "fusion.mode", "unknown value"),
+    ("zero voxel", ("[plan]", "[fusion]\nvoxel_m = 0\n[plan]"), "15:11", "fusion.voxel_m", "out of range"),
+    (
+        "fine distance above the coarse one",
+        ("[plan]", "[fusion]\nmax_correspondence_m = 0.2\nfine_correspondence_m = 0.5\n[plan]"),
+        "16:25",
+        "fusion.fine_correspondence_m",
+        "expected ≤ max_correspondence_m = 0.2",
+    ),
+    (
+        "scan stations and every_n_stations",
+        ("[plan]", "[scan]\nevery_n_stations = 2\nstations = [0, 3]\n[plan]"),
+        "16:12",
+        "scan.stations",
+        "not both",
+    ),
+    (
+        "scan stations out of order",
+        ("[plan]", "[scan]\nstations = [3, 1]\n[plan]"),
+        "15:12",
+        "scan.stations",
+        "ascending",
+    ),
+    (
+        "scan station beyond the plan",
+        ("[plan]", "[scan]\nstations = [0, 99]\n[plan]"),
+        "15:12",
+        "scan.stations",
+        "station 99 does not exist; expected indices 0 to 10",
+    ),
+    ("unknown scan head", ("[plan]", "[scan]\nhead = \"spinning\"\n[plan]"), "15:8", "scan.head", "unknown value"),
+    (
+        "scene and scene_file",
+        ("[plan]", "[backend]\nscene = \"hall\"\nscene_file = \"lab.toml\"\n[plan]"),
+        "16:14",
+        "backend.scene_file",
+        "not both",
+    ),
+    (
+        "missing scene file",
+        ("[plan]", "[backend]\nscene_file = \"no-such-scene.toml\"\n[plan]"),
+        "15:14",
+        "backend.scene_file",
+        "cannot read scene file",
+    ),
+    (
+        "a robot alone with a formation",
+        ("children = [\"c1\", \"c2\"]", "children = []"),
+        "17:15",
+        "plan.formation_m",
+        "no children to place",
+    ),
     ("broken TOML", ("[plan]", "[plan"), "14:6", "", "invalid TOML"),
     ("duplicate key", ("stride_m = 10.0", "stride_m = 10.0\nstride_m = 5.0"), "17:1", "", "invalid TOML"),
 ];
 
 #[test]
 fn every_malformed_mission_exits_2_at_the_right_place() {
-    assert!(CASES.len() >= 30);
+    assert!(CASES.len() >= 30, "the corpus has {} cases", CASES.len());
     // The unmodified mission is fine: each case's failure is its edit's.
     let good = temp_mission(GOOD);
     assert_eq!(cps_survey(["validate".into(), good.path.clone().into_os_string()]).code, 0);
