@@ -77,6 +77,17 @@ fn hall_fusion_modes_compare() {
     let on = on_scene("hall", &dir.path().join("cloud.ply"), 0.05);
     assert!(on > 0.97, "{:.1} % of the fused cloud within 5 cm of the hall", 100.0 * on);
 
+    // The recording holds the refined scans next to the direct ones, and
+    // the ICP RMSE of the 7 matched scans as one column.
+    let rows = tests::rrd_rows(&dir.path().join("mission.rrd")).expect("the recording decodes");
+    for k in 0..8 {
+        for kind in ["direct", "icp"] {
+            let path = format!("/world/scans/{kind}/scan{k:03}");
+            assert_eq!(rows.get(&path).map(|r| r.0), Some(1), "{path}: {:?}", rows.keys());
+        }
+    }
+    assert_eq!(rows.get("/metrics/icp_rmse_m").map(|r| r.0), Some(7), "{:?}", rows.keys());
+
     // `fuse` on something that is not a run is an error naming it.
     let bad = cps_survey(["fuse".into(), mission.path.parent().expect("dir").join("nope").into_os_string()]);
     assert_eq!(bad.code, 2);
