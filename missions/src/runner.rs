@@ -405,14 +405,7 @@ impl Run<'_> {
             self.log_team(Some(&predicted.covariance), &predicted.children_covariance)?;
         }
 
-        let nominal = self.dance.station_pose(cycle.to);
-        let goal = PlanarPose::from(&nominal);
-        let driven: Driven = self.steps.step(
-            json!({"event": "drive", "cycle": cycle.cycle, "robot": "parent", "target": [goal.x_m, goal.y_m, goal.heading_rad]}),
-            DeviceKind::Drive,
-            |sim| sim.drive(Robot::Parent, &goal).map(|o| Driven { distance_m: o.distance_m }),
-        )?;
-        self.steps.rec.advance(driven.distance_m / DRIVE_SPEED_M_PER_S);
+        let nominal = self.drive_parent(&cycle)?;
         let mut readings = Vec::with_capacity(cycle.children.len());
         for (j, at) in cycle.children.iter().enumerate() {
             let target = Target { child: j, predicted: observe(&nominal, at)? };
@@ -462,9 +455,8 @@ impl Run<'_> {
         self.station(cycle.to, predicted.covariance, Some(&predicted.children_covariance))
     }
 
-    /// A robot alone drives to the next station and takes the pose its
-    /// odometry believes, with the dead-reckoning covariance.
-    fn solo_cycle(&mut self, cycle: &DanceCycle, predicted: &planner::CyclePrediction) -> Result<()> {
+    /// The parent drives to the cycle's station; returns its nominal pose.
+    fn drive_parent(&mut self, cycle: &DanceCycle) -> Result<ParentPose> {
         let nominal = self.dance.station_pose(cycle.to);
         let goal = PlanarPose::from(&nominal);
         let driven: Driven = self.steps.step(
@@ -473,6 +465,13 @@ impl Run<'_> {
             |sim| sim.drive(Robot::Parent, &goal).map(|o| Driven { distance_m: o.distance_m }),
         )?;
         self.steps.rec.advance(driven.distance_m / DRIVE_SPEED_M_PER_S);
+        Ok(nominal)
+    }
+
+    /// A robot alone drives to the next station and takes the pose its
+    /// odometry believes, with the dead-reckoning covariance.
+    fn solo_cycle(&mut self, cycle: &DanceCycle, predicted: &planner::CyclePrediction) -> Result<()> {
+        let nominal = self.drive_parent(cycle)?;
         let believed = self.steps.sim.parent_believed();
         let pose = ParentPose::new(believed.x_m, believed.y_m, nominal.position.z, believed.heading_rad);
         self.team = TeamState::new(pose, predicted.covariance, 0)?;

@@ -66,6 +66,17 @@ where
     Run { code: exit_code(&result), stdout: String::from_utf8_lossy(&out).into_owned(), stderr }
 }
 
+/// Runs `cps-survey run MISSION --out OUT --quiet` in-process.
+pub fn run_mission(mission: &Path, out: &Path) -> Run {
+    cps_survey([
+        "run".into(),
+        mission.as_os_str().to_owned(),
+        "--out".into(),
+        out.as_os_str().to_owned(),
+        "--quiet".into(),
+    ])
+}
+
 /// Rows per entity path in a Rerun `.rrd` file, read back with Rerun's own
 /// decoder: `(path, rows, static)` summed over the file's chunks.
 pub fn rrd_rows(path: &Path) -> Result<std::collections::BTreeMap<String, (usize, bool)>, String> {

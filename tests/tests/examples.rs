@@ -6,16 +6,6 @@
 use serde_json::Value;
 use tests::{cps_survey, example, temp_mission};
 
-fn run_into(mission: &std::path::Path, out: &std::path::Path) -> tests::Run {
-    cps_survey([
-        "run".into(),
-        mission.as_os_str().to_owned(),
-        "--out".into(),
-        out.as_os_str().to_owned(),
-        "--quiet".into(),
-    ])
-}
-
 fn json_file(path: &std::path::Path) -> Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())))
         .expect("JSON")
@@ -42,7 +32,7 @@ fn hall_fusion_modes_compare() {
     let text = std::fs::read_to_string(example("hall.toml")).expect("hall.toml");
     let mission = temp_mission(&text.replace("[output]", "[fusion]\nmode = \"cps-icp\"\n\n[output]"));
     let dir = tempfile::tempdir().expect("tempdir");
-    let run = run_into(&mission.path, dir.path());
+    let run = tests::run_mission(&mission.path, dir.path());
     assert_eq!(run.code, 0, "{}\n{}", run.stdout, run.stderr);
     assert!(run.stdout.contains("fusion cps-icp:"), "{}", run.stdout);
     let report = json_file(&dir.path().join("report.json"));
@@ -102,7 +92,7 @@ fn corridor_icp_example() {
     let text = std::fs::read_to_string(example("corridor-icp.toml")).expect("corridor-icp.toml");
     let mission = temp_mission(&text.replace("slices = 180", "slices = 120"));
     let dir = tempfile::tempdir().expect("tempdir");
-    let run = run_into(&mission.path, dir.path());
+    let run = tests::run_mission(&mission.path, dir.path());
     assert_eq!(run.code, 0, "{}\n{}", run.stdout, run.stderr);
     let report = json_file(&dir.path().join("report.json"));
     let stations = report["stations"].as_array().expect("stations");
@@ -128,7 +118,7 @@ fn building_example() {
     let text = std::fs::read_to_string(example("building.toml")).expect("building.toml");
     let mission = temp_mission(&text.replace("slices = 180", "slices = 45"));
     let dir = tempfile::tempdir().expect("tempdir");
-    let run = run_into(&mission.path, dir.path());
+    let run = tests::run_mission(&mission.path, dir.path());
     assert_eq!(run.code, 0, "{}\n{}", run.stdout, run.stderr);
     let report = json_file(&dir.path().join("report.json"));
     let stations = report["stations"].as_array().expect("stations");
@@ -162,7 +152,7 @@ fn scan_stations_pitching_head_and_scene_file() {
     let mission = dir.path().join("m.toml");
     std::fs::write(&mission, text).expect("mission");
     let out = dir.path().join("run");
-    let run = run_into(&mission, &out);
+    let run = tests::run_mission(&mission, &out);
     assert_eq!(run.code, 0, "{}\n{}", run.stdout, run.stderr);
     let report = json_file(&out.join("report.json"));
     let scanned: Vec<u64> = report["stations"]

@@ -4,23 +4,13 @@
 //! is never overwritten.
 
 use serde_json::Value;
-use tests::{cps_survey, example, temp_mission};
-
-fn run_into(mission: &std::path::Path, out: &std::path::Path) -> tests::Run {
-    cps_survey([
-        "run".into(),
-        mission.as_os_str().to_owned(),
-        "--out".into(),
-        out.as_os_str().to_owned(),
-        "--quiet".into(),
-    ])
-}
+use tests::{example, temp_mission};
 
 #[test]
 fn hall_runs_end_to_end() {
     let dir = tempfile::tempdir().expect("tempdir");
     let out = dir.path().join("hall");
-    let run = run_into(&example("hall.toml"), &out);
+    let run = tests::run_mission(&example("hall.toml"), &out);
     assert_eq!(run.code, 0, "{}\n{}", run.stdout, run.stderr);
     assert!(run.stdout.contains("acceptance: passed"), "{}", run.stdout);
 
@@ -96,7 +86,7 @@ fn hall_runs_end_to_end() {
     assert!(on > 0.99, "{:.2} % of the points within 5 cm of a surface", 100.0 * on);
 
     // A finished run is never overwritten.
-    let again = run_into(&example("hall.toml"), &out);
+    let again = tests::run_mission(&example("hall.toml"), &out);
     assert_eq!(again.code, 2);
     assert!(again.stderr.contains("already holds a run"), "{}", again.stderr);
 }
@@ -109,7 +99,7 @@ fn acceptance_failure_exits_1_with_outputs_written() {
         .replace("every_n_stations = 1", "every_n_stations = 0");
     let mission = temp_mission(&strict);
     let dir = tempfile::tempdir().expect("tempdir");
-    let run = run_into(&mission.path, dir.path());
+    let run = tests::run_mission(&mission.path, dir.path());
     assert_eq!(run.code, 1, "{}", run.stderr);
     assert!(run.stdout.contains("acceptance: FAILED"));
     let report: Value =
@@ -133,7 +123,7 @@ fn odometry_settings_drive_the_simulator() {
                 .replace("seed = 1", &format!("seed = 1\n{extra}")),
         );
         let dir = tempfile::tempdir().expect("tempdir");
-        let run = run_into(&mission.path, dir.path());
+        let run = tests::run_mission(&mission.path, dir.path());
         assert_eq!(run.code, 0, "{}", run.stderr);
         let report: Value =
             serde_json::from_str(&std::fs::read_to_string(dir.path().join("report.json")).expect("report"))
