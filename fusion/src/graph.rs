@@ -67,17 +67,13 @@ pub fn exp(xi: &Vector6<f64>) -> Isometry3<f64> {
     )
 }
 
-fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
-    Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
-}
-
 /// The adjoint of `t` in the (ω, v) order: exp(Ad·ξ) = t·exp(ξ)·t⁻¹.
 pub fn adjoint(t: &Isometry3<f64>) -> Matrix6<f64> {
     let r = *t.rotation.to_rotation_matrix().matrix();
     let mut a = Matrix6::zeros();
     a.fixed_view_mut::<3, 3>(0, 0).copy_from(&r);
     a.fixed_view_mut::<3, 3>(3, 3).copy_from(&r);
-    a.fixed_view_mut::<3, 3>(3, 0).copy_from(&(skew(&t.translation.vector) * r));
+    a.fixed_view_mut::<3, 3>(3, 0).copy_from(&(crate::icp::skew(&t.translation.vector) * r));
     a
 }
 

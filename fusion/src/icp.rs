@@ -302,7 +302,8 @@ impl Sums {
     }
 }
 
-fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
+/// The cross-product matrix: `skew(v) · x = v × x`.
+pub(crate) fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
     Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
 }
 
@@ -374,13 +375,6 @@ pub fn align_with_prior(
     align_impl(source, target, init, config, Some(prior))
 }
 
-/// ξ = (ω, v) with `a ≈ exp(ξ) · b` to first order.
-fn left_difference(a: &Isometry3<f64>, b: &Isometry3<f64>) -> Vector6<f64> {
-    let d = a * b.inverse();
-    let w = d.rotation.scaled_axis();
-    Vector6::new(w.x, w.y, w.z, d.translation.x, d.translation.y, d.translation.z)
-}
-
 fn align_impl(
     source: &[Point3<f32>],
     target: &Target,
@@ -423,7 +417,7 @@ fn align_impl(
                     None => (sums.h, sums.b),
                     Some(p) => {
                         let sigma2 = residual_variance(&sums, config.method);
-                        let e = left_difference(&estimate, &p.target_from_source);
+                        let e = crate::graph::left_difference(&estimate, &p.target_from_source);
                         (sums.h / sigma2 + p.information, sums.b / sigma2 + p.information * e)
                     }
                 };
@@ -433,11 +427,7 @@ fn align_impl(
                         what: format!("point-to-plane normal equations at iteration {iterations}"),
                     })?
                     .solve(&(-b));
-                let w = Vector3::new(delta[0], delta[1], delta[2]);
-                Isometry3::from_parts(
-                    Translation3::new(delta[3], delta[4], delta[5]),
-                    UnitQuaternion::from_scaled_axis(w),
-                )
+                crate::graph::exp(&delta)
             }
         };
         estimate = update * estimate;
