@@ -126,8 +126,8 @@ struct Prepared {
 
 /// Registers `scans` (each in its own frame) given a guess of each one's
 /// pose. `progress(done, total)` is called as each scan is registered.
-pub fn register_views(
-    scans: &[Vec<Point3<f32>>],
+pub fn register_views<S: AsRef<[Point3<f32>]> + Sync>(
+    scans: &[S],
     guesses: &[Isometry3<f64>],
     config: &MultiviewConfig,
     progress: &mut dyn FnMut(usize, usize),
@@ -198,8 +198,8 @@ pub struct PriorFusionResult {
 /// That is one round per entry of `schedule`, the ICP correspondence
 /// distance of the round (coarse to fine); each round's matches start from
 /// the previous round's adjusted poses.
-pub fn register_with_priors(
-    scans: &[Vec<Point3<f32>>],
+pub fn register_with_priors<S: AsRef<[Point3<f32>]> + Sync>(
+    scans: &[S],
     priors: &[Prior],
     config: &MultiviewConfig,
     max_partners: usize,
@@ -323,12 +323,13 @@ fn gate(r: &IcpResult, pj: &Prior, pc: &Prior, factor: f64) -> Result<()> {
 }
 
 /// Reduced points and the model target of every scan, in parallel.
-fn prepare(scans: &[Vec<Point3<f32>>], config: &MultiviewConfig) -> Result<Vec<Prepared>> {
+fn prepare<S: AsRef<[Point3<f32>]> + Sync>(scans: &[S], config: &MultiviewConfig) -> Result<Vec<Prepared>> {
     let k = if config.icp.method == Method::PointToPlane { config.icp.normal_neighbours.max(3) } else { 0 };
     scans
         .par_iter()
         .enumerate()
         .map(|(i, points)| -> Result<Prepared> {
+            let points = points.as_ref();
             let source = scanner::reduced_points(points, config.source_voxel_m).map_err(|e| in_scan(i, e.into()))?;
             let model = scanner::reduced_points(points, config.target_voxel_m).map_err(|e| in_scan(i, e.into()))?;
             let local = Target::new(&model, k).map_err(|e| in_scan(i, e))?;
@@ -452,7 +453,7 @@ fn in_scan(scan: usize, e: FusionError) -> FusionError {
     FusionError::InScan { scan, source: Box::new(e) }
 }
 
-fn check(scans: &[Vec<Point3<f32>>], guesses: &[Isometry3<f64>], c: &MultiviewConfig) -> Result<()> {
+fn check<S>(scans: &[S], guesses: &[Isometry3<f64>], c: &MultiviewConfig) -> Result<()> {
     if scans.len() != guesses.len() {
         return Err(FusionError::OutOfRange {
             what: "number of pose guesses".into(),

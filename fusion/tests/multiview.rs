@@ -81,7 +81,7 @@ fn bad_input_is_named() {
     let cfg = MultiviewConfig::default();
     let e = register_views(&h.scans, &h.odometry[..1], &cfg, &mut |_, _| {}).expect_err("count");
     assert!(e.to_string().contains("one per scan (2)"), "{e}");
-    let e = register_views(&[], &[], &cfg, &mut |_, _| {}).expect_err("empty");
+    let e = register_views::<Vec<Point3<f32>>>(&[], &[], &cfg, &mut |_, _| {}).expect_err("empty");
     assert!(e.to_string().contains("number of scans"), "{e}");
     let mut nan = h.odometry.clone();
     nan[1].translation.x = f64::NAN;

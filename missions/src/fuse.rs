@@ -116,7 +116,7 @@ pub fn fuse(
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Fused> {
     let started = Instant::now();
-    let scans = || views.iter().map(|v| v.body.clone()).collect::<Vec<_>>();
+    let scans: Vec<&[Point3<f32>]> = views.iter().map(|v| v.body.as_slice()).collect();
     let (poses, rmse, matches): (Vec<Isometry3<f64>>, Vec<Option<f64>>, usize) = match mode {
         FusionMode::Direct => (views.iter().map(ScanView::direct).collect(), vec![None; views.len()], 0),
         _ if views.is_empty() => (Vec::new(), Vec::new(), 0),
@@ -126,7 +126,6 @@ pub fn fuse(
             let mut guesses: Vec<Isometry3<f64>> = views.iter().map(ScanView::odometry_guess).collect();
             let shift = views[0].direct() * guesses[0].inverse();
             guesses.iter_mut().for_each(|g| *g = shift * *g);
-            let scans = scans();
             let mut config = multiview_config(plan, Strategy::Simultaneous);
             let coarse = fusion::multiview::register_views(&scans, &guesses, &config, progress)
                 .context("ICP fusion (simultaneous matching, coarse pass)")?;
@@ -143,7 +142,7 @@ pub fn fuse(
                 .map(|v| fusion::graph::cps_prior(&v.direct(), &v.pose, &v.covariance, &v.tilt, TILT_SIGMA_RAD))
                 .collect::<fusion::Result<Vec<_>>>()?;
             let r = fusion::multiview::register_with_priors(
-                &scans(),
+                &scans,
                 &priors,
                 &multiview_config(plan, Strategy::Pairwise),
                 plan.max_partners,

@@ -595,19 +595,21 @@ impl Run<'_> {
         if mode == FusionMode::Direct {
             return Ok(fused);
         }
-        self.merged = timed(&mut self.timings.fusion_s, || crate::fuse::merged(views, &fused));
+        // Each scan moved once, into the merged cloud and the recording.
         let rec = &mut self.steps.rec;
-        if rec.enabled() {
-            timed(&mut self.timings.recording_s, || -> Result<()> {
-                for ((view, at), f) in views.iter().zip(&self.scan_times).zip(&fused.scans) {
-                    let world = fusion::direct::transform(&view.body, &f.world_from_body);
-                    rec.scan_at("icp", &format!("scan{:03}", view.station), world, *at)?;
+        let (merged, t) = (&mut self.merged, &mut self.timings);
+        for ((view, at), f) in views.iter().zip(&self.scan_times).zip(&fused.scans) {
+            let world = timed(&mut t.fusion_s, || fusion::direct::transform(&view.body, &f.world_from_body));
+            if rec.enabled() {
+                timed(&mut t.recording_s, || -> Result<()> {
+                    rec.scan_at("icp", &format!("scan{:03}", view.station), world.clone(), *at)?;
                     if let Some(rmse) = f.rmse_m {
                         rec.icp_metrics(at.0, rmse);
                     }
-                }
-                Ok(())
-            })?;
+                    Ok(())
+                })?;
+            }
+            merged.extend(world);
         }
         Ok(fused)
     }
@@ -627,7 +629,7 @@ impl Run<'_> {
             }
             Ok(())
         })?;
-        let accepted = mission_accepted(self.mission, &self.stations, &fusion);
+        let accepted = mission_accepted(self.mission, &self.stations, &self.views, &fused);
         self.steps.rec.event(
             rerun::TextLogLevel::INFO,
             format!("mission ends: acceptance {}", if accepted { "passed" } else { "FAILED" }),
@@ -652,14 +654,14 @@ impl Run<'_> {
 /// Whether the mission's acceptance tolerances hold. A station's error is
 /// that of the mission's result: the fused scan pose where an ICP mode
 /// refined it, else the station's CPS (or odometry) pose.
-fn mission_accepted(mission: &Mission, stations: &[StationRecord], fusion: &Value) -> bool {
+fn mission_accepted(mission: &Mission, stations: &[StationRecord], views: &[ScanView], fused: &Fused) -> bool {
     let sigma_xy = stations.last().map_or(0.0, |s| cps::sigma_xy2(&s.covariance).sqrt());
     let refined = |index: usize| -> Option<f64> {
-        if fusion["mode"] == "direct" {
+        if fused.mode == FusionMode::Direct {
             return None;
         }
-        let scans = fusion["scans"].as_array()?;
-        scans.iter().find(|s| s["station"] == index)?["error_xy_m"].as_f64()
+        let (view, f) = views.iter().zip(&fused.scans).find(|(v, _)| v.station == index)?;
+        view.truth.map(|truth| crate::fuse::error_xy(&f.world_from_body, &truth))
     };
     let max_error = stations.iter().map(|s| refined(s.index).unwrap_or(s.error_xy_m)).fold(0.0, f64::max);
     mission.acceptance.max_final_sigma_xy_m.is_none_or(|m| sigma_xy <= m)
