@@ -330,7 +330,7 @@ pub fn run(mission: &Mission, dir: &Path, options: &RunOptions) -> Result<RunSum
         .progress_chars("=> ");
     let n = mission.children.len() as u64;
     let scans = (0..dance.stations.len()).filter(|k| mission.scan.scans_at(*k)).count() as u64;
-    let total_steps = dance.cycles.len() as u64 * (3 * n + 1) + 2 * scans;
+    let total_steps = dance.cycles.iter().map(|c| 2 * c.moved.len() as u64 + n + 1).sum::<u64>() + 2 * scans;
     let bar = progress.add(ProgressBar::new(total_steps).with_style(style.clone()));
     bar.set_prefix("steps");
     let scan_bar = progress.add(ProgressBar::new(mission.scan.slices as u64).with_style(style));
@@ -382,7 +382,8 @@ impl Run<'_> {
             return self.solo_cycle(&cycle, &predicted);
         };
         let from = self.team.parent();
-        for (j, at) in cycle.children.iter().enumerate() {
+        for &j in &cycle.moved {
+            let at = &cycle.children[j];
             let goal = PlanarPose { x_m: at.x, y_m: at.y, heading_rad: 0.0 };
             let robot = &self.mission.children[j];
             let driven: Driven = self.steps.step(

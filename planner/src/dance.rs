@@ -1,7 +1,15 @@
-//! The leapfrog dance (seed 003 Fig. 1): at station k each child moves to
-//! `station_k + R(heading_k)·formation_m[j]` and is measured from the standing
-//! parent; then the parent moves to station k+1 and fixes itself from all
-//! children.
+//! Dance schedules.
+//!
+//! - **Leapfrog** (seed 003 Fig. 1): at station k each child moves to
+//!   `station_k + R(heading_k)·formation_m[j]` and is measured from the
+//!   standing parent; then the parent moves to station k+1 and fixes itself
+//!   from all children.
+//! - **Parent hops** (seed 003 §3.2): the children are placed as in leapfrog
+//!   at stations 0, h, 2h, …; in between, the parent makes h moves and fixes
+//!   itself after each from the same standing children.
+//!
+//! A [`Dance`] is a list of [`DanceCycle`]s (one parent move and fix each);
+//! [`Dance::steps`] spells it out as the list of actions the runner executes.
 
 use nalgebra::{Point3, Rotation3, Vector3};
 
@@ -22,6 +30,10 @@ pub struct DanceCycle {
     pub to: usize,
     /// Nominal prism positions of the children during this cycle, team order.
     pub children: Vec<Point3<f64>>,
+    /// The children that move to their position and are measured from the
+    /// standing parent at the start of this cycle, in order (all of them in
+    /// leapfrog; in parent hops, all at a placement, none in between).
+    pub moved: Vec<usize>,
 }
 
 /// A complete schedule of a leapfrog dance along a route.
@@ -37,22 +49,78 @@ pub struct Dance {
 /// metres.
 pub type Formation = [Vector3<f64>];
 
+/// How the team advances.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Strategy {
+    /// Children move every cycle, then the parent (the seed's dance).
+    Leapfrog,
+    /// Children are placed every `hops` cycles; the parent makes `hops`
+    /// moves and fixes from the same standing children.
+    ParentHops {
+        /// Parent moves (and fixes) per placement of the children, ≥ 1
+        /// (1 is leapfrog).
+        hops: usize,
+    },
+}
+
+impl Strategy {
+    /// Parent moves per placement of the children.
+    pub fn hops(&self) -> usize {
+        match self {
+            Strategy::Leapfrog => 1,
+            Strategy::ParentHops { hops } => *hops,
+        }
+    }
+
+    /// The name used in mission files (`leapfrog`, `parent-hops`).
+    pub fn name(&self) -> &'static str {
+        match self {
+            Strategy::Leapfrog => "leapfrog",
+            Strategy::ParentHops { .. } => "parent-hops",
+        }
+    }
+}
+
+impl std::fmt::Display for Strategy {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Strategy::Leapfrog => f.write_str("leapfrog"),
+            Strategy::ParentHops { hops } => write!(f, "parent-hops ×{hops}"),
+        }
+    }
+}
+
 /// Builds the leapfrog schedule for `stations` with `formation_m` (one offset
 /// per child, at least two).
 pub fn leapfrog(stations: Vec<Station>, formation_m: &Formation) -> Result<Dance, PlanError> {
+    schedule(stations, formation_m, Strategy::Leapfrog)
+}
+
+/// Builds the schedule of `strategy` for `stations` with `formation_m` (one
+/// offset per child, at least two): the children are placed around station
+/// k (`station_k + R(heading_k)·offset`) for every k that is a multiple of
+/// the strategy's hops.
+pub fn schedule(stations: Vec<Station>, formation_m: &Formation, strategy: Strategy) -> Result<Dance, PlanError> {
     if formation_m.len() < 2 {
         return Err(PlanError::TooFewChildren { got: formation_m.len() });
     }
+    let hops = strategy.hops();
+    if hops == 0 {
+        return Err(PlanError::BadHops { value: hops });
+    }
+    let mut children = Vec::new();
     let cycles = (1..stations.len())
         .map(|to| {
-            let s = &stations[to - 1];
-            let rot = Rotation3::from_axis_angle(&Vector3::z_axis(), s.heading_rad);
-            DanceCycle {
-                cycle: to,
-                from: to - 1,
-                to,
-                children: formation_m.iter().map(|o| s.position + rot * o).collect(),
-            }
+            let from = to - 1;
+            let moved = if from.is_multiple_of(hops) {
+                let s = &stations[from];
+                let rot = Rotation3::from_axis_angle(&Vector3::z_axis(), s.heading_rad);
+                children = formation_m.iter().map(|o| s.position + rot * o).collect();
+                (0..formation_m.len()).collect()
+            } else {
+                Vec::new()
+            };
+            DanceCycle { cycle: to, from, to, children: children.clone(), moved }
         })
         .collect();
     Ok(Dance { stations, cycles })
@@ -61,9 +129,70 @@ pub fn leapfrog(stations: Vec<Station>, formation_m: &Formation) -> Result<Dance
 /// The schedule of a robot alone (no children, no total station): it
 /// drives from station to station; every cycle has no children.
 pub fn solo(stations: Vec<Station>) -> Dance {
-    let cycles =
-        (1..stations.len()).map(|to| DanceCycle { cycle: to, from: to - 1, to, children: Vec::new() }).collect();
+    let cycles = (1..stations.len())
+        .map(|to| DanceCycle { cycle: to, from: to - 1, to, children: Vec::new(), moved: Vec::new() })
+        .collect();
     Dance { stations, cycles }
+}
+
+/// A formation generated from a few parameters, for any number of children
+/// (offsets forward, left, up in the parent frame at the placing station).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum FormationKind {
+    /// Pairs to either side: pair k at (forward, ±lateral·(k+1)); an odd
+    /// last child stands straight ahead at (forward, 0).
+    Symmetric {
+        /// Forward offset, metres (negative: behind).
+        forward_m: f64,
+        /// Lateral offset of the first pair, metres (> 0).
+        lateral_m: f64,
+    },
+    /// On an arc of `radius_m` around the parent, spread evenly over
+    /// `spread_deg` centred on the heading (`spread_deg` = 0 with one child).
+    Fan {
+        /// Distance from the parent, metres.
+        radius_m: f64,
+        /// Angle from the first to the last child, degrees (0 < spread < 360).
+        spread_deg: f64,
+    },
+    /// In a line along the heading: child j at (ahead + j·spacing, 0);
+    /// negative `ahead_m` and `spacing_m` put the line behind.
+    Line {
+        /// Forward offset of the first child, metres.
+        ahead_m: f64,
+        /// Distance between consecutive children along the line, metres.
+        spacing_m: f64,
+    },
+}
+
+impl FormationKind {
+    /// The offsets of `n` children, all at height `up_m` relative to the
+    /// parent's instrument.
+    pub fn offsets(&self, n: usize, up_m: f64) -> Vec<Vector3<f64>> {
+        (0..n)
+            .map(|j| match *self {
+                FormationKind::Symmetric { forward_m, lateral_m } => {
+                    let pair = (j / 2 + 1) as f64;
+                    if j + 1 == n && n % 2 == 1 {
+                        Vector3::new(forward_m, 0.0, up_m)
+                    } else if j % 2 == 0 {
+                        Vector3::new(forward_m, lateral_m * pair, up_m)
+                    } else {
+                        Vector3::new(forward_m, -lateral_m * pair, up_m)
+                    }
+                }
+                FormationKind::Fan { radius_m, spread_deg } => {
+                    let a = if n > 1 {
+                        spread_deg.to_radians() * (0.5 - j as f64 / (n - 1) as f64)
+                    } else {
+                        0.0
+                    };
+                    Vector3::new(radius_m * a.cos(), radius_m * a.sin(), up_m)
+                }
+                FormationKind::Line { ahead_m, spacing_m } => Vector3::new(ahead_m + j as f64 * spacing_m, 0.0, up_m),
+            })
+            .collect()
+    }
 }
 
 impl Dance {
@@ -84,6 +213,9 @@ impl Dance {
         for c in &self.cycles {
             for (phase, station) in [(Phase::Placement, c.from), (Phase::Fix, c.to)] {
                 for (child, p) in c.children.iter().enumerate() {
+                    if phase == Phase::Placement && !c.moved.contains(&child) {
+                        continue;
+                    }
                     let range_m = (p - self.stations[station].position).norm();
                     if instrument.check_range(child, range_m).is_err() {
                         out.push(PlanError::ChildOutOfRange {
@@ -102,7 +234,107 @@ impl Dance {
     }
 }
 
-/// Runs `dance` through `team`: in every cycle each child is placed from the
+/// A robot of the team.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Robot {
+    /// The parent (total station, scanner).
+    Parent,
+    /// Child `j` (a prism), team order.
+    Child(usize),
+}
+
+/// One action of a schedule.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Action {
+    /// A child drives in a straight line from `from` to `to` (prism
+    /// positions; at its first placement a child starts where it is placed).
+    MoveChild {
+        /// Child index.
+        child: usize,
+        /// Start of the move.
+        from: Point3<f64>,
+        /// End of the move.
+        to: Point3<f64>,
+    },
+    /// The parent, standing at `station`, measures a child.
+    Measure {
+        /// Child index.
+        child: usize,
+        /// The parent's station.
+        station: usize,
+        /// Placement of a child that has moved, or the parent's fix.
+        phase: Phase,
+    },
+    /// The parent drives from station `from` to station `to`.
+    MoveParent {
+        /// Station left.
+        from: usize,
+        /// Station reached.
+        to: usize,
+    },
+    /// The parent fixes its pose at `station` from the children.
+    Fix {
+        /// The station.
+        station: usize,
+    },
+    /// The parent takes a 3D scan at `station`.
+    Scan {
+        /// The station.
+        station: usize,
+    },
+}
+
+/// One step of a schedule: its index in [`Dance::steps`], the dance cycle it
+/// belongs to (0 before the first) and what happens.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Step {
+    /// Position in the schedule, 0-based.
+    pub index: usize,
+    /// Dance cycle, 1-based (0: the start, before the first cycle).
+    pub cycle: usize,
+    /// What happens.
+    pub action: Action,
+}
+
+impl Dance {
+    /// The schedule as the runner executes it: a scan at station 0 if due;
+    /// then per cycle each moved child's move and placement measurement, the
+    /// parent's move, its measurement of every child, its fix, and a scan
+    /// if one is due at the new station (`scan_at(station)`).
+    pub fn steps(&self, scan_at: impl Fn(usize) -> bool) -> Vec<Step> {
+        let mut out = Vec::new();
+        let mut push = |cycle, action| {
+            let index = out.len();
+            out.push(Step { index, cycle, action });
+        };
+        if scan_at(0) {
+            push(0, Action::Scan { station: 0 });
+        }
+        let mut at: Vec<Option<Point3<f64>>> = vec![None; self.n_children()];
+        for c in &self.cycles {
+            for &j in &c.moved {
+                let to = c.children[j];
+                let from = at[j].unwrap_or(to);
+                at[j] = Some(to);
+                push(c.cycle, Action::MoveChild { child: j, from, to });
+                push(c.cycle, Action::Measure { child: j, station: c.from, phase: Phase::Placement });
+            }
+            push(c.cycle, Action::MoveParent { from: c.from, to: c.to });
+            for j in 0..c.children.len() {
+                push(c.cycle, Action::Measure { child: j, station: c.to, phase: Phase::Fix });
+            }
+            if !c.children.is_empty() {
+                push(c.cycle, Action::Fix { station: c.to });
+            }
+            if scan_at(c.to) {
+                push(c.cycle, Action::Scan { station: c.to });
+            }
+        }
+        out
+    }
+}
+
+/// Runs `dance` through `team`: in every cycle each moved child is placed from the
 /// reading `read(station, child)` taken at the standing parent's nominal
 /// station, then the parent fixes itself at the next station from fresh
 /// readings; `after_fix` sees the team after each fix. With
@@ -120,7 +352,8 @@ pub fn run_dance(
     for c in &dance.cycles {
         let model = |source| PlanError::Model { cycle: c.cycle, source };
         let from = dance.station_pose(c.from);
-        for (j, child) in c.children.iter().enumerate() {
+        for &j in &c.moved {
+            let child = &c.children[j];
             let reading = read(&from, child).map_err(model)?;
             team.place_child(j, &reading, instrument).map_err(model)?;
         }
@@ -134,4 +367,44 @@ pub fn run_dance(
         after_fix(c, team);
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn generated_formations() {
+        let s = FormationKind::Symmetric { forward_m: 3.0, lateral_m: 2.0 }.offsets(5, -0.5);
+        let xy: Vec<(f64, f64, f64)> = s.iter().map(|o| (o.x, o.y, o.z)).collect();
+        assert_eq!(
+            xy,
+            [(3.0, 2.0, -0.5), (3.0, -2.0, -0.5), (3.0, 4.0, -0.5), (3.0, -4.0, -0.5), (3.0, 0.0, -0.5)]
+        );
+        let f = FormationKind::Fan { radius_m: 10.0, spread_deg: 90.0 }.offsets(3, 0.0);
+        let half = 10.0 * std::f64::consts::FRAC_1_SQRT_2;
+        for (o, e) in f.iter().zip([(half, half), (10.0, 0.0), (half, -half)]) {
+            assert!((o.x - e.0).abs() < 1e-12 && (o.y - e.1).abs() < 1e-12, "{o:?}");
+        }
+        let l = FormationKind::Line { ahead_m: -2.0, spacing_m: -3.0 }.offsets(3, 0.0);
+        assert_eq!(l.iter().map(|o| o.x).collect::<Vec<_>>(), [-2.0, -5.0, -8.0]);
+    }
+
+    #[test]
+    fn parent_hops_place_the_children_every_h_stations() {
+        let route = [Point3::new(0.0, 0.0, 0.0), Point3::new(35.0, 0.0, 0.0)];
+        let formation = FormationKind::Symmetric { forward_m: 6.0, lateral_m: 4.0 }.offsets(2, 0.0);
+        let d = schedule(crate::stations(&route, 5.0).expect("route"), &formation, Strategy::ParentHops { hops: 3 })
+            .expect("dance");
+        let placed: Vec<usize> = d.cycles.iter().filter(|c| !c.moved.is_empty()).map(|c| c.from).collect();
+        assert_eq!(placed, [0, 3, 6]);
+        // Between placements the children stand still.
+        assert_eq!(d.cycles[1].children, d.cycles[0].children);
+        assert_eq!(d.cycles[3].children[0], Point3::new(21.0, 4.0, 0.0));
+        assert!(matches!(
+            schedule(d.stations.clone(), &formation, Strategy::ParentHops { hops: 0 }),
+            Err(PlanError::BadHops { value: 0 })
+        ));
+        assert_eq!(leapfrog(d.stations.clone(), &formation).expect("dance").cycles.iter().filter(|c| c.moved.len() == 2).count(), 7);
+    }
 }

@@ -42,6 +42,12 @@ pub enum PlanError {
         /// The stride given.
         value: f64,
     },
+    /// Parent hops need at least one move per placement.
+    #[error("hops = {value}; expected an integer ≥ 1")]
+    BadHops {
+        /// The value given.
+        value: usize,
+    },
     /// A formation needs one offset per child.
     #[error("formation_m has {got} offsets but the team has {expected} children")]
     FormationSize {

@@ -7,13 +7,17 @@
 //! [`montecarlo`] executes the dance with noisy readings to check it.
 #![warn(missing_docs)]
 
+pub mod constraints;
 pub mod dance;
 pub mod error;
 pub mod montecarlo;
 pub mod predict;
 pub mod route;
 
-pub use dance::{Dance, DanceCycle, Formation, leapfrog, run_dance, solo};
+pub use constraints::{Check, Limits, Violation, check};
+pub use dance::{
+    Action, Dance, DanceCycle, Formation, FormationKind, Robot, Step, Strategy, leapfrog, run_dance, schedule, solo,
+};
 pub use error::{Phase, PlanError};
 pub use predict::{CyclePrediction, OdometryNoise, Prediction, predict, predict_odometry};
 pub use route::{Station, stations};

@@ -27,8 +27,11 @@ fn instrument() -> Instrument {
 /// is χ²_{4n}/n: |NEES − 4| < 3·√(8/n). The same for the heading variance:
 /// |s_θ/P_θθ − 1| < 3·√(2/n).
 fn check(formation: &[Vector3<f64>], start: Matrix4<f64>, trials: usize, seed: u64) {
-    let dance = common::straight_dance(10, 10.0, formation);
-    let stats = monte_carlo(&dance, &instrument(), &start, trials, seed).expect("runs");
+    check_dance(&common::straight_dance(10, 10.0, formation), start, trials, seed);
+}
+
+fn check_dance(dance: &planner::Dance, start: Matrix4<f64>, trials: usize, seed: u64) {
+    let stats = monte_carlo(dance, &instrument(), &start, trials, seed).expect("runs");
     let last = stats.last().expect("cycles");
     let p_xy = Matrix2::from_fn(|i, j| last.predicted[(i, j)]);
     let n = trials as f64;
@@ -58,6 +61,17 @@ fn three_children_with_an_uncertain_start_match_monte_carlo() {
     let formation = vec![Vector3::new(5.0, 8.0, 0.0), Vector3::new(5.0, -8.0, 0.0), Vector3::new(15.0, 0.0, 0.5)];
     let start = Matrix4::from_diagonal(&nalgebra::Vector4::new(1e-4, 2e-4, 1e-4, (20.0 * RAD_PER_ARCSEC).powi(2)));
     check(&formation, start, 1000, 3);
+}
+
+#[test]
+fn parent_hops_match_monte_carlo() {
+    // Children placed 10 m ahead every third station; the parent fixes
+    // itself three times from the same children (their errors are shared
+    // by the three fixes: the cross-covariances must be carried).
+    let formation = common::symmetric(10.0, 8.0);
+    let dance = common::straight_schedule(12, 5.0, &formation, planner::Strategy::ParentHops { hops: 3 });
+    assert_eq!(dance.cycles.iter().filter(|c| !c.moved.is_empty()).count(), 4);
+    check_dance(&dance, Matrix4::zeros(), 1000, 4);
 }
 
 #[test]

@@ -2,12 +2,18 @@
 #![allow(dead_code)]
 
 use nalgebra::{Point3, Vector3};
-use planner::{Dance, leapfrog, stations};
+use planner::{Dance, Strategy, leapfrog, schedule, stations};
 
 /// A straight route of `cycles` strides of `stride_m` along +x.
 pub fn straight_dance(cycles: usize, stride_m: f64, formation: &[Vector3<f64>]) -> Dance {
     let route = [Point3::origin(), Point3::new(cycles as f64 * stride_m, 0.0, 0.0)];
     leapfrog(stations(&route, stride_m).expect("valid route"), formation).expect("valid formation")
+}
+
+/// A straight route of `cycles` strides along +x, danced with `strategy`.
+pub fn straight_schedule(cycles: usize, stride_m: f64, formation: &[Vector3<f64>], strategy: Strategy) -> Dance {
+    let route = [Point3::origin(), Point3::new(cycles as f64 * stride_m, 0.0, 0.0)];
+    schedule(stations(&route, stride_m).expect("valid route"), formation, strategy).expect("valid formation")
 }
 
 /// An L-shaped route with a climb: 30 m along x, then 12 m along y up 1 m.
