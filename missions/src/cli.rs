@@ -29,6 +29,23 @@ pub enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Check a mission's plan step by step (ranges, line of sight, tracking,
+    /// clearance, slope, scan range), analyse its accuracy, and with
+    /// --optimize search formation, stride and strategy (exit 1 when the
+    /// plan breaks a constraint or misses the acceptance tolerance).
+    Plan {
+        /// The mission file (TOML).
+        mission: PathBuf,
+        /// Search [plan.search] for the best plan that keeps every constraint.
+        #[arg(long)]
+        optimize: bool,
+        /// Write the chosen plan as a complete mission file.
+        #[arg(long, value_name = "FILE", requires = "optimize")]
+        out: Option<PathBuf>,
+        /// Print one JSON object instead of the text report.
+        #[arg(long)]
+        json: bool,
+    },
     /// Check a mission file and report every problem with file:line:column.
     Validate {
         /// The mission file (TOML).
@@ -134,8 +151,26 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> anyhow::Result<Outcome> {
                 Outcome::AcceptanceFailed
             })
         }
+        Command::Plan { mission, optimize, out: file, json } => {
+            let m = Mission::load(&mission)?;
+            let report = crate::plan::plan(&m, optimize)?;
+            if json {
+                crate::plan::write_json(out, &m, &report)?;
+            } else {
+                crate::plan::write_table(out, &m, &report)?;
+            }
+            if let (Some(file), Some(o)) = (file, &report.optimized) {
+                crate::plan::write_mission(&m, o, &file)?;
+                if !json {
+                    writeln!(out, "wrote {}", file.display())?;
+                }
+            }
+            out.flush()?;
+            Ok(if crate::plan::accepted(&m, &report) { Outcome::Success } else { Outcome::AcceptanceFailed })
+        }
         Command::Run { mission, out: dir, quiet, resume, spawn, connect, sim_fault, abort_after_events } => {
             let m = Mission::load(&mission)?;
+            crate::plan::refuse_violations(&m, &crate::predict::dance(&m)?)?;
             let dir = dir.unwrap_or_else(|| PathBuf::from("runs").join(&m.name));
             let viewer = match (spawn, connect) {
                 (true, _) => Viewer::Spawn,
@@ -171,7 +206,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> anyhow::Result<Outcome> {
         }
         Command::Validate { mission } => {
             let m = Mission::load(&mission)?;
-            crate::predict::dance(&m)?;
+            crate::plan::refuse_violations(&m, &crate::predict::dance(&m)?)?;
             writeln!(out, "{}: ok (mission \"{}\", {} children)", mission.display(), m.name, m.children.len())?;
             Ok(Outcome::Success)
         }

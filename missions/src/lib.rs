@@ -15,6 +15,7 @@ pub mod fuse;
 pub mod journal;
 pub mod mission;
 pub mod montecarlo;
+pub mod plan;
 pub mod predict;
 pub mod reader;
 pub mod recording;

@@ -22,8 +22,38 @@ pub struct Plan {
     pub stride_m: f64,
     /// Child offsets (forward, left, up) in the parent frame, team order, metres.
     pub formation_m: Vec<Vector3<f64>>,
+    /// The generated formation (`formation = { kind = ... }`) the offsets
+    /// come from, with its `up_m`; `None` when `formation_m` lists them.
+    pub formation: Option<(planner::FormationKind, f64)>,
     /// Covariance of the start pose (x, y, z, θ), m² and rad²; zero when known.
     pub start_covariance: Matrix4<f64>,
+    /// How the team advances (`strategy`, `hops`).
+    pub strategy: planner::Strategy,
+    /// The moving robot must stay in sight (`track`, default false).
+    pub track: bool,
+    /// Steepest move, radians (`max_slope_deg`; `None`: unchecked).
+    pub max_slope_rad: Option<f64>,
+    /// Radius of every robot's footprint, metres (`[team] footprint_radius_m`,
+    /// default 0.3).
+    pub footprint_radius_m: f64,
+    /// What `plan --optimize` may change (`[plan.search]`).
+    pub search: Search,
+}
+
+/// The space `cps-survey plan --optimize` searches (`[plan.search]`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Search {
+    /// Strategies to try (`strategies`, default both).
+    pub strategies: Vec<String>,
+    /// Largest `hops` tried for parent hops (`max_hops`, default 4).
+    pub max_hops: usize,
+    /// Strides to try, metres (`strides_m`; default the written stride
+    /// × 0.5, 0.75, 1, 1.25, 1.5 and 2).
+    pub strides_m: Vec<f64>,
+    /// Longest sight line a formation may need, metres
+    /// (`max_sight_line_m`; default the total station's `max_range_m`,
+    /// at most 200 m).
+    pub max_sight_line_m: f64,
 }
 
 /// Pass/fail tolerances.
@@ -44,6 +74,10 @@ pub struct Backend {
     pub scene: String,
     /// `scene_file`: the file's resolved path and text (checked to parse).
     pub scene_file: Option<(PathBuf, String)>,
+    /// Whether the file has a `[backend]` table: the plan is then checked
+    /// against its scene (line of sight, tracking, clearance, scan range);
+    /// without one it is planned in open space.
+    pub given: bool,
     /// Seed of every simulated device (`seed`, default 1).
     pub seed: u64,
     /// Attempts after the first when a device command fails
@@ -198,8 +232,16 @@ pub struct Spans {
     pub route_m: Vec<Range<usize>>,
     /// `stride_m`.
     pub stride_m: Range<usize>,
-    /// Each `formation_m` offset.
+    /// Each `formation_m` offset (each the `formation` table when generated).
     pub formation_m: Vec<Range<usize>>,
+    /// The value of `formation_m` or `formation`.
+    pub formation_value: Range<usize>,
+    /// The values of `strategy` and `hops`, where given.
+    pub strategy: Option<Range<usize>>,
+    /// The value of `hops`, where given.
+    pub hops: Option<Range<usize>>,
+    /// The value of `[backend] scene_file`, where given.
+    pub scene_file: Option<Range<usize>>,
     /// `[scan] stations`, when given.
     pub scan_stations: Option<Range<usize>>,
 }
@@ -365,6 +407,8 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>, scene_override: Op
 
     let mut team = root.table(r, "team");
     let children = team.required(r, "children", "the child robots' names, e.g. [\"c1\", \"c2\"]", read_children);
+    let footprint =
+        team.optional(r, "footprint_radius_m", |r, v, f| r.number_in(v, f, 0.0, false, Some(10.0)).map(At::into_inner));
     team.finish(r);
 
     let solo = children.as_ref().is_some_and(Vec::is_empty);
@@ -395,6 +439,7 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>, scene_override: Op
     let max_err = acc.optional(r, "max_station_error_m", positive);
     acc.finish(r);
 
+    let backend_given = root.has("backend");
     let mut b = root.table(r, "backend");
     let kind = b.optional(r, "kind", |r, v, f| {
         let k = r.choice(v, f, &["sim", "serial"])?;
@@ -423,7 +468,8 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>, scene_override: Op
             r.problem(&name.span(), f, format!("scene file {}: {e}", path.display()));
             return None;
         }
-        Some((name.into_inner(), path, text))
+        let span = name.span();
+        Some((name.into_inner(), path, text, span))
     });
     if b.has("scene") && b.has("scene_file") {
         let span = b.get("scene_file").map_or(b.span(), |v| v.span());
@@ -529,9 +575,12 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>, scene_override: Op
     let rerun = o.optional(r, "rerun", |r, v, f| r.boolean(v, f));
     o.finish(r);
 
-    let (plan, mut spans) = plan?;
+    let (mut plan, mut spans) = plan?;
+    plan.footprint_radius_m = footprint?.unwrap_or(plan.footprint_radius_m);
     let listed = listed?;
     spans.scan_stations = listed.as_ref().map(|(_, span)| span.clone());
+    let scene_file = scene_file?;
+    spans.scene_file = scene_file.as_ref().map(|(_, _, _, span)| span.clone());
     let d = ScanPlan::default();
     Some(Parts {
         name: name?,
@@ -543,11 +592,12 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>, scene_override: Op
             kind?;
             Backend {
                 scene: match (&scene_file, scene?) {
-                    (Some(Some((written, _, _))), _) => written.clone(),
+                    (Some((written, _, _, _)), _) => written.clone(),
                     (_, Some(name)) => name,
                     _ => "hall".into(),
                 },
-                scene_file: scene_file?.map(|(_, path, text)| (path, text)),
+                scene_file: scene_file.map(|(_, path, text, _)| (path, text)),
+                given: backend_given,
                 seed: seed?.unwrap_or(1),
                 max_retries: retries?.map_or(2, |n| n as u32),
                 retry_delay_s: delay?.unwrap_or(0.5),
@@ -700,13 +750,30 @@ fn read_plan(r: &mut Reader<'_>, t: &mut Table<'_, '_>, n_children: Option<usize
         }
         Some(offsets)
     };
+    let n = n_children.unwrap_or(0);
     let formation = if n_children == Some(0) {
-        if let Some(v) = t.get("formation_m") {
-            r.problem(&v.span(), "plan.formation_m", "the team has no children to place; remove formation_m");
+        for key in ["formation_m", "formation"] {
+            if let Some(v) = t.get(key) {
+                r.problem(&v.span(), &format!("plan.{key}"), "the team has no children to place; remove it");
+            }
         }
-        Some(Vec::new())
+        Some(Formation::Listed(Vec::new(), 0..0))
+    } else if t.has("formation") {
+        if let Some(v) = t.get("formation_m") {
+            r.problem(&v.span(), "plan.formation_m", "give either formation_m or formation, not both");
+        }
+        let span = t.get("formation").map_or(t.span(), |v| v.span());
+        let mut g = t.table(r, "formation");
+        let kind = read_formation_kind(r, &mut g);
+        g.finish(r);
+        kind.map(|(kind, up)| Formation::Generated(kind, up, span))
     } else {
-        t.required(r, "formation_m", "one offset [forward, left, up] in metres per child", read_formation)
+        t.required(
+            r,
+            "formation_m",
+            "one offset [forward, left, up] in metres per child (or a generated formation = { kind = ... })",
+            |r, v, f| read_formation(r, v, f).map(|o| Formation::Listed(o, v.span())),
+        )
     };
     let start_sigma = t.optional(r, "start_sigma_m", |r, v, f| {
         let p = r.point3(v, f)?;
@@ -721,21 +788,135 @@ fn read_plan(r: &mut Reader<'_>, t: &mut Table<'_, '_>, n_children: Option<usize
     });
     let start_heading =
         t.optional(r, "start_sigma_heading_arcsec", |r, v, f| r.number_in(v, f, 0.0, true, None).map(At::into_inner));
+    let strategy_v =
+        t.optional(r, "strategy", |r, v, f| r.choice(v, f, &planner::STRATEGIES).map(|s| (s.into_inner(), v.span())));
+    let hops_v = t.optional(r, "hops", |r, v, f| r.integer_in(v, f, 1, 1000).map(|h| (h as usize, v.span())));
+    let track = t.optional(r, "track", |r, v, f| r.boolean(v, f));
+    let slope = t.optional(r, "max_slope_deg", |r, v, f| r.number_in(v, f, 0.0, false, Some(90.0)).map(At::into_inner));
+    let mut st = t.table(r, "search");
+    let strategies = st.optional(r, "strategies", |r, v, f| {
+        let list = r.array(v, f, |r, e, f| r.choice(e, f, &planner::STRATEGIES).map(At::into_inner))?;
+        if list.is_empty() {
+            r.problem(&v.span(), f, format!("expected at least one of {}", planner::STRATEGIES.join(", ")));
+            return None;
+        }
+        Some(list)
+    });
+    let max_hops = st.optional(r, "max_hops", |r, v, f| r.integer_in(v, f, 2, 100).map(|h| h as usize));
+    let strides = st.optional(r, "strides_m", |r, v, f| {
+        let list = r.array(v, f, |r, e, f| r.number_in(e, f, 0.0, false, None).map(At::into_inner))?;
+        if list.is_empty() {
+            r.problem(&v.span(), f, "expected at least one stride");
+            return None;
+        }
+        Some(list)
+    });
+    let sight = st.optional(r, "max_sight_line_m", |r, v, f| r.number_in(v, f, 0.0, false, None).map(At::into_inner));
+    st.finish(r);
+    let (strategy_v, hops_v) = (strategy_v?, hops_v?);
+    let strategy = match (strategy_v.as_ref().map(|(s, _)| s.as_str()), &hops_v) {
+        (Some("parent-hops"), hops) => Some(planner::Strategy::ParentHops { hops: hops.as_ref().map_or(2, |h| h.0) }),
+        (_, Some((_, span))) => {
+            r.problem(
+                span,
+                "plan.hops",
+                "hops applies to strategy = \"parent-hops\" only; remove it or set the strategy",
+            );
+            None
+        }
+        _ => Some(planner::Strategy::Leapfrog),
+    };
     let (route, stride, formation) = (route?, stride?, formation?);
+    let (strategy, track, slope) = (strategy?, track?, slope?);
     let s = start_sigma?.unwrap_or([0.0; 3]);
     let h = start_heading?.unwrap_or(0.0) * RAD_PER_ARCSEC;
+    let (offsets, generated, offset_spans, formation_value) = match formation {
+        Formation::Listed(o, span) => {
+            let spans = o.iter().map(|p| p.span()).collect();
+            (o.iter().map(|p| Vector3::from(*p.get_ref())).collect(), None, spans, span)
+        }
+        Formation::Generated(kind, up, span) => (kind.offsets(n, up), Some((kind, up)), vec![span.clone(); n], span),
+    };
     let spans = Spans {
         plan: t.span(),
         route_m: route.iter().map(|p| p.span()).collect(),
         stride_m: stride.1.clone(),
-        formation_m: formation.iter().map(|p| p.span()).collect(),
+        formation_m: offset_spans,
+        formation_value,
+        strategy: strategy_v.map(|(_, span)| span),
+        hops: hops_v.map(|(_, span)| span),
         scan_stations: None,
+        scene_file: None,
     };
+    let stride_m = stride.0;
     let plan = Plan {
         route_m: route.iter().map(|p| Point3::from(*p.get_ref())).collect(),
-        stride_m: stride.0,
-        formation_m: formation.iter().map(|p| Vector3::from(*p.get_ref())).collect(),
+        stride_m,
+        formation_m: offsets,
+        formation: generated,
         start_covariance: Matrix4::from_diagonal(&Vector4::new(s[0] * s[0], s[1] * s[1], s[2] * s[2], h * h)),
+        strategy,
+        track: track.unwrap_or(false),
+        max_slope_rad: slope.map(f64::to_radians),
+        footprint_radius_m: 0.3,
+        search: Search {
+            strategies: strategies?.unwrap_or_else(|| planner::STRATEGIES.iter().map(|s| s.to_string()).collect()),
+            max_hops: max_hops?.unwrap_or(4),
+            strides_m: strides?.unwrap_or_else(|| [0.5, 0.75, 1.0, 1.25, 1.5, 2.0].map(|f| f * stride_m).to_vec()),
+            max_sight_line_m: sight?.unwrap_or(f64::INFINITY),
+        },
     };
     Some((plan, spans))
+}
+
+enum Formation {
+    Listed(Vec<At<[f64; 3]>>, Range<usize>),
+    Generated(planner::FormationKind, f64, Range<usize>),
+}
+
+/// `formation = { kind = "symmetric" | "fan" | "line", ..., up_m }`.
+fn read_formation_kind(r: &mut Reader<'_>, g: &mut Table<'_, '_>) -> Option<(planner::FormationKind, f64)> {
+    use planner::FormationKind;
+    let kind = g.required(r, "kind", "one of \"symmetric\", \"fan\", \"line\"", |r, v, f| {
+        r.choice(v, f, &["symmetric", "fan", "line"]).map(At::into_inner)
+    })?;
+    let num =
+        |r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, f: &str| r.number(v, f).map(At::into_inner);
+    let positive = |r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, f: &str| {
+        r.number_in(v, f, 0.0, false, None).map(At::into_inner)
+    };
+    let up = g.optional(r, "up_m", num);
+    let kind = match kind.as_str() {
+        "symmetric" => {
+            let forward = g.required(r, "forward_m", "the children's forward offset in metres", num);
+            let lateral = g.required(r, "lateral_m", "the first pair's lateral offset in metres (> 0)", positive);
+            FormationKind::Symmetric { forward_m: forward?, lateral_m: lateral? }
+        }
+        "fan" => {
+            let radius = g.required(r, "radius_m", "the children's distance from the parent in metres (> 0)", positive);
+            let spread = g.required(
+                r,
+                "spread_deg",
+                "the angle from the first to the last child in degrees (0 to 359)",
+                |r, v, f| r.number_in(v, f, 0.0, false, Some(359.0)).map(At::into_inner),
+            );
+            FormationKind::Fan { radius_m: radius?, spread_deg: spread? }
+        }
+        _ => {
+            let ahead = g.required(r, "ahead_m", "the first child's forward offset in metres (≠ 0)", num);
+            let spacing =
+                g.required(r, "spacing_m", "the distance between children along the line in metres (≠ 0)", num);
+            let (ahead, spacing) = (ahead?, spacing?);
+            if ahead == 0.0 || spacing == 0.0 {
+                r.problem(
+                    &g.span(),
+                    "plan.formation",
+                    "a line needs ahead_m ≠ 0 and spacing_m ≠ 0 (a child on the parent)",
+                );
+                return None;
+            }
+            FormationKind::Line { ahead_m: ahead, spacing_m: spacing }
+        }
+    };
+    Some((kind, up?.unwrap_or(0.0)))
 }

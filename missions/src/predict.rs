@@ -15,19 +15,26 @@ pub fn dance(mission: &Mission) -> Result<Dance, MissionError> {
 }
 
 fn dance_or_diagnostics(mission: &Mission) -> Result<Dance, Diagnostics> {
+    let dance = schedule(mission)?;
+    if let Some(instrument) = &mission.total_station {
+        let violations = dance.range_violations(instrument);
+        if !violations.is_empty() {
+            return Err(plan_diagnostics(mission, violations));
+        }
+    }
+    Ok(dance)
+}
+
+/// Builds the mission's schedule without checking ranges (`plan` reports
+/// them as violations); route, stride, formation and scan-list errors
+/// point at the mission file.
+pub fn schedule(mission: &Mission) -> Result<Dance, Diagnostics> {
     let plan = &mission.plan;
     let stations = planner::stations(&plan.route_m, plan.stride_m).map_err(|e| plan_diagnostics(mission, vec![e]))?;
     let dance = match &mission.total_station {
         None => planner::solo(stations),
-        Some(instrument) => {
-            let dance =
-                planner::leapfrog(stations, &plan.formation_m).map_err(|e| plan_diagnostics(mission, vec![e]))?;
-            let violations = dance.range_violations(instrument);
-            if !violations.is_empty() {
-                return Err(plan_diagnostics(mission, violations));
-            }
-            dance
-        }
+        Some(_) => planner::schedule(stations, &plan.formation_m, plan.strategy)
+            .map_err(|e| plan_diagnostics(mission, vec![e]))?,
     };
     if let (Some(list), Some(span)) = (&mission.scan.stations, &mission.spans.scan_stations)
         && let Some(k) = list.iter().find(|k| **k >= dance.stations.len())
@@ -90,6 +97,7 @@ fn plan_diagnostics(mission: &Mission, errors: Vec<PlanError>) -> Diagnostics {
                 format!("plan.route_m[{waypoint}]"),
             ),
             PlanError::BadStride { .. } => (spans.stride_m.clone(), "plan.stride_m".to_string()),
+            PlanError::BadHops { .. } => (spans.hops.clone().unwrap_or(spans.plan.clone()), "plan.hops".to_string()),
             PlanError::FormationSize { .. } | PlanError::TooFewChildren { .. } => {
                 (spans.formation_m.first().cloned().unwrap_or(spans.plan.clone()), "plan.formation_m".to_string())
             }

@@ -450,7 +450,10 @@ mod tests {
         // Slope: a ramp of 1 m over 4 m is 14°.
         let ramp = [Point3::new(0.0, 0.0, 1.5), Point3::new(4.0, 0.0, 2.5)];
         let up = schedule(stations(&ramp, 5.0).expect("route"), &tight, Strategy::Leapfrog).expect("dance");
-        let v = check(&up, None, &Limits { max_slope_rad: Some(10f64.to_radians()), ..Limits::range(0.0, 100.0) }, |_| false);
+        let v =
+            check(&up, None, &Limits { max_slope_rad: Some(10f64.to_radians()), ..Limits::range(0.0, 100.0) }, |_| {
+                false
+            });
         assert_eq!(v.len(), 1);
         assert_eq!(v[0].check, Check::Slope);
         assert!((v[0].value - 0.25f64.atan()).abs() < 1e-12);

@@ -13,7 +13,7 @@
 
 use nalgebra::{Point3, Rotation3, Vector3};
 
-use cps::{FixOptions, Instrument, ParentPose, Reading, TeamState};
+use cps::{FixOptions, Instrument, ParentFix, ParentPose, Reading, TeamState};
 
 use crate::error::{Phase, PlanError};
 use crate::route::Station;
@@ -48,6 +48,9 @@ pub struct Dance {
 /// Formation offsets (forward, left, up) of each child in the parent frame,
 /// metres.
 pub type Formation = [Vector3<f64>];
+
+/// Strategy names as written in mission files.
+pub const STRATEGIES: [&str; 2] = ["leapfrog", "parent-hops"];
 
 /// How the team advances.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -182,11 +185,7 @@ impl FormationKind {
                     }
                 }
                 FormationKind::Fan { radius_m, spread_deg } => {
-                    let a = if n > 1 {
-                        spread_deg.to_radians() * (0.5 - j as f64 / (n - 1) as f64)
-                    } else {
-                        0.0
-                    };
+                    let a = if n > 1 { spread_deg.to_radians() * (0.5 - j as f64 / (n - 1) as f64) } else { 0.0 };
                     Vector3::new(radius_m * a.cos(), radius_m * a.sin(), up_m)
                 }
                 FormationKind::Line { ahead_m, spacing_m } => Vector3::new(ahead_m + j as f64 * spacing_m, 0.0, up_m),
@@ -337,7 +336,7 @@ impl Dance {
 /// Runs `dance` through `team`: in every cycle each moved child is placed from the
 /// reading `read(station, child)` taken at the standing parent's nominal
 /// station, then the parent fixes itself at the next station from fresh
-/// readings; `after_fix` sees the team after each fix. With
+/// readings; `after_fix` sees the team and the fix after each fix. With
 /// `start_at_nominal`, Gauss–Newton starts at the planned station instead of
 /// the closed-form start (prediction: the readings are exact).
 pub fn run_dance(
@@ -346,7 +345,7 @@ pub fn run_dance(
     instrument: &Instrument,
     start_at_nominal: bool,
     mut read: impl FnMut(&ParentPose, &Point3<f64>) -> cps::Result<Reading>,
-    mut after_fix: impl FnMut(&DanceCycle, &TeamState),
+    mut after_fix: impl FnMut(&DanceCycle, &TeamState, &ParentFix),
 ) -> Result<(), PlanError> {
     let mut readings = Vec::with_capacity(dance.n_children());
     for c in &dance.cycles {
@@ -363,8 +362,8 @@ pub fn run_dance(
             readings.push((j, read(&to, child).map_err(model)?));
         }
         let options = FixOptions { initial: start_at_nominal.then_some(to), ..FixOptions::default() };
-        team.fix_parent(&readings, instrument, &options).map_err(model)?;
-        after_fix(c, team);
+        let fix = team.fix_parent(&readings, instrument, &options).map_err(model)?;
+        after_fix(c, team, &fix);
     }
     Ok(())
 }
@@ -377,10 +376,7 @@ mod tests {
     fn generated_formations() {
         let s = FormationKind::Symmetric { forward_m: 3.0, lateral_m: 2.0 }.offsets(5, -0.5);
         let xy: Vec<(f64, f64, f64)> = s.iter().map(|o| (o.x, o.y, o.z)).collect();
-        assert_eq!(
-            xy,
-            [(3.0, 2.0, -0.5), (3.0, -2.0, -0.5), (3.0, 4.0, -0.5), (3.0, -4.0, -0.5), (3.0, 0.0, -0.5)]
-        );
+        assert_eq!(xy, [(3.0, 2.0, -0.5), (3.0, -2.0, -0.5), (3.0, 4.0, -0.5), (3.0, -4.0, -0.5), (3.0, 0.0, -0.5)]);
         let f = FormationKind::Fan { radius_m: 10.0, spread_deg: 90.0 }.offsets(3, 0.0);
         let half = 10.0 * std::f64::consts::FRAC_1_SQRT_2;
         for (o, e) in f.iter().zip([(half, half), (10.0, 0.0), (half, -half)]) {
@@ -405,6 +401,14 @@ mod tests {
             schedule(d.stations.clone(), &formation, Strategy::ParentHops { hops: 0 }),
             Err(PlanError::BadHops { value: 0 })
         ));
-        assert_eq!(leapfrog(d.stations.clone(), &formation).expect("dance").cycles.iter().filter(|c| c.moved.len() == 2).count(), 7);
+        assert_eq!(
+            leapfrog(d.stations.clone(), &formation)
+                .expect("dance")
+                .cycles
+                .iter()
+                .filter(|c| c.moved.len() == 2)
+                .count(),
+            7
+        );
     }
 }

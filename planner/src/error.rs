@@ -48,6 +48,12 @@ pub enum PlanError {
         /// The value given.
         value: usize,
     },
+    /// The search needs a positive, finite longest sight line.
+    #[error("max_sight_line_m = {value}; expected a finite value > 0 (and a total station range > 0)")]
+    BadSightLine {
+        /// The value given.
+        value: f64,
+    },
     /// A formation needs one offset per child.
     #[error("formation_m has {got} offsets but the team has {expected} children")]
     FormationSize {

@@ -7,17 +7,21 @@
 //! [`montecarlo`] executes the dance with noisy readings to check it.
 #![warn(missing_docs)]
 
+pub mod analysis;
 pub mod constraints;
 pub mod dance;
 pub mod error;
 pub mod montecarlo;
 pub mod predict;
 pub mod route;
+pub mod search;
 
 pub use constraints::{Check, Limits, Violation, check};
 pub use dance::{
-    Action, Dance, DanceCycle, Formation, FormationKind, Robot, Step, Strategy, leapfrog, run_dance, schedule, solo,
+    Action, Dance, DanceCycle, Formation, FormationKind, Robot, STRATEGIES, Step, Strategy, leapfrog, run_dance,
+    schedule, solo,
 };
 pub use error::{Phase, PlanError};
 pub use predict::{CyclePrediction, OdometryNoise, Prediction, predict, predict_odometry};
 pub use route::{Station, stations};
+pub use search::{Candidate, Objective, Problem, SearchResult, SearchSpace, search};

@@ -48,7 +48,7 @@ pub fn execute(
         .map_err(|source| PlanError::Model { cycle: 0, source })?;
     let mut estimates = Vec::with_capacity(dance.cycles.len());
     let read = |from: &ParentPose, to: &nalgebra::Point3<f64>| noisy_reading(from, to, instrument, rng);
-    run_dance(dance, &mut team, instrument, false, read, |_, team| estimates.push(team.parent()))?;
+    run_dance(dance, &mut team, instrument, false, read, |_, team, _| estimates.push(team.parent()))?;
     Ok(estimates)
 }
 

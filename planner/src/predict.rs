@@ -75,7 +75,7 @@ pub fn predict(
     let n = dance.n_children();
     let mut team = TeamState::new(dance.station_pose(0), *start_covariance, n).map_err(model)?;
     let mut cycles = Vec::with_capacity(dance.cycles.len());
-    run_dance(dance, &mut team, instrument, true, observe, |c, team| {
+    run_dance(dance, &mut team, instrument, true, observe, |c, team, _| {
         cycles.push(CyclePrediction {
             cycle: c.cycle,
             distance_m: dance.stations[c.to].distance_m,
