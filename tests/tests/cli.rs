@@ -64,7 +64,10 @@ fn every_example_validates() {
         let path = entry.expect("entry").path();
         if path.extension().is_some_and(|e| e == "toml") {
             let run = cps_survey(["validate".into(), path.clone().into_os_string()]);
-            assert_eq!(run.code, 0, "{}: {}", path.display(), run.stderr);
+            // hall-plan.toml is the planner's example of a plan that breaks a
+            // constraint: validate refuses it (tests/tests/plan.rs).
+            let expected = if path.ends_with("hall-plan.toml") { 2 } else { 0 };
+            assert_eq!(run.code, expected, "{}: {}", path.display(), run.stderr);
         }
     }
 }
