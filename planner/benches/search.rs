@@ -3,19 +3,15 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use nalgebra::{Matrix4, Point3};
 
-use cps::{Instrument, RAD_PER_ARCSEC};
+#[path = "../tests/common/mod.rs"]
+mod common;
+
+use cps::Instrument;
 use planner::constraints::Limits;
 use planner::{Objective, Problem, SearchSpace, Strategy, search};
 
 fn bench(c: &mut Criterion) {
-    let inst = Instrument {
-        sigma_distance_m: 0.003,
-        sigma_hz_rad: 5.0 * RAD_PER_ARCSEC,
-        sigma_v_rad: 5.0 * RAD_PER_ARCSEC,
-        min_range_m: 4.0,
-        max_range_m: 400.0,
-        ..Instrument::default()
-    };
+    let inst = common::paper_instrument();
     let no_scans = |_: usize| false;
     // The seed's 1 km route, open space, sight lines ≤ 100 m.
     let route = [Point3::origin(), Point3::new(1000.0, 0.0, 0.0)];
@@ -28,12 +24,8 @@ fn bench(c: &mut Criterion) {
         limits: Limits::range(4.0, 400.0),
         scan_at: &no_scans,
     };
-    let leapfrog = SearchSpace {
-        strategies: vec![Strategy::Leapfrog],
-        strides_m: vec![10.0],
-        max_sight_line_m: 100.0,
-        up_m: 0.0,
-    };
+    let leapfrog =
+        SearchSpace { strategies: vec![Strategy::Leapfrog], strides_m: vec![10.0], max_sight_line_m: 100.0, up_m: 0.0 };
     c.bench_function("search 1 km, leapfrog, stride 10 m", |b| {
         b.iter(|| search(&open, &leapfrog, Objective::MinVariance).expect("search"))
     });
@@ -56,11 +48,7 @@ fn bench(c: &mut Criterion) {
         start_covariance: Matrix4::zeros(),
         n_children: 2,
         scene: Some(&scene),
-        limits: Limits {
-            footprint_radius_m: Some(0.3),
-            scanner_max_range_m: Some(32.0),
-            ..Limits::range(2.0, 500.0)
-        },
+        limits: Limits { footprint_radius_m: Some(0.3), scanner_max_range_m: Some(32.0), ..Limits::range(2.0, 500.0) },
         scan_at: &every,
     };
     let space = SearchSpace {

@@ -1,20 +1,12 @@
 //! The formation/stride/strategy search on the seed's 1 km example.
 
-use cps::{Instrument, RAD_PER_ARCSEC};
+mod common;
+
+use common::paper_instrument as instrument;
+use cps::Instrument;
 use nalgebra::{Matrix4, Point3};
 use planner::constraints::Limits;
 use planner::{FormationKind, Objective, Problem, SearchSpace, Strategy, search};
-
-fn instrument() -> Instrument {
-    Instrument {
-        sigma_distance_m: 0.003,
-        sigma_hz_rad: 5.0 * RAD_PER_ARCSEC,
-        sigma_v_rad: 5.0 * RAD_PER_ARCSEC,
-        min_range_m: 4.0,
-        max_range_m: 400.0,
-        ..Instrument::default()
-    }
-}
 
 fn best(max_sight_line_m: f64, strategies: Vec<Strategy>) -> planner::search::Evaluated {
     let route = [Point3::origin(), Point3::new(1000.0, 0.0, 0.0)];

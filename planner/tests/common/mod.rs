@@ -1,6 +1,7 @@
 //! Canonical example problems shared by the planner's tests and benches.
 #![allow(dead_code)]
 
+use cps::{Instrument, RAD_PER_ARCSEC};
 use nalgebra::{Point3, Vector3};
 use planner::{Dance, Strategy, leapfrog, schedule, stations};
 
@@ -25,4 +26,16 @@ pub fn l_shaped_dance(stride_m: f64, formation: &[Vector3<f64>]) -> Dance {
 /// Symmetric formation (a, ±b) at height 0.
 pub fn symmetric(a: f64, b: f64) -> Vec<Vector3<f64>> {
     vec![Vector3::new(a, b, 0.0), Vector3::new(a, -b, 0.0)]
+}
+
+/// The seed's numeric example's total station: 3 mm, 5″, 4–400 m.
+pub fn paper_instrument() -> Instrument {
+    Instrument {
+        sigma_distance_m: 0.003,
+        sigma_hz_rad: 5.0 * RAD_PER_ARCSEC,
+        sigma_v_rad: 5.0 * RAD_PER_ARCSEC,
+        min_range_m: 4.0,
+        max_range_m: 400.0,
+        ..Instrument::default()
+    }
 }
