@@ -186,31 +186,12 @@ pub fn check(dance: &Dance, scene: Option<&Scene>, limits: &Limits, scan_at: imp
             Action::MoveChild { child, from, to } => {
                 let robot = Robot::Child(*child);
                 let station = dance.cycles[step.cycle - 1].from;
-                let parent = dance.stations[station].position;
-                if let Some(slope) = slope_violation(from, to, limits) {
-                    out.push(v(robot, station, Check::Slope, slope, limits.max_slope_rad.unwrap_or(0.0)));
-                }
-                if let Some(scene) = scene {
-                    if let Some((value, limit, obstacle)) = sweep_clearance(scene, from, to, limits) {
-                        out.push(v(robot, station, Check::Clearance { obstacle }, value, limit));
-                    }
-                    if limits.track
-                        && let Some((at, obstacle)) = sweep_sight(scene, from, to, &[parent])
-                    {
-                        out.push(v(robot, station, Check::Tracking { obstacle, target: Robot::Parent }, at, 0.0));
-                    }
-                }
+                let parent = (Robot::Parent, dance.stations[station].position);
                 children[*child] = Some(*to);
-                if let Some(r) = limits.footprint_radius_m {
-                    let others = std::iter::once((Robot::Parent, parent))
-                        .chain(children.iter().enumerate().filter_map(|(k, p)| Some((Robot::Child(k), (*p)?))))
-                        .filter(|(o, _)| *o != robot);
-                    for (other, p) in others {
-                        let d = (p.xy() - to.xy()).norm();
-                        if d < 2.0 * r {
-                            out.push(v(robot, station, Check::Separation { other }, d, 2.0 * r));
-                        }
-                    }
+                let others: Vec<_> =
+                    std::iter::once(parent).chain(placed(&children)).filter(|(o, _)| *o != robot).collect();
+                for (check, value, limit) in move_checks(from, to, &[parent], &others, scene, limits) {
+                    out.push(v(robot, station, check, value, limit));
                 }
             }
             Action::Measure { child, station, .. } => {
@@ -224,38 +205,18 @@ pub fn check(dance: &Dance, scene: Option<&Scene>, limits: &Limits, scan_at: imp
                 } else if range > limits.max_range_m {
                     out.push(v(robot, *station, Check::Range, range, limits.max_range_m));
                 }
-                if let Some(hit) = scene.and_then(|s| s.obstruction(&parent, &prism).map(|h| (h, s))) {
-                    let (hit, scene) = hit;
+                if let Some(scene) = scene
+                    && let Some(hit) = scene.obstruction(&parent, &prism)
+                {
                     let obstacle = scene.object_name(hit.object).to_string();
                     out.push(v(robot, *station, Check::LineOfSight { obstacle }, hit.distance_m, range));
                 }
             }
             Action::MoveParent { from, to } => {
                 let (a, b) = (dance.stations[*from].position, dance.stations[*to].position);
-                if let Some(slope) = slope_violation(&a, &b, limits) {
-                    out.push(v(Robot::Parent, *to, Check::Slope, slope, limits.max_slope_rad.unwrap_or(0.0)));
-                }
-                let Some(scene) = scene else { continue };
-                if let Some((value, limit, obstacle)) = sweep_clearance(scene, &a, &b, limits) {
-                    out.push(v(Robot::Parent, *to, Check::Clearance { obstacle }, value, limit));
-                }
-                if limits.track {
-                    for (j, c) in children.iter().enumerate() {
-                        let Some(c) = c else { continue };
-                        if let Some((at, obstacle)) = sweep_sight(scene, &a, &b, &[*c]) {
-                            let check = Check::Tracking { obstacle, target: Robot::Child(j) };
-                            out.push(v(Robot::Parent, *to, check, at, 0.0));
-                        }
-                    }
-                }
-                if let Some(r) = limits.footprint_radius_m {
-                    for (j, c) in children.iter().enumerate() {
-                        let Some(c) = c else { continue };
-                        let d = (c.xy() - b.xy()).norm();
-                        if d < 2.0 * r {
-                            out.push(v(Robot::Parent, *to, Check::Separation { other: Robot::Child(j) }, d, 2.0 * r));
-                        }
-                    }
+                let standing: Vec<_> = placed(&children).collect();
+                for (check, value, limit) in move_checks(&a, &b, &standing, &standing, scene, limits) {
+                    out.push(v(Robot::Parent, *to, check, value, limit));
                 }
             }
             Action::Fix { .. } => {}
@@ -276,6 +237,50 @@ pub fn check(dance: &Dance, scene: Option<&Scene>, limits: &Limits, scan_at: imp
                     }
                 }
                 previous_scan = Some(*station);
+            }
+        }
+    }
+    out
+}
+
+/// The placed children with their positions.
+fn placed(children: &[Option<Point3<f64>>]) -> impl Iterator<Item = (Robot, Point3<f64>)> + '_ {
+    children.iter().enumerate().filter_map(|(j, p)| Some((Robot::Child(j), (*p)?)))
+}
+
+/// The checks of one robot's move a → b, as (check, value, limit): its
+/// slope; its clearance from the scene; with `track`, its sight line to each
+/// of `targets` (the robots it stays locked on); its separation at b from
+/// `others` (the robots standing).
+fn move_checks(
+    a: &Point3<f64>,
+    b: &Point3<f64>,
+    targets: &[(Robot, Point3<f64>)],
+    others: &[(Robot, Point3<f64>)],
+    scene: Option<&Scene>,
+    limits: &Limits,
+) -> Vec<(Check, f64, f64)> {
+    let mut out = Vec::new();
+    if let Some(slope) = slope_violation(a, b, limits) {
+        out.push((Check::Slope, slope, limits.max_slope_rad.unwrap_or(0.0)));
+    }
+    if let Some(scene) = scene {
+        if let Some((value, limit, obstacle)) = sweep_clearance(scene, a, b, limits) {
+            out.push((Check::Clearance { obstacle }, value, limit));
+        }
+        if limits.track {
+            for &(target, at) in targets {
+                if let Some((driven, obstacle)) = sweep_sight(scene, a, b, &at) {
+                    out.push((Check::Tracking { obstacle, target }, driven, 0.0));
+                }
+            }
+        }
+    }
+    if let Some(r) = limits.footprint_radius_m {
+        for &(other, p) in others {
+            let d = (p.xy() - b.xy()).norm();
+            if d < 2.0 * r {
+                out.push((Check::Separation { other }, d, 2.0 * r));
             }
         }
     }
@@ -303,17 +308,11 @@ fn sweep(a: &Point3<f64>, b: &Point3<f64>) -> impl Iterator<Item = (f64, Point3<
     })
 }
 
-/// The first sample of the move a → b whose sight line to a target is
+/// The first sample of the move a → b whose sight line to `target` is
 /// blocked: (distance driven, obstacle).
-fn sweep_sight(scene: &Scene, a: &Point3<f64>, b: &Point3<f64>, targets: &[Point3<f64>]) -> Option<(f64, String)> {
-    for (at, p) in sweep(a, b) {
-        for t in targets {
-            if let Some(hit) = scene.obstruction(&p, t) {
-                return Some((at, scene.object_name(hit.object).to_string()));
-            }
-        }
-    }
-    None
+fn sweep_sight(scene: &Scene, a: &Point3<f64>, b: &Point3<f64>, target: &Point3<f64>) -> Option<(f64, String)> {
+    sweep(a, b)
+        .find_map(|(at, p)| scene.obstruction(&p, target).map(|hit| (at, scene.object_name(hit.object).to_string())))
 }
 
 /// The smallest clearance along the move a → b when it is below the
@@ -447,6 +446,10 @@ mod tests {
         assert!(v.iter().any(|v| matches!(v.check, Check::Separation { other: Robot::Child(0) })
             && v.robot == Robot::Child(1)
             && (v.value - 0.8).abs() < 1e-9));
+        // The parent's move ends 0.4 m abeam of each child (open space too).
+        assert!(v.iter().any(|v| matches!(v.check, Check::Separation { other: Robot::Child(0) })
+            && v.robot == Robot::Parent
+            && (v.value - 0.4).abs() < 1e-9));
         // Slope: a ramp of 1 m over 4 m is 14°.
         let ramp = [Point3::new(0.0, 0.0, 1.5), Point3::new(4.0, 0.0, 2.5)];
         let up = schedule(stations(&ramp, 5.0).expect("route"), &tight, Strategy::Leapfrog).expect("dance");
