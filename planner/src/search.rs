@@ -97,6 +97,12 @@ impl Evaluated {
         self.dance.cycles.len()
     }
 
+    /// Orders two plans under `objective`: better first.
+    fn cmp_by(&self, other: &Self, objective: &Objective) -> std::cmp::Ordering {
+        let (a, b) = (self.score(objective), other.score(objective));
+        a.0.cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.total_cmp(&b.2))
+    }
+
     fn score(&self, objective: &Objective) -> (u8, usize, f64) {
         match objective {
             Objective::MinVariance => (0, 0, self.sigma_xy2_m2),
@@ -192,7 +198,7 @@ pub fn search(problem: &Problem<'_>, space: &SearchSpace, objective: Objective) 
     }
     let predicted = grid.len();
     let mut ranked: Vec<Evaluated> = grid.par_iter().filter_map(|c| problem.evaluate(c, &instrument)).collect();
-    ranked.sort_by(|a, b| a.score(&objective).partial_cmp(&b.score(&objective)).unwrap_or(std::cmp::Ordering::Equal));
+    ranked.sort_by(|a, b| a.cmp_by(b, &objective));
 
     // The best feasible candidate, checking a batch at a time in parallel.
     let mut checked = 0;
@@ -235,14 +241,11 @@ pub fn search(problem: &Problem<'_>, space: &SearchSpace, objective: Objective) 
         let better: Vec<Evaluated> = trials
             .par_iter()
             .filter_map(|c| problem.evaluate(c, &instrument))
-            .filter(|e| e.score(&objective) < best.score(&objective))
+            .filter(|e| e.cmp_by(&best, &objective).is_lt())
             .filter(|e| problem.violations(&e.dance, reach).is_empty())
             .collect();
         checked += trials.len();
-        match better
-            .into_iter()
-            .min_by(|x, y| x.score(&objective).partial_cmp(&y.score(&objective)).unwrap_or(std::cmp::Ordering::Equal))
-        {
+        match better.into_iter().min_by(|x, y| x.cmp_by(y, &objective)) {
             Some(e) => best = e,
             None => step = (step.0 / 2.0, step.1 / 2.0),
         }
