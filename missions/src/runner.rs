@@ -271,10 +271,12 @@ struct Run<'m> {
 
 /// Runs `mission` on the simulator into `dir`: a new run (an existing
 /// journal there is an error, so a run is never overwritten), or with
-/// `resume` the continuation of the run whose journal is there.
+/// `resume` the continuation of the run whose journal is there. A plan that
+/// breaks a constraint (`cps-survey plan`) is refused before anything moves.
 pub fn run(mission: &Mission, dir: &Path, options: &RunOptions) -> Result<RunSummary> {
     let started = Instant::now();
     let dance = crate::predict::dance(mission)?;
+    crate::plan::refuse_violations(mission, &dance)?;
     let prediction = crate::predict::prediction(mission)?;
     std::fs::create_dir_all(dir.join("scans")).with_context(|| format!("creating {}", dir.display()))?;
     let journal_path = dir.join("journal.jsonl");
