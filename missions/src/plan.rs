@@ -54,6 +54,14 @@ pub fn robot_name(mission: &Mission) -> impl Fn(Robot) -> String + '_ {
     }
 }
 
+/// "parent" or the child's name, as in the recording's entity paths.
+pub fn robot_label(mission: &Mission) -> impl Fn(Robot) -> String + '_ {
+    |r| match r {
+        Robot::Parent => "parent".to_string(),
+        Robot::Child(j) => mission.children.get(j).cloned().unwrap_or_else(|| format!("child{j}")),
+    }
+}
+
 /// Every constraint the schedule breaks.
 pub fn violations(mission: &Mission, dance: &Dance, scene: Option<&Scene>) -> Vec<Violation> {
     planner::check(dance, scene, &limits(mission), |k| mission.scan.scans_at(k))

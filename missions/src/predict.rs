@@ -3,7 +3,7 @@
 use std::io::Write;
 
 use cps::{CHI2_2D_95_SQRT, ErrorEllipse, RAD_PER_ARCSEC};
-use planner::{Dance, PlanError, Prediction};
+use planner::{Action, Dance, PlanError, Prediction, Robot, StepEstimate};
 use serde::Serialize;
 
 use crate::diagnostics::{Diagnostic, Diagnostics};
@@ -64,6 +64,26 @@ pub fn prediction(mission: &Mission) -> Result<Prediction, MissionError> {
             };
             Ok(planner::predict_odometry(&dance, &noise, &mission.plan.start_covariance))
         }
+    }
+}
+
+/// Every robot's predicted estimate along the mission's schedule: each
+/// child after its placement, the parent after each fix, and the parent at
+/// each scan station (see [`planner::step_estimates`]).
+pub fn step_estimates(mission: &Mission, prediction: &Prediction) -> Result<Vec<StepEstimate>, MissionError> {
+    let dance = dance(mission)?;
+    let steps = dance.steps(|k| mission.scan.scans_at(k));
+    Ok(planner::step_estimates(&dance, prediction, &steps, &mission.plan.start_covariance))
+}
+
+/// What a step that sets an estimate does, in words.
+fn step_kind(steps: &[planner::Step], e: &StepEstimate) -> &'static str {
+    match steps.get(e.step).map(|s| &s.action) {
+        Some(Action::Measure { .. }) => "placement",
+        Some(Action::Fix { .. }) => "fix",
+        Some(Action::Scan { .. }) => "scan",
+        Some(Action::MoveParent { .. }) => "odometry",
+        _ => "estimate",
     }
 }
 
@@ -130,6 +150,39 @@ impl From<ErrorEllipse> for EllipseJson {
 }
 
 #[derive(Serialize)]
+struct ChildJson {
+    name: String,
+    position: PoseJson,
+    covariance: [[f64; 3]; 3],
+    sigma_xy_m: f64,
+    ellipse_95_m: EllipseJson,
+}
+
+#[derive(Serialize)]
+struct StepJson {
+    step: usize,
+    cycle: usize,
+    action: &'static str,
+    robot: String,
+    position_m: [f64; 3],
+    /// 4×4 (x, y, z, θ) for the parent, 3×3 (x, y, z) for a child.
+    covariance: Vec<Vec<f64>>,
+    sigma_xy_m: f64,
+    ellipse_95_m: EllipseJson,
+}
+
+#[derive(Serialize)]
+struct ScanJson {
+    step: usize,
+    station: usize,
+    pose: PoseJson,
+    covariance: Vec<Vec<f64>>,
+    sigma_xy_m: f64,
+    sigma_heading_rad: f64,
+    ellipse_95_m: EllipseJson,
+}
+
+#[derive(Serialize)]
 struct CycleJson {
     cycle: usize,
     distance_m: f64,
@@ -140,6 +193,7 @@ struct CycleJson {
     sigma_xy2_m2: f64,
     sigma_heading_rad: f64,
     drift_percent: f64,
+    children: Vec<ChildJson>,
 }
 
 #[derive(Serialize)]
@@ -159,6 +213,8 @@ struct PredictionJson {
     mission: String,
     children: Vec<String>,
     cycles: Vec<CycleJson>,
+    steps: Vec<StepJson>,
+    scans: Vec<ScanJson>,
     #[serde(rename = "final")]
     final_: Option<FinalJson>,
 }
@@ -171,8 +227,21 @@ pub fn accepted(mission: &Mission, prediction: &Prediction) -> bool {
     }
 }
 
-/// Writes the prediction as one JSON object.
-pub fn write_json(out: &mut dyn Write, mission: &Mission, prediction: &Prediction) -> std::io::Result<()> {
+fn nested(m: &nalgebra::DMatrix<f64>) -> Vec<Vec<f64>> {
+    m.row_iter().map(|r| r.iter().copied().collect()).collect()
+}
+
+fn ellipse_95(e: &StepEstimate) -> EllipseJson {
+    e.ellipse_1sigma().scaled(CHI2_2D_95_SQRT).into()
+}
+
+/// Writes the prediction as one JSON object: per cycle the parent and every
+/// child, per step every estimate a step sets, and every scan station.
+pub fn write_json(out: &mut dyn Write, mission: &Mission, prediction: &Prediction) -> anyhow::Result<()> {
+    let name = crate::plan::robot_label(mission);
+    let dance = dance(mission)?;
+    let steps = dance.steps(|k| mission.scan.scans_at(k));
+    let estimates = planner::step_estimates(&dance, prediction, &steps, &mission.plan.start_covariance);
     let cycles = prediction
         .cycles
         .iter()
@@ -191,6 +260,57 @@ pub fn write_json(out: &mut dyn Write, mission: &Mission, prediction: &Predictio
             sigma_xy2_m2: c.sigma_xy2_m2(),
             sigma_heading_rad: c.sigma_heading_rad(),
             drift_percent: c.drift_percent(),
+            children: c
+                .children_covariance
+                .iter()
+                .enumerate()
+                .map(|(j, cov)| {
+                    let p = dance.cycles[c.cycle - 1].children[j];
+                    let e = cps::ErrorEllipse::from_covariance(&cov.fixed_view::<2, 2>(0, 0).into_owned());
+                    ChildJson {
+                        name: name(Robot::Child(j)),
+                        position: PoseJson { x_m: p.x, y_m: p.y, z_m: p.z, heading_rad: 0.0 },
+                        covariance: std::array::from_fn(|r| std::array::from_fn(|s| cov[(r, s)])),
+                        sigma_xy_m: (cov[(0, 0)] + cov[(1, 1)]).sqrt(),
+                        ellipse_95_m: e.scaled(CHI2_2D_95_SQRT).into(),
+                    }
+                })
+                .collect(),
+        })
+        .collect();
+    let scans = estimates
+        .iter()
+        .filter_map(|e| {
+            let Action::Scan { station } = steps.get(e.step)?.action else { return None };
+            let pose = dance.station_pose(station);
+            Some(ScanJson {
+                step: e.step,
+                station,
+                pose: PoseJson {
+                    x_m: pose.position.x,
+                    y_m: pose.position.y,
+                    z_m: pose.position.z,
+                    heading_rad: pose.heading_rad,
+                },
+                covariance: nested(&e.covariance),
+                sigma_xy_m: e.sigma_xy2_m2().sqrt(),
+                sigma_heading_rad: e.covariance[(3, 3)].sqrt(),
+                ellipse_95_m: ellipse_95(e),
+            })
+        })
+        .collect();
+    let step_rows = estimates
+        .iter()
+        .filter(|e| !e.scan)
+        .map(|e| StepJson {
+            step: e.step,
+            cycle: e.cycle,
+            action: step_kind(&steps, e),
+            robot: name(e.robot),
+            position_m: [e.position.x, e.position.y, e.position.z],
+            covariance: nested(&e.covariance),
+            sigma_xy_m: e.sigma_xy2_m2().sqrt(),
+            ellipse_95_m: ellipse_95(e),
         })
         .collect();
     let final_ = prediction.last().map(|l| FinalJson {
@@ -203,13 +323,81 @@ pub fn write_json(out: &mut dyn Write, mission: &Mission, prediction: &Predictio
         max_final_sigma_xy_m: mission.acceptance.max_final_sigma_xy_m,
         accepted: accepted(mission, prediction),
     });
-    let doc = PredictionJson { mission: mission.name.clone(), children: mission.children.clone(), cycles, final_ };
+    let doc = PredictionJson {
+        mission: mission.name.clone(),
+        children: mission.children.clone(),
+        cycles,
+        steps: step_rows,
+        scans,
+        final_,
+    };
     serde_json::to_writer(&mut *out, &doc)?;
-    writeln!(out)
+    writeln!(out)?;
+    Ok(())
 }
 
-/// Writes the per-cycle table and the final summary.
-pub fn write_table(out: &mut dyn Write, mission: &Mission, prediction: &Prediction) -> std::io::Result<()> {
+/// The children right after each placement: √(σx² + σy²) per child, one
+/// row per cycle that placed any.
+fn write_children(
+    out: &mut dyn Write,
+    mission: &Mission,
+    prediction: &Prediction,
+    estimates: &[StepEstimate],
+) -> std::io::Result<()> {
+    if mission.children.is_empty() || prediction.cycles.is_empty() {
+        return Ok(());
+    }
+    writeln!(out)?;
+    writeln!(out, "children after placement, √(σx² + σy²) in mm:")?;
+    write!(out, "{:>6}", "cycle")?;
+    for name in &mission.children {
+        write!(out, " {name:>12}")?;
+    }
+    writeln!(out)?;
+    for c in &prediction.cycles {
+        let placed: Vec<&StepEstimate> =
+            estimates.iter().filter(|e| e.cycle == c.cycle && matches!(e.robot, Robot::Child(_))).collect();
+        if placed.is_empty() {
+            continue;
+        }
+        write!(out, "{:>6}", c.cycle)?;
+        for j in 0..mission.children.len() {
+            match placed.iter().find(|e| e.robot == Robot::Child(j)) {
+                Some(e) => write!(out, " {:>12.3}", 1e3 * e.sigma_xy2_m2().sqrt())?,
+                None => write!(out, " {:>12}", "stays")?,
+            }
+        }
+        writeln!(out)?;
+    }
+    Ok(())
+}
+
+/// The scan stations' covariance: what a direct transformation inherits.
+fn write_scans(out: &mut dyn Write, estimates: &[StepEstimate]) -> std::io::Result<()> {
+    let scans: Vec<&StepEstimate> = estimates.iter().filter(|e| e.scan).collect();
+    if scans.is_empty() {
+        return Ok(());
+    }
+    writeln!(out)?;
+    writeln!(out, "scan stations:")?;
+    writeln!(out, "{:>6} {:>9} {:>9} {:>9} {:>10}", "step", "x_m", "y_m", "σxy_mm", "σθ_arcsec")?;
+    for e in scans {
+        writeln!(
+            out,
+            "{:>6} {:>9.2} {:>9.2} {:>9.3} {:>10.2}",
+            e.step,
+            e.position.x,
+            e.position.y,
+            1e3 * e.sigma_xy2_m2().sqrt(),
+            e.covariance[(3, 3)].sqrt() / RAD_PER_ARCSEC
+        )?;
+    }
+    Ok(())
+}
+
+/// Writes the per-cycle table, the children after each placement, the scan
+/// stations and the final summary.
+pub fn write_table(out: &mut dyn Write, mission: &Mission, prediction: &Prediction) -> anyhow::Result<()> {
     let n = prediction.cycles.len();
     let dist = prediction.last().map_or(0.0, |l| l.distance_m);
     writeln!(out, "mission {}: {n} cycles, {} children, {dist:.1} m of route", mission.name, mission.children.len())?;
@@ -235,6 +423,9 @@ pub fn write_table(out: &mut dyn Write, mission: &Mission, prediction: &Predicti
             c.drift_percent(),
         )?;
     }
+    let estimates = step_estimates(mission, prediction)?;
+    write_children(out, mission, prediction, &estimates)?;
+    write_scans(out, &estimates)?;
     if let Some(l) = prediction.last() {
         let e = l.ellipse_1sigma().scaled(CHI2_2D_95_SQRT);
         writeln!(out)?;

@@ -22,6 +22,8 @@ pub use dance::{
     schedule, solo,
 };
 pub use error::{Phase, PlanError};
-pub use predict::{CyclePrediction, OdometryNoise, Prediction, predict, predict_odometry};
+pub use predict::{
+    CyclePrediction, OdometryNoise, Prediction, StepEstimate, predict, predict_odometry, step_estimates,
+};
 pub use route::{Station, stations};
 pub use search::{Candidate, Objective, Problem, SearchResult, SearchSpace, search};

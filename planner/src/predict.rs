@@ -1,11 +1,12 @@
 //! Covariance prediction: the CPS equations run on the nominal (noise-free)
 //! readings of a dance (DESIGN §5 "Prediction").
 
-use nalgebra::{Matrix2, Matrix3, Matrix4};
+use nalgebra::{DMatrix, Matrix2, Matrix3, Matrix4, Point3};
 
 use cps::{ErrorEllipse, Instrument, ParentPose, TeamState, observe};
 
-use crate::dance::{Dance, run_dance};
+use crate::dance::{Action, Dance, Robot, Step, run_dance};
+use crate::error::Phase;
 use crate::error::PlanError;
 
 /// The prediction after one dance cycle.
@@ -85,6 +86,87 @@ pub fn predict(
         })
     })?;
     Ok(Prediction { cycles })
+}
+
+/// A robot's predicted estimate right after the step that set it: a child
+/// after its placement, the parent after its fix (after its move when it
+/// positions itself by odometry alone), and the parent at every scan (the
+/// scan-station covariance, the one a direct transformation inherits).
+#[derive(Debug, Clone, PartialEq)]
+pub struct StepEstimate {
+    /// Index of the step in [`Dance::steps`].
+    pub step: usize,
+    /// Dance cycle, 1-based (0: the start).
+    pub cycle: usize,
+    /// Whose estimate.
+    pub robot: Robot,
+    /// Whether the step is a scan (the estimate is the scan station's).
+    pub scan: bool,
+    /// Nominal position: the parent's station or the child's prism, metres.
+    pub position: Point3<f64>,
+    /// Covariance: parent (x, y, z, θ) 4×4 in m² and rad²; child (x, y, z)
+    /// 3×3 in m².
+    pub covariance: DMatrix<f64>,
+}
+
+impl StepEstimate {
+    /// σx² + σy², m².
+    pub fn sigma_xy2_m2(&self) -> f64 {
+        self.covariance[(0, 0)] + self.covariance[(1, 1)]
+    }
+
+    /// The 1σ horizontal error ellipse.
+    pub fn ellipse_1sigma(&self) -> ErrorEllipse {
+        ErrorEllipse::from_covariance(&Matrix2::from_fn(|i, j| self.covariance[(i, j)]))
+    }
+}
+
+/// Every robot's predicted estimate along `steps` (from [`Dance::steps`] of
+/// the same `dance`), from a prediction of that dance. A child's block is
+/// set by its placement and left alone by the parent's fixes (only the
+/// cross-terms change), so the end-of-cycle child covariance is its
+/// covariance right after placement. Steps that set no estimate are skipped;
+/// cycles the prediction does not cover yield nothing.
+pub fn step_estimates(
+    dance: &Dance,
+    prediction: &Prediction,
+    steps: &[Step],
+    start_covariance: &Matrix4<f64>,
+) -> Vec<StepEstimate> {
+    let parent_cov = |cycle: usize| -> Option<Matrix4<f64>> {
+        if cycle == 0 { Some(*start_covariance) } else { prediction.cycles.get(cycle - 1).map(|c| c.covariance) }
+    };
+    let parent = |s: &Step, station: usize, scan: bool| {
+        parent_cov(s.cycle).map(|cov| StepEstimate {
+            step: s.index,
+            cycle: s.cycle,
+            robot: Robot::Parent,
+            scan,
+            position: dance.stations[station].position,
+            covariance: DMatrix::from_column_slice(4, 4, cov.as_slice()),
+        })
+    };
+    steps
+        .iter()
+        .filter_map(|s| match s.action {
+            Action::Measure { child, phase: Phase::Placement, .. } => {
+                let cycle = prediction.cycles.get(s.cycle.checked_sub(1)?)?;
+                let cov = cycle.children_covariance.get(child)?;
+                Some(StepEstimate {
+                    step: s.index,
+                    cycle: s.cycle,
+                    robot: Robot::Child(child),
+                    scan: false,
+                    position: dance.cycles[s.cycle - 1].children[child],
+                    covariance: DMatrix::from_column_slice(3, 3, cov.as_slice()),
+                })
+            }
+            Action::Fix { station } => parent(s, station, false),
+            Action::MoveParent { to, .. } if dance.n_children() == 0 => parent(s, to, false),
+            Action::Scan { station } => parent(s, station, true),
+            _ => None,
+        })
+        .collect()
 }
 
 /// The random part of a drive's odometry error: 1σ distance and heading

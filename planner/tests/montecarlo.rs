@@ -86,3 +86,63 @@ fn an_inconsistent_prediction_would_fail_the_check() {
     let wrong = cps::sigma_xy2(&last.empirical) / (1.3 * cps::sigma_xy2(&last.predicted));
     assert!((wrong - 1.0).abs() > bound);
 }
+
+#[test]
+fn every_robots_step_estimate_matches_monte_carlo() {
+    // The per-step child and scan-station covariances against the spread of
+    // the real procedure's child positions and parent poses. Parent hops
+    // place the children at cycles 1, 4, 7 and 10; the last placement
+    // carries three fixes' worth of parent error into the children.
+    use rand::SeedableRng;
+    let formation = common::symmetric(10.0, 8.0);
+    let dance = common::straight_schedule(12, 5.0, &formation, planner::Strategy::ParentHops { hops: 3 });
+    let instrument = instrument();
+    let start = Matrix4::zeros();
+    let prediction = planner::predict(&dance, &instrument, &start).expect("predicts");
+    let steps = dance.steps(|k| k % 2 == 0);
+    let estimates = planner::step_estimates(&dance, &prediction, &steps, &start);
+    // One estimate per placement, per fix and per scan.
+    let placements = dance.cycles.iter().map(|c| c.moved.len()).sum::<usize>();
+    let scans = (0..dance.stations.len()).filter(|k| k % 2 == 0).count();
+    assert_eq!(estimates.len(), placements + dance.cycles.len() + scans);
+    // Scan-station covariance equals the fix's at the same station.
+    for e in estimates.iter().filter(|e| e.scan && e.cycle > 0) {
+        let fix = estimates.iter().find(|f| !f.scan && f.robot == planner::Robot::Parent && f.cycle == e.cycle);
+        assert_eq!(fix.map(|f| &f.covariance), Some(&e.covariance));
+    }
+    let last_child =
+        |j| estimates.iter().rev().find(|e| e.robot == planner::Robot::Child(j)).expect("child placed").clone();
+    let (c0, c1) = (last_child(0), last_child(1));
+    assert_eq!(c0.cycle, 10);
+    // Monte Carlo: the children's estimated positions at the end of cycle
+    // 10 (placed in it, untouched by its fix) minus the truth.
+    let trials = 1000;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(21);
+    let mut sums = [0.0_f64; 2];
+    for _ in 0..trials {
+        let mut team = cps::TeamState::new(dance.station_pose(0), start, 2).expect("team");
+        let read = |from: &cps::ParentPose, to: &nalgebra::Point3<f64>| {
+            planner::montecarlo::noisy_reading(from, to, &instrument, &mut rng)
+        };
+        let mut errors = [0.0_f64; 2];
+        planner::run_dance(&dance, &mut team, &instrument, false, read, |c, team, _| {
+            if c.cycle == 10 {
+                for (j, e) in errors.iter_mut().enumerate() {
+                    let d = team.child(j).expect("placed") - c.children[j];
+                    *e = d.x * d.x + d.y * d.y;
+                }
+            }
+        })
+        .expect("runs");
+        for j in 0..2 {
+            sums[j] += errors[j];
+        }
+    }
+    // Bound as in `check`: |s/tr(P) − 1| < 3·√(2·tr(P²)/n)/tr(P).
+    for (j, c) in [c0, c1].iter().enumerate() {
+        let p = Matrix2::from_fn(|r, s| c.covariance[(r, s)]);
+        let bound = 3.0 * (2.0 * (p * p).trace() / trials as f64).sqrt() / p.trace();
+        let ratio = sums[j] / trials as f64 / p.trace();
+        assert!((ratio - 1.0).abs() < bound, "child {j}: ratio {ratio:.4}, bound ±{bound:.4}");
+    }
+}

@@ -36,6 +36,50 @@ fn paper_1km_predicts_100_cycles_near_the_model_floor() {
 }
 
 #[test]
+fn predict_reports_every_robot_and_every_scan_station() {
+    // hall: 7 leapfrog cycles, two children placed every cycle, a scan at
+    // every station (8).
+    let run = cps_survey(["predict".into(), example("hall.toml").into_os_string(), "--json".into()]);
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    let v = json(&run);
+    let cycles = v["cycles"].as_array().expect("cycles");
+    let steps = v["steps"].as_array().expect("steps");
+    let scans = v["scans"].as_array().expect("scans");
+    let of = |a: &str| steps.iter().filter(|s| s["action"] == a).count();
+    assert_eq!((of("placement"), of("fix"), scans.len()), (14, 7, 8));
+    for (k, scan) in scans.iter().enumerate() {
+        assert_eq!(scan["station"], k);
+        let cov = &scan["covariance"];
+        if k == 0 {
+            // The start is known exactly in this mission.
+            assert_eq!(scan["sigma_xy_m"], 0.0);
+        } else {
+            // A scan station inherits the fix of the cycle that reached it.
+            assert_eq!(cov, &cycles[k - 1]["covariance"], "station {k}");
+        }
+    }
+    // Each child's covariance after its placement is the cycle's child row;
+    // it is 3×3 and the parent's 4×4.
+    for s in steps {
+        let size = s["covariance"].as_array().map(Vec::len);
+        let cycle = &cycles[s["cycle"].as_u64().expect("cycle") as usize - 1];
+        if s["robot"] == "parent" {
+            assert_eq!(size, Some(4));
+            assert_eq!(s["covariance"], cycle["covariance"]);
+        } else {
+            assert_eq!(size, Some(3));
+            let child = cycle["children"].as_array().and_then(|c| c.iter().find(|c| c["name"] == s["robot"]));
+            assert_eq!(Some(&s["covariance"]), child.map(|c| &c["covariance"]));
+        }
+    }
+    // Children drift with the parent that places them.
+    let sigma = |c: &Value| c["children"][0]["sigma_xy_m"].as_f64().expect("σ");
+    assert!(sigma(&cycles[6]) > 5.0 * sigma(&cycles[0]));
+    let table = cps_survey(["predict".into(), example("hall.toml").into_os_string()]);
+    assert!(table.stdout.contains("children after placement") && table.stdout.contains("scan stations:"));
+}
+
+#[test]
 fn the_table_has_one_row_per_cycle_and_a_summary() {
     let run = cps_survey(["predict".into(), example("indoor-compact.toml").into_os_string()]);
     assert_eq!(run.code, 0, "{}", run.stderr);
