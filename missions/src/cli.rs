@@ -28,6 +28,10 @@ pub enum Command {
         /// Print one JSON object instead of the table.
         #[arg(long)]
         json: bool,
+        /// Also draw σ_xy and σ_θ versus distance and a top view with the
+        /// 95 % ellipses (SVG).
+        #[arg(long, value_name = "FILE.svg")]
+        plot: Option<PathBuf>,
     },
     /// Check a mission's plan step by step (ranges, line of sight, tracking,
     /// clearance, slope, scan range), analyse its accuracy, and with
@@ -45,6 +49,10 @@ pub enum Command {
         /// Print one JSON object instead of the text report.
         #[arg(long)]
         json: bool,
+        /// Also draw σ_xy and σ_θ versus distance (as written and optimized)
+        /// and a top view with the 95 % ellipses and violations (SVG).
+        #[arg(long, value_name = "FILE.svg")]
+        plot: Option<PathBuf>,
     },
     /// Check a mission file and report every problem with file:line:column.
     Validate {
@@ -133,16 +141,33 @@ pub fn exit_code(result: &anyhow::Result<Outcome>) -> u8 {
     }
 }
 
+fn plotted(out: &mut dyn Write, file: &std::path::Path, s: &crate::plot::PlotSummary) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "plotted {}: {} parent 95 % ellipses drawn ×{}, {} scene outline segments",
+        file.display(),
+        s.ellipses,
+        s.ellipse_scale,
+        s.scene_segments
+    )
+}
+
 /// Runs a parsed command, writing its report to `out`. Errors mean exit 2.
 pub fn run(cli: Cli, out: &mut dyn Write) -> anyhow::Result<Outcome> {
     match cli.command {
-        Command::Predict { mission, json } => {
+        Command::Predict { mission, json, plot } => {
             let mission = Mission::load(&mission)?;
             let prediction = crate::predict::prediction(&mission)?;
             if json {
                 crate::predict::write_json(out, &mission, &prediction)?;
             } else {
                 crate::predict::write_table(out, &mission, &prediction)?;
+            }
+            if let Some(file) = plot {
+                let summary = crate::predict::plot(&mission, &prediction, &file)?;
+                if !json {
+                    plotted(out, &file, &summary)?;
+                }
             }
             out.flush()?;
             Ok(if crate::predict::accepted(&mission, &prediction) {
@@ -151,13 +176,19 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> anyhow::Result<Outcome> {
                 Outcome::AcceptanceFailed
             })
         }
-        Command::Plan { mission, optimize, out: file, json } => {
+        Command::Plan { mission, optimize, out: file, json, plot } => {
             let m = Mission::load(&mission)?;
             let report = crate::plan::plan(&m, optimize)?;
             if json {
                 crate::plan::write_json(out, &m, &report)?;
             } else {
                 crate::plan::write_table(out, &m, &report)?;
+            }
+            if let Some(plot) = plot {
+                let summary = crate::plan::plot(&m, &report, &plot)?;
+                if !json {
+                    plotted(out, &plot, &summary)?;
+                }
             }
             if let (Some(file), Some(o)) = (file, &report.optimized) {
                 crate::plan::write_mission(&m, o, &file)?;

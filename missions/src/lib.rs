@@ -16,6 +16,7 @@ pub mod journal;
 pub mod mission;
 pub mod montecarlo;
 pub mod plan;
+pub mod plot;
 pub mod predict;
 pub mod reader;
 pub mod recording;

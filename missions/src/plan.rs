@@ -12,7 +12,7 @@ use cps::{Instrument, RAD_PER_ARCSEC};
 use nalgebra::Vector3;
 use planner::analysis::{FixReliability, Sensitivity, UNCHECKED_REDUNDANCY};
 use planner::search::Evaluated;
-use planner::{Dance, FormationKind, Limits, Objective, Robot, SearchSpace, Strategy, Violation};
+use planner::{Dance, FormationKind, Limits, Objective, Prediction, Robot, SearchSpace, Strategy, Violation};
 use serde_json::{Value, json};
 
 use crate::diagnostics::Diagnostics;
@@ -95,6 +95,8 @@ pub struct PlanReport {
     pub steps: usize,
     /// Its violations.
     pub violations: Vec<Violation>,
+    /// The prediction as written (range limits lifted).
+    pub prediction: Option<Prediction>,
     /// Predicted final σx² + σy² as written (range limits lifted), m².
     pub sigma_xy2_m2: Option<f64>,
     /// Predicted final σθ as written, rad.
@@ -141,6 +143,7 @@ pub fn plan(mission: &Mission, optimize: bool) -> Result<PlanReport> {
     let mut report = PlanReport {
         steps,
         violations,
+        prediction: None,
         sigma_xy2_m2: None,
         sigma_heading_rad: None,
         sensitivity: None,
@@ -160,6 +163,7 @@ pub fn plan(mission: &Mission, optimize: bool) -> Result<PlanReport> {
         let p = crate::predict::prediction(mission)?;
         report.sigma_xy2_m2 = p.last().map(|l| l.sigma_xy2_m2());
         report.sigma_heading_rad = p.last().map(|l| l.sigma_heading_rad());
+        report.prediction = Some(p);
         return Ok(report);
     };
     let free = unlimited(instrument);
@@ -168,6 +172,7 @@ pub fn plan(mission: &Mission, optimize: bool) -> Result<PlanReport> {
         .map_err(|e| anyhow::anyhow!("mission {}: {e}", mission.source.file.display()))?;
     report.sigma_xy2_m2 = last.last().map(|l| l.sigma_xy2_m2());
     report.sigma_heading_rad = last.last().map(|l| l.sigma_heading_rad());
+    report.prediction = Some(last);
     report.sensitivity = planner::analysis::sensitivity(&report.dance, &free, &start).ok();
     report.one_more_child_m2 =
         planner::analysis::with_one_more_child(&report.dance, &plan.formation_m, plan.strategy, &free, &start);
@@ -181,6 +186,40 @@ pub fn plan(mission: &Mission, optimize: bool) -> Result<PlanReport> {
         report.optimized = Some(search(mission, instrument, scene.as_ref())?);
     }
     Ok(report)
+}
+
+/// The optimized plan's prediction (it keeps every range limit).
+pub fn optimized_prediction(mission: &Mission, o: &Optimized) -> Result<Prediction> {
+    let instrument = mission.total_station.as_ref().context("an optimized plan has children")?;
+    planner::predict(&o.best.dance, instrument, &mission.plan.start_covariance)
+        .map_err(|e| anyhow::anyhow!("mission {}: optimized plan: {e}", mission.source.file.display()))
+}
+
+/// Writes `--plot`: the plan as written, and the optimized one if any.
+pub fn plot(mission: &Mission, report: &PlanReport, path: &Path) -> Result<crate::plot::PlotSummary> {
+    let Some(written) = &report.prediction else { anyhow::bail!("the plan has no prediction to plot") };
+    let scan_at = |k: usize| mission.scan.scans_at(k);
+    let steps = report.dance.steps(scan_at);
+    let mut plans = vec![crate::plot::PlotPlan {
+        label: "as written",
+        dance: &report.dance,
+        prediction: written,
+        steps: &steps,
+        violations: &report.violations,
+    }];
+    let optimized = report.optimized.as_ref().map(|o| optimized_prediction(mission, o)).transpose()?;
+    let optimized_steps = report.optimized.as_ref().map(|o| o.best.dance.steps(scan_at));
+    if let (Some(o), Some(p), Some(steps)) = (&report.optimized, &optimized, &optimized_steps) {
+        plans.push(crate::plot::PlotPlan {
+            label: "optimized",
+            dance: &o.best.dance,
+            prediction: p,
+            steps,
+            violations: &[],
+        });
+    }
+    let scene = scene(mission)?;
+    crate::plot::write_svg(path, &format!("cps-survey plan — mission {}", mission.name), &plans, scene.as_ref())
 }
 
 /// Runs the search of `[plan.search]`.

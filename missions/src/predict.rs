@@ -67,6 +67,19 @@ pub fn prediction(mission: &Mission) -> Result<Prediction, MissionError> {
     }
 }
 
+/// Writes `--plot` for the mission as written.
+pub fn plot(
+    mission: &Mission,
+    prediction: &Prediction,
+    path: &std::path::Path,
+) -> anyhow::Result<crate::plot::PlotSummary> {
+    let dance = dance(mission)?;
+    let steps = dance.steps(|k| mission.scan.scans_at(k));
+    let plan = crate::plot::PlotPlan { label: "as written", dance: &dance, prediction, steps: &steps, violations: &[] };
+    let scene = crate::plan::scene(mission)?;
+    crate::plot::write_svg(path, &format!("cps-survey predict — mission {}", mission.name), &[plan], scene.as_ref())
+}
+
 /// Every robot's predicted estimate along the mission's schedule: each
 /// child after its placement, the parent after each fix, and the parent at
 /// each scan station (see [`planner::step_estimates`]).

@@ -118,3 +118,40 @@ fn the_seeds_1km_example_reaches_the_floor_with_100_m_sight_lines() {
         assert!(a.hypot(b) <= 20.0 + 1e-9 && (a - 10.0).hypot(b) <= 20.0 + 1e-9, "{o}");
     }
 }
+
+#[test]
+fn plot_draws_the_curves_the_scene_the_ellipses_and_the_violation() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let svg = dir.path().join("plan.svg");
+    let run =
+        cps_survey(["plan".into(), example("hall-plan.toml").into_os_string(), "--plot".into(), svg.clone().into()]);
+    assert_eq!(run.code, 1, "the written plan breaks a constraint: {}", run.stderr);
+    let text = std::fs::read_to_string(&svg).expect("the plot is written");
+    assert!(text.starts_with("<svg"), "{}", &text[..80.min(text.len())]);
+    // One ellipse per cycle (7), as reported.
+    assert!(
+        run.stdout.contains("plotted") && run.stdout.contains(": 7 parent 95 % ellipses drawn ×"),
+        "{}",
+        run.stdout
+    );
+    let ellipses = text.matches("<polygon opacity=\"0.35\" fill=\"#9467BD\"").count();
+    assert_eq!(ellipses, 7);
+    for label in
+        ["as written", "σθ (″)", "scene &quot;hall&quot;", "constraint violated", "95 % error ellipses of the parent ×"]
+    {
+        assert!(text.contains(label), "missing {label}");
+    }
+    // Not SVG, or nowhere to write: exit 2 with the reason.
+    let png = cps_survey([
+        "plan".into(),
+        example("hall.toml").into_os_string(),
+        "--plot".into(),
+        dir.path().join("p.png").into(),
+    ]);
+    assert_eq!(png.code, 2);
+    assert!(png.stderr.contains("p.png") && png.stderr.contains(".svg"), "{}", png.stderr);
+    let nowhere = dir.path().join("missing").join("p.svg");
+    let run = cps_survey(["predict".into(), example("hall.toml").into_os_string(), "--plot".into(), nowhere.into()]);
+    assert_eq!(run.code, 2);
+    assert!(run.stderr.contains("missing/p.svg"), "{}", run.stderr);
+}
