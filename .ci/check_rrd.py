@@ -25,6 +25,8 @@ expected = {
     "/world/scans/direct/scan007": 1,
     "/metrics/sigma_xy_m": stations,
     "/metrics/fix_sigma0_squared": cycles,
+    "/world/plan/route": 1,
+    "/world/plan/sight_lines": 2 * cycles * children,
 }
 bad = {p: (rows.get(p), n) for p, n in expected.items() if rows.get(p) != n}
 if bad:

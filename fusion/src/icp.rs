@@ -44,6 +44,9 @@ pub struct IcpConfig {
     pub normal_neighbours: usize,
     /// Robust kernel on the residuals. Default none (least squares).
     pub kernel: Kernel,
+    /// Keep the estimate after every iteration in [`IcpResult::trace`]
+    /// (for viewing the registration). Default false.
+    pub trace: bool,
 }
 
 /// A robust kernel, applied by iteratively reweighted least squares: each
@@ -81,6 +84,7 @@ impl Default for IcpConfig {
             rotation_tolerance_rad: 1e-5,
             normal_neighbours: 10,
             kernel: Kernel::None,
+            trace: false,
         }
     }
 }
@@ -243,6 +247,9 @@ pub struct IcpResult {
     pub rmse_m: f64,
     /// 6×6 information of ξ = (ω, v), see the module docs.
     pub information: Matrix6<f64>,
+    /// With [`IcpConfig::trace`]: `target_from_source` after each
+    /// iteration (the last is the estimate); empty otherwise.
+    pub trace: Vec<Isometry3<f64>>,
 }
 
 impl IcpResult {
@@ -394,6 +401,7 @@ fn align_impl(
     let mut estimate = *init;
     let mut converged = false;
     let mut iterations = 0;
+    let mut trace = Vec::new();
     while iterations < config.max_iterations {
         let sums = accumulate(source, target, &estimate, max_sq, config);
         if sums.n < 6 {
@@ -432,6 +440,9 @@ fn align_impl(
         };
         estimate = update * estimate;
         iterations += 1;
+        if config.trace {
+            trace.push(estimate);
+        }
         if update.translation.vector.norm() < config.translation_tolerance_m
             && update.rotation.angle() < config.rotation_tolerance_rad
         {
@@ -444,7 +455,7 @@ fn align_impl(
     let rmse_m = (sums.sq / sums.n.max(1) as f64).sqrt();
     let information = sums.normal_matrix(config.method) / residual_variance(&sums, config.method)
         + prior.map_or_else(Matrix6::zeros, |p| p.information);
-    Ok(IcpResult { target_from_source: estimate, converged, iterations, inliers: sums.n, rmse_m, information })
+    Ok(IcpResult { target_from_source: estimate, converged, iterations, inliers: sums.n, rmse_m, information, trace })
 }
 
 /// σ̂² per scalar residual: point-to-plane has one per pair, point-to-point three.

@@ -98,6 +98,18 @@ impl Default for MultiviewConfig {
     }
 }
 
+/// One ICP run of a multi-view registration, iteration by iteration
+/// (recorded when [`IcpConfig::trace`] is set).
+#[derive(Debug, Clone, PartialEq)]
+pub struct IcpTrace {
+    /// The scan that moved (the source).
+    pub scan: usize,
+    /// The scans it was matched against.
+    pub partners: Vec<usize>,
+    /// The scan's world pose after each iteration, in order.
+    pub world_from_scan: Vec<Isometry3<f64>>,
+}
+
 /// What multi-view matching returns.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MultiviewResult {
@@ -114,6 +126,9 @@ pub struct MultiviewResult {
     /// False when a simultaneous queue hit
     /// [`max_matches_per_scan`](MultiviewConfig::max_matches_per_scan).
     pub settled: bool,
+    /// Every ICP run in the order run, with [`IcpConfig::trace`] set;
+    /// empty otherwise.
+    pub traces: Vec<IcpTrace>,
 }
 
 /// A scan prepared for matching, in its own frame.
@@ -143,6 +158,7 @@ pub fn register_views<S: AsRef<[Point3<f32>]> + Sync>(
         partners: vec![Vec::new()],
         matches: 0,
         settled: true,
+        traces: Vec::new(),
     };
     progress(1, n);
     for i in 1..n {
@@ -166,6 +182,7 @@ pub fn register_views<S: AsRef<[Point3<f32>]> + Sync>(
         partners: m.partners,
         matches: m.matches,
         settled: m.settled,
+        traces: m.traces,
     })
 }
 
@@ -185,6 +202,10 @@ pub struct PriorFusionResult {
     pub chi2: f64,
     /// 6 × (priors + edges) − 6 × scans.
     pub redundancy: usize,
+    /// Every ICP run of every round in order (the source scan's world pose
+    /// per iteration, its partner's pose held), with [`IcpConfig::trace`]
+    /// set; empty otherwise.
+    pub traces: Vec<IcpTrace>,
 }
 
 /// Scans with an absolute prior each (the CPS pose and its covariance) and
@@ -225,6 +246,7 @@ pub fn register_with_priors<S: AsRef<[Point3<f32>]> + Sync>(
     let mut poses = guesses;
     let total = schedule.len() * n;
     let mut result = None;
+    let mut traces = Vec::new();
     for (round, distance) in schedule.iter().enumerate() {
         let round_config = MultiviewConfig {
             icp: IcpConfig { max_correspondence_m: *distance, ..config.icp },
@@ -239,6 +261,7 @@ pub fn register_with_priors<S: AsRef<[Point3<f32>]> + Sync>(
             partners: vec![Vec::new(); n],
             matches: 0,
             settled: true,
+            traces: Vec::new(),
         };
         let mut matches = Vec::new();
         let mut failed = Vec::new();
@@ -256,6 +279,12 @@ pub fn register_with_priors<S: AsRef<[Point3<f32>]> + Sync>(
                 })
                 .collect();
             for (j, r) in found {
+                if let Ok(r) = &r
+                    && !r.trace.is_empty()
+                {
+                    let world_from_scan = r.trace.iter().map(|t| m.poses[j] * t).collect();
+                    traces.push(IcpTrace { scan: c, partners: vec![j], world_from_scan });
+                }
                 match r.and_then(|r| gate(&r, &priors[j], &priors[c], edge_variance_factor).map(|()| r)) {
                     Ok(r) => matches.push((j, c, r)),
                     Err(e) => failed.push((j, c, e.to_string())),
@@ -282,9 +311,10 @@ pub fn register_with_priors<S: AsRef<[Point3<f32>]> + Sync>(
             failed,
             chi2: g.chi2,
             redundancy: g.redundancy,
+            traces: Vec::new(),
         });
     }
-    result.ok_or_else(|| FusionError::OutOfRange {
+    result.map(|r| PriorFusionResult { traces, ..r }).ok_or_else(|| FusionError::OutOfRange {
         what: "rounds in the schedule".into(),
         value: 0.0,
         expected: "at least one correspondence distance".into(),
@@ -347,6 +377,7 @@ struct Matcher<'a> {
     partners: Vec<Vec<usize>>,
     matches: usize,
     settled: bool,
+    traces: Vec<IcpTrace>,
 }
 
 impl Matcher<'_> {
@@ -380,6 +411,10 @@ impl Matcher<'_> {
     fn align(&mut self, c: usize, model: &Target, partners: Vec<usize>) -> Result<Isometry3<f64>> {
         let r = align(&self.prepared[c].source, model, &self.poses[c], &self.config.icp).map_err(|e| in_scan(c, e))?;
         let before = self.poses[c];
+        if !r.trace.is_empty() {
+            // The model is in the world frame: the trace is the world pose.
+            self.traces.push(IcpTrace { scan: c, partners: partners.clone(), world_from_scan: r.trace.clone() });
+        }
         self.poses[c] = r.target_from_source;
         self.last_match[c] = Some(r);
         self.partners[c] = partners;

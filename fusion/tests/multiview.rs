@@ -52,6 +52,34 @@ fn hall_every_strategy_recovers_the_drive() {
     }
 }
 
+/// With `trace`, every ICP run is kept iteration by iteration: one trace
+/// per match, in order, each ending where that run put its scan, the last
+/// run of each scan ending at its final pose — and the result is the same
+/// as without tracing.
+#[test]
+fn traces_follow_every_icp_run() {
+    let h = corridor::hall(5, 120, 3);
+    let plain = config(Strategy::Simultaneous);
+    let traced = MultiviewConfig { icp: fusion::icp::IcpConfig { trace: true, ..plain.icp }, ..plain };
+    let a = register_views(&h.scans, &h.odometry, &plain, &mut |_, _| {}).expect("views");
+    let b = register_views(&h.scans, &h.odometry, &traced, &mut |_, _| {}).expect("views");
+    assert!(a.traces.is_empty());
+    assert_eq!(a.world_from_scan, b.world_from_scan);
+    assert_eq!(b.traces.len(), b.matches);
+    for k in 1..5 {
+        let last = b.traces.iter().rev().find(|t| t.scan == k).expect("scan k was matched");
+        assert_eq!(last.world_from_scan.last(), Some(&b.world_from_scan[k]));
+        let result = b.last_match[k].as_ref().expect("matched");
+        assert_eq!(last.world_from_scan.len(), result.iterations);
+        assert_eq!(result.trace, last.world_from_scan);
+        assert_eq!(last.partners, b.partners[k]);
+    }
+    // The first iteration moves the scan away from where it started.
+    let first = &b.traces[0];
+    assert_eq!(first.scan, 1);
+    assert_ne!(first.world_from_scan[0], h.odometry[1]);
+}
+
 /// Seed 000 Fig. 5's scenario: 20 scans down the corridor with an 8 m
 /// scanner and a poor odometry. Every strategy beats dead reckoning by a
 /// wide margin and incremental matching drifts (its error grows along the

@@ -32,6 +32,10 @@ pub enum Command {
         /// 95 % ellipses (SVG).
         #[arg(long, value_name = "FILE.svg")]
         plot: Option<PathBuf>,
+        /// Also write the plan to a Rerun recording (route, stations, moves,
+        /// sight lines, predicted ellipsoids per step).
+        #[arg(long, value_name = "FILE.rrd")]
+        rrd: Option<PathBuf>,
     },
     /// Check a mission's plan step by step (ranges, line of sight, tracking,
     /// clearance, slope, scan range), analyse its accuracy, and with
@@ -53,6 +57,11 @@ pub enum Command {
         /// and a top view with the 95 % ellipses and violations (SVG).
         #[arg(long, value_name = "FILE.svg")]
         plot: Option<PathBuf>,
+        /// Also write the plan (and the optimized one) to a Rerun recording:
+        /// route, stations, moves and sight lines green or red, predicted
+        /// ellipsoids per step, violations.
+        #[arg(long, value_name = "FILE.rrd")]
+        rrd: Option<PathBuf>,
     },
     /// Check a mission file and report every problem with file:line:column.
     Validate {
@@ -79,6 +88,10 @@ pub enum Command {
         #[arg(long, value_name = "URL", num_args = 0..=1,
               default_missing_value = "rerun+http://127.0.0.1:9876/proxy")]
         connect: Option<String>,
+        /// Log every ICP iteration of the fusion (modes icp and cps-icp) to
+        /// the recording, on its own timeline `icp_iteration`.
+        #[arg(long)]
+        log_icp_iterations: bool,
         /// Inject a fault into a simulated device: DEVICE:after=N (stops
         /// answering after N commands) or DEVICE:every=K (every K-th command
         /// fails); DEVICE is drive, total-station, tilt or scanner. Repeatable.
@@ -155,7 +168,7 @@ fn plotted(out: &mut dyn Write, file: &std::path::Path, s: &crate::plot::PlotSum
 /// Runs a parsed command, writing its report to `out`. Errors mean exit 2.
 pub fn run(cli: Cli, out: &mut dyn Write) -> anyhow::Result<Outcome> {
     match cli.command {
-        Command::Predict { mission, json, plot } => {
+        Command::Predict { mission, json, plot, rrd } => {
             let mission = Mission::load(&mission)?;
             let prediction = crate::predict::prediction(&mission)?;
             if json {
@@ -169,6 +182,13 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> anyhow::Result<Outcome> {
                     plotted(out, &file, &summary)?;
                 }
             }
+            if let Some(file) = rrd {
+                let dance = crate::predict::dance(&mission)?;
+                crate::plan::write_rrd(&mission, &file, &[("plan", &dance, &prediction, &[])])?;
+                if !json {
+                    writeln!(out, "recorded the plan in {} (view it with `rerun {}`)", file.display(), file.display())?;
+                }
+            }
             out.flush()?;
             Ok(if crate::predict::accepted(&mission, &prediction) {
                 Outcome::Success
@@ -176,7 +196,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> anyhow::Result<Outcome> {
                 Outcome::AcceptanceFailed
             })
         }
-        Command::Plan { mission, optimize, out: file, json, plot } => {
+        Command::Plan { mission, optimize, out: file, json, plot, rrd } => {
             let m = Mission::load(&mission)?;
             let report = crate::plan::plan(&m, optimize)?;
             if json {
@@ -190,6 +210,12 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> anyhow::Result<Outcome> {
                     plotted(out, &plot, &summary)?;
                 }
             }
+            if let Some(rrd) = rrd {
+                crate::plan::record(&m, &report, &rrd)?;
+                if !json {
+                    writeln!(out, "recorded the plan in {} (view it with `rerun {}`)", rrd.display(), rrd.display())?;
+                }
+            }
             if let (Some(file), Some(o)) = (file, &report.optimized) {
                 crate::plan::write_mission(&m, o, &file)?;
                 if !json {
@@ -199,7 +225,17 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> anyhow::Result<Outcome> {
             out.flush()?;
             Ok(if crate::plan::accepted(&m, &report) { Outcome::Success } else { Outcome::AcceptanceFailed })
         }
-        Command::Run { mission, out: dir, quiet, resume, spawn, connect, sim_fault, abort_after_events } => {
+        Command::Run {
+            mission,
+            out: dir,
+            quiet,
+            resume,
+            spawn,
+            connect,
+            log_icp_iterations,
+            sim_fault,
+            abort_after_events,
+        } => {
             let m = Mission::load(&mission)?;
             let dir = dir.unwrap_or_else(|| PathBuf::from("runs").join(&m.name));
             let viewer = match (spawn, connect) {
@@ -207,7 +243,8 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> anyhow::Result<Outcome> {
                 (false, Some(url)) => Viewer::Connect(url),
                 (false, None) => Viewer::None,
             };
-            let options = RunOptions { quiet, resume, faults: sim_fault, abort_after_events, viewer };
+            let options =
+                RunOptions { quiet, resume, faults: sim_fault, abort_after_events, viewer, log_icp_iterations };
             let summary = crate::runner::run(&m, &dir, &options)?;
             crate::runner::write_summary(out, &m, &summary)?;
             out.flush()?;

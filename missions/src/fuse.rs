@@ -86,6 +86,8 @@ pub struct Fused {
     pub matches: usize,
     /// Wall time, seconds.
     pub seconds: f64,
+    /// Every ICP run iteration by iteration, when asked for (`trace`).
+    pub traces: Vec<fusion::multiview::IcpTrace>,
 }
 
 /// The tilt sensor's standard deviation the simulator uses (0.01°).
@@ -108,15 +110,22 @@ fn multiview_config(plan: &FusionPlan, strategy: Strategy) -> MultiviewConfig {
 }
 
 /// Fuses `views` by `mode` with the settings of `plan`; `progress(done,
-/// total)` is called as scans are matched.
+/// total)` is called as scans are matched. With `trace`, every ICP run is
+/// kept iteration by iteration ([`Fused::traces`]).
 pub fn fuse(
     views: &[ScanView],
     mode: FusionMode,
     plan: &FusionPlan,
+    trace: bool,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Fused> {
     let started = Instant::now();
     let scans: Vec<&[Point3<f32>]> = views.iter().map(|v| v.body.as_slice()).collect();
+    let mut traces = Vec::new();
+    let traced = |mut c: MultiviewConfig| {
+        c.icp.trace = trace;
+        c
+    };
     let (poses, rmse, matches): (Vec<Isometry3<f64>>, Vec<Option<f64>>, usize) = match mode {
         FusionMode::Direct => (views.iter().map(ScanView::direct).collect(), vec![None; views.len()], 0),
         _ if views.is_empty() => (Vec::new(), Vec::new(), 0),
@@ -126,13 +135,14 @@ pub fn fuse(
             let mut guesses: Vec<Isometry3<f64>> = views.iter().map(ScanView::odometry_guess).collect();
             let shift = views[0].direct() * guesses[0].inverse();
             guesses.iter_mut().for_each(|g| *g = shift * *g);
-            let mut config = multiview_config(plan, Strategy::Simultaneous);
+            let mut config = traced(multiview_config(plan, Strategy::Simultaneous));
             let coarse = fusion::multiview::register_views(&scans, &guesses, &config, progress)
                 .context("ICP fusion (simultaneous matching, coarse pass)")?;
             config.overlap_m = Some(plan.max_correspondence_m);
             config.icp.max_correspondence_m = plan.fine_correspondence_m;
             let r = fusion::multiview::register_views(&scans, &coarse.world_from_scan, &config, progress)
                 .context("ICP fusion (simultaneous matching, fine pass)")?;
+            traces = coarse.traces.into_iter().chain(r.traces).collect();
             let rmse = r.last_match.iter().map(|m| m.as_ref().map(|m| m.rmse_m)).collect();
             (r.world_from_scan, rmse, coarse.matches + r.matches)
         }
@@ -144,7 +154,7 @@ pub fn fuse(
             let r = fusion::multiview::register_with_priors(
                 &scans,
                 &priors,
-                &multiview_config(plan, Strategy::Pairwise),
+                &traced(multiview_config(plan, Strategy::Pairwise)),
                 plan.max_partners,
                 plan.icp_variance_factor,
                 &[plan.max_correspondence_m, plan.fine_correspondence_m],
@@ -155,6 +165,7 @@ pub fn fuse(
             for (_, s, m) in &r.matches {
                 rmse[*s] = Some(m.rmse_m);
             }
+            traces = r.traces;
             (r.world_from_scan, rmse, r.matches.len())
         }
     };
@@ -164,7 +175,7 @@ pub fn fuse(
         .zip(rmse)
         .map(|((v, world_from_body), rmse_m)| FusedScan { station: v.station, world_from_body, rmse_m })
         .collect();
-    Ok(Fused { mode, scans, matches, seconds: started.elapsed().as_secs_f64() })
+    Ok(Fused { mode, scans, matches, seconds: started.elapsed().as_secs_f64(), traces })
 }
 
 /// Horizontal distance between the body origins of two poses, metres.
@@ -291,7 +302,7 @@ pub fn fuse_run(dir: &Path, mode: Option<FusionMode>, json_out: bool, out: &mut 
         bail!("{}: the journal has no scans to fuse", dir.display());
     }
     let mode = mode.unwrap_or(mission.fusion.mode);
-    let fused = fuse(&views, mode, &mission.fusion, &mut |_, _| {})?;
+    let fused = fuse(&views, mode, &mission.fusion, false, &mut |_, _| {})?;
     let target = dir.join("fusion").join(mode.name());
     std::fs::create_dir_all(&target).with_context(|| format!("creating {}", target.display()))?;
     let cloud = PointCloud::from_points(merged(&views, &fused));

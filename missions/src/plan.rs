@@ -17,6 +17,7 @@ use serde_json::{Value, json};
 
 use crate::diagnostics::Diagnostics;
 use crate::mission::{Mission, MissionError};
+use crate::recording::{PlanLog, Recorder, Viewer};
 
 /// Longest sight line `--optimize` considers when neither the mission nor
 /// the instrument sets a shorter one, metres.
@@ -195,6 +196,54 @@ pub fn optimized_prediction(mission: &Mission, o: &Optimized) -> Result<Predicti
         .map_err(|e| anyhow::anyhow!("mission {}: optimized plan: {e}", mission.source.file.display()))
 }
 
+/// Logs a plan under `world/<root>/` (see [`Recorder::plan`]): its steps,
+/// every robot's predicted estimate and `violations` described.
+pub fn log_plan(
+    rec: &mut Recorder,
+    mission: &Mission,
+    root: &str,
+    dance: &Dance,
+    prediction: &Prediction,
+    violations: &[Violation],
+) -> Result<()> {
+    let steps = dance.steps(|k| mission.scan.scans_at(k));
+    let estimates = planner::step_estimates(dance, prediction, &steps, &mission.plan.start_covariance);
+    let name = robot_name(mission);
+    let described: Vec<(Violation, String)> = violations.iter().map(|v| (v.clone(), v.describe(&name))).collect();
+    let names = robot_names(mission);
+    rec.plan(&PlanLog { root, dance, steps: &steps, estimates: &estimates, violations: &described, names: &names })
+}
+
+/// "parent" and the children's names, in team order.
+pub fn robot_names(mission: &Mission) -> Vec<String> {
+    std::iter::once("parent".to_string()).chain(mission.children.iter().cloned()).collect()
+}
+
+/// Writes `--rrd`: the scene and each plan (root, schedule, prediction,
+/// violations) on the `plan_step` timeline.
+pub fn write_rrd(mission: &Mission, path: &Path, plans: &[(&str, &Dance, &Prediction, &[Violation])]) -> Result<()> {
+    let mut rec = Recorder::new(&mission.name, Some(path), &Viewer::None, robot_names(mission))?;
+    rec.layout(crate::recording::Layout::Plan)?;
+    rec.world(scene(mission)?.as_ref())?;
+    for (root, dance, prediction, violations) in plans {
+        log_plan(&mut rec, mission, root, dance, prediction, violations)?;
+    }
+    rec.finish()
+}
+
+/// `plan --rrd`: the plan as written with its violations, and the
+/// optimized plan under `world/plan_optimized/` if any.
+pub fn record(mission: &Mission, report: &PlanReport, path: &Path) -> Result<()> {
+    let Some(written) = &report.prediction else { anyhow::bail!("the plan has no prediction to record") };
+    let optimized = report.optimized.as_ref().map(|o| optimized_prediction(mission, o)).transpose()?;
+    let mut plans: Vec<(&str, &Dance, &Prediction, &[Violation])> =
+        vec![("plan", &report.dance, written, &report.violations)];
+    if let (Some(o), Some(p)) = (&report.optimized, &optimized) {
+        plans.push(("plan_optimized", &o.best.dance, p, &[]));
+    }
+    write_rrd(mission, path, &plans)
+}
+
 /// Writes `--plot`: the plan as written, and the optimized one if any.
 pub fn plot(mission: &Mission, report: &PlanReport, path: &Path) -> Result<crate::plot::PlotSummary> {
     let Some(written) = &report.prediction else { anyhow::bail!("the plan has no prediction to plot") };
@@ -305,20 +354,6 @@ fn formation_json(kind: &FormationKind, up_m: f64) -> Value {
     }
 }
 
-fn check_name(v: &Violation) -> &'static str {
-    use planner::Check;
-    match v.check {
-        Check::Range => "range",
-        Check::LineOfSight { .. } => "line-of-sight",
-        Check::Tracking { .. } => "tracking",
-        Check::Slope => "slope",
-        Check::Clearance { .. } => "clearance",
-        Check::Separation { .. } => "separation",
-        Check::ScanNothingInRange => "scan-nothing-in-range",
-        Check::ScanGap { .. } => "scan-gap",
-    }
-}
-
 fn robot_json(mission: &Mission, r: Robot) -> Value {
     match r {
         Robot::Parent => json!("parent"),
@@ -368,7 +403,7 @@ pub fn write_json(out: &mut dyn Write, mission: &Mission, report: &PlanReport) -
         .iter()
         .map(|v| {
             json!({"step": v.step, "cycle": v.cycle, "station": v.station, "robot": robot_json(mission, v.robot),
-                "constraint": check_name(v), "value": v.value, "limit": v.limit, "message": v.describe(&name)})
+                "constraint": v.check.name(), "value": v.value, "limit": v.limit, "message": v.describe(&name)})
         })
         .collect();
     let optimized = report.optimized.as_ref().map(|o| {

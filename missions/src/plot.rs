@@ -253,7 +253,7 @@ fn top_view(
         ellipses.into_iter().enumerate().filter(|(k, _)| (k + 1) % every == 0 || k + 1 == n).map(|(_, e)| e).collect();
     let which = if every > 1 { format!(", one station in {every}") } else { String::new() };
     let caption =
-        format!("top view — {}: 95 % error ellipses of the parent ×{}{which}", plan.label, format_scale(scale));
+        format!("top view — {}: 95 % error ellipses of the parent ×{}{which}", plan.label, ellipse_scale_name(scale));
     let mut chart = draw(
         ChartBuilder::on(area)
             .caption(caption, ("sans-serif", 18))
@@ -292,7 +292,7 @@ fn top_view(
         let outline = ellipse_outline(*c, &e.scaled(scale), 64);
         Polygon::new(outline.into_iter().map(|p| (p.x, p.y)).collect::<Vec<_>>(), purple.mix(0.35).filled())
     })))?
-    .label(format!("parent 95 % ellipse ×{}", format_scale(scale)))
+    .label(format!("parent 95 % ellipse ×{}", ellipse_scale_name(scale)))
     .legend(move |(x, y)| Rectangle::new([(x, y - 4), (x + 20, y + 4)], purple.mix(0.35).filled()));
     let red = COLOURS[1];
     let crosses: Vec<(f64, f64)> = plans
@@ -317,7 +317,7 @@ fn top_view(
 }
 
 /// "1000", "20", "0.5".
-fn format_scale(k: f64) -> String {
+pub fn ellipse_scale_name(k: f64) -> String {
     if k >= 1.0 { format!("{k:.0}") } else { format!("{k}") }
 }
 

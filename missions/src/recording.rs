@@ -21,6 +21,23 @@
 //! | `metrics/fix_sigma0_squared` | `Scalars`, column-wise | each parent fix |
 //! | `metrics/icp_rmse_m` | `Scalars`, column-wise, at each scan's step | ICP fusion modes |
 //! | `log` | `TextLog` of mission events, warnings for retries and blunders | as they happen |
+//! | `world/scans/icp_iterations/scanNNN` (+ `/points`) | `Transform3D` of the scan per ICP iteration over `Points3D` in the scan's frame | `run --log-icp-iterations`, timeline `icp_iteration` |
+//! | `metrics/icp_iteration_shift_m` | `Scalars`: how far each iteration moved its scan | likewise |
+//!
+//! The plan ([`Recorder::plan`]; also `plan`/`predict --rrd FILE`) on its own
+//! timeline `plan_step` (the index of [`planner::Dance::steps`]):
+//!
+//! | path | archetype | when |
+//! |---|---|---|
+//! | `world/plan/route` | `LineStrips3D` through the parent's stations | static |
+//! | `world/plan/stations` | `Points3D`; scan stations green | static |
+//! | `world/plan/robots/<name>` | `Points3D` at the planned position | each move (and step 0) |
+//! | `world/plan/moves` | `LineStrips3D` of the move, green, red if it breaks a constraint | each move |
+//! | `world/plan/sight_lines` | `LineStrips3D` parent → child, green, red if it breaks a constraint | each measurement |
+//! | `world/plan/uncertainty/<name>/predicted_95pct_x<k>` | `Ellipsoids3D`, 95 %, exaggerated ×k | each placement and fix |
+//! | `world/plan/violations` | `Points3D`, red, every violation so far, labelled | each violating step |
+//! | `plan/log` | `TextLog`: each violation described (warning) | each violating step |
+//! | `plan/metrics/{predicted_sigma_xy_m,predicted_sigma_heading_rad}` | `Scalars`, column-wise | each parent fix |
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -29,6 +46,7 @@ use anyhow::{Context, Result};
 use cps::geom::{Primitive, Scene};
 use cps::{ParentPose, TeamState};
 use nalgebra::{Matrix3, Matrix4, Point3, SymmetricEigen, UnitQuaternion, Vector3};
+use planner::{Action, Dance, Robot, Step, StepEstimate, Violation};
 use rerun::{RecordingStream, RecordingStreamBuilder};
 
 /// Nominal drive speed for `sim_time`, m/s.
@@ -43,6 +61,107 @@ pub const CHI3_95_SCALE: f64 = 2.795_483_482_915_108;
 pub const DISPLAY_VOXEL_M: f64 = 0.05;
 /// Baarda's critical value for α₀ = 0.1 % (two-sided).
 pub const W_CRITICAL: f64 = 3.29;
+
+/// The plan to log under `world/plan/` ([`Recorder::plan`]).
+#[derive(Debug, Clone, Copy)]
+pub struct PlanLog<'a> {
+    /// Entity root: `plan` (as written) or `plan_optimized`; the 3D
+    /// entities go under `world/<root>/`, the log and metrics under `<root>/`.
+    pub root: &'a str,
+    /// The schedule.
+    pub dance: &'a Dance,
+    /// Its steps ([`Dance::steps`] with the mission's scan stations).
+    pub steps: &'a [Step],
+    /// Every robot's predicted estimate ([`planner::step_estimates`]).
+    pub estimates: &'a [StepEstimate],
+    /// Constraints broken, each with its description.
+    pub violations: &'a [(Violation, String)],
+    /// Robot names: the parent's, then the children's in team order.
+    pub names: &'a [String],
+}
+
+impl PlanLog<'_> {
+    fn name(&self, r: Robot) -> String {
+        let k = match r {
+            Robot::Parent => 0,
+            Robot::Child(j) => j + 1,
+        };
+        self.names.get(k).cloned().unwrap_or_else(|| format!("robot{k}"))
+    }
+
+    /// The ellipsoids' exaggeration: the largest 95 % half axis drawn at
+    /// most half a station gap long (1-2-5 steps).
+    pub fn ellipsoid_scale(&self) -> f64 {
+        let largest = self
+            .estimates
+            .iter()
+            .map(|e| ellipsoid_95(&e.covariance.fixed_view::<3, 3>(0, 0).into_owned()).0)
+            .flat_map(|h| h.into_iter().map(f64::from))
+            .fold(0.0, f64::max);
+        let mut gaps: Vec<f64> =
+            self.dance.stations.windows(2).map(|w| (w[1].position - w[0].position).norm()).collect();
+        gaps.sort_by(f64::total_cmp);
+        crate::plot::ellipse_scale(largest, 0.5 * gaps.get(gaps.len() / 2).copied().unwrap_or(1.0))
+    }
+}
+
+fn green() -> rerun::Color {
+    rerun::Color::from_rgb(40, 170, 70)
+}
+
+fn red() -> rerun::Color {
+    rerun::Color::from_rgb(220, 40, 40)
+}
+
+/// Which default layout a recording opens with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Layout {
+    /// A run: the world, the accuracy series, fix σ0², the event log.
+    Mission,
+    /// A plan (`--rrd`): the world, the predicted series, the violations.
+    Plan,
+}
+
+/// The default layout: the 3D world large on the left, the series and the
+/// log on the right, side panels collapsed, time on the run's timeline.
+fn blueprint(layout: Layout) -> rerun::blueprint::Blueprint {
+    use rerun::blueprint::components::PanelState;
+    use rerun::blueprint::{
+        Blueprint, BlueprintPanel, ContainerLike, Horizontal, SelectionPanel, Spatial3DView, TextLogView, TimePanel,
+        TimeSeriesView, Vertical,
+    };
+    let (timeline, right): (&str, Vec<ContainerLike>) = match layout {
+        Layout::Mission => (
+            "step",
+            vec![
+                TimeSeriesView::new("σxy achieved, predicted, error to truth (m)")
+                    .with_contents(["/metrics/sigma_xy_m", "/metrics/predicted_sigma_xy_m", "/metrics/error_xy_m"])
+                    .into(),
+                TimeSeriesView::new("parent fix σ0², ICP RMSE (m)")
+                    .with_contents(["/metrics/fix_sigma0_squared", "/metrics/icp_rmse_m"])
+                    .into(),
+                TextLogView::new("events").with_origin("/log").into(),
+            ],
+        ),
+        Layout::Plan => (
+            "plan_step",
+            vec![
+                TimeSeriesView::new("predicted σxy (m), σθ (rad)").with_contents(["/plan/metrics/**"]).into(),
+                TimeSeriesView::new("optimized: predicted σxy (m), σθ (rad)")
+                    .with_contents(["/plan_optimized/metrics/**"])
+                    .into(),
+                TextLogView::new("violations").with_contents(["/plan/log"]).into(),
+            ],
+        ),
+    };
+    Blueprint::new(
+        Horizontal::new([Spatial3DView::new("world").with_origin("/world").into(), Vertical::new(right).into()])
+            .with_column_shares([2.0, 1.0]),
+    )
+    .with_blueprint_panel(BlueprintPanel::new().with_state(PanelState::Collapsed))
+    .with_selection_panel(SelectionPanel::new().with_state(PanelState::Collapsed))
+    .with_time_panel(TimePanel::new().with_state(PanelState::Collapsed).with_timeline(timeline))
+}
 
 /// Where the recording goes besides `mission.rrd`.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
@@ -248,6 +367,14 @@ impl Recorder {
         Ok(Self { rec: Some(rec), scans: Some((send, worker)), robots, ..Self::disabled() })
     }
 
+    /// Sends the default layout (the viewer opens with it; "reset
+    /// blueprint" in the viewer returns to it).
+    pub fn layout(&mut self, layout: Layout) -> Result<()> {
+        let Some(rec) = &self.rec else { return Ok(()) };
+        let activation = rerun::blueprint::BlueprintActivation { make_active: true, make_default: true };
+        rr(blueprint(layout).send(rec, activation))
+    }
+
     /// True when something is recorded.
     pub fn enabled(&self) -> bool {
         self.rec.is_some()
@@ -255,15 +382,8 @@ impl Recorder {
 
     /// Static content: axes convention, the scene, the robots' bodies.
     pub fn scene(&mut self, scene: &Scene) -> Result<()> {
+        self.world(Some(scene))?;
         let Some(rec) = &self.rec else { return Ok(()) };
-        rr(rec.log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP()))?;
-        let (vertices, triangles) = scene_mesh(scene);
-        rr(rec.log_static(
-            "world/scene",
-            &rerun::Mesh3D::new(vertices)
-                .with_triangle_indices(triangles)
-                .with_albedo_factor(rerun::datatypes::Rgba32::from_unmultiplied_rgba(200, 200, 210, 60)),
-        ))?;
         for (k, name) in self.robots.iter().enumerate() {
             for (root, alpha) in [("robots", 255), ("truth", 90)] {
                 let path = format!("world/{root}/{name}/body");
@@ -281,6 +401,145 @@ impl Recorder {
                     ))?;
                 }
             }
+        }
+        Ok(())
+    }
+
+    /// The axes convention and, when given, the scene (static).
+    pub fn world(&mut self, scene: Option<&Scene>) -> Result<()> {
+        let Some(rec) = &self.rec else { return Ok(()) };
+        rr(rec.log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP()))?;
+        if let Some(scene) = scene {
+            let (vertices, triangles) = scene_mesh(scene);
+            rr(rec.log_static(
+                "world/scene",
+                &rerun::Mesh3D::new(vertices)
+                    .with_triangle_indices(triangles)
+                    .with_albedo_factor(rerun::datatypes::Rgba32::from_unmultiplied_rgba(200, 200, 210, 60)),
+            ))?;
+        }
+        Ok(())
+    }
+
+    /// The plan under `world/<root>/` on the `plan_step` timeline (the
+    /// runner's `step` and `sim_time` are left as they were).
+    pub fn plan(&mut self, plan: &PlanLog) -> Result<()> {
+        let Some(rec) = &self.rec else { return Ok(()) };
+        rec.reset_time();
+        let dance = plan.dance;
+        let stations: Vec<[f32; 3]> = dance.stations.iter().map(|s| p32(&s.position)).collect();
+        rr(rec.log_static(
+            format!("world/{}/route", plan.root),
+            &rerun::LineStrips3D::new([stations.clone()])
+                .with_colors([rerun::Color::from_rgb(60, 120, 230)])
+                .with_radii([0.015_f32]),
+        ))?;
+        let scanned: Vec<usize> = plan
+            .steps
+            .iter()
+            .filter_map(|s| if let Action::Scan { station } = s.action { Some(station) } else { None })
+            .collect();
+        let colours: Vec<rerun::Color> = (0..stations.len())
+            .map(|k| if scanned.contains(&k) { green() } else { rerun::Color::from_rgb(60, 120, 230) })
+            .collect();
+        rr(rec.log_static(
+            format!("world/{}/stations", plan.root),
+            &rerun::Points3D::new(stations).with_colors(colours).with_radii([0.06_f32]),
+        ))?;
+        let scale = plan.ellipsoid_scale();
+        let scale_name = crate::plot::ellipse_scale_name(scale);
+        let broken = |step: usize| plan.violations.iter().any(|(v, _)| v.step == step);
+        let colour = |step: usize| if broken(step) { red() } else { green() };
+        let line = |a: &Point3<f64>, b: &Point3<f64>, step: usize| {
+            rerun::LineStrips3D::new([[p32(a), p32(b)]]).with_colors([colour(step)]).with_radii([0.01_f32])
+        };
+        let robot = |p: &Point3<f64>, parent: bool| {
+            let c = if parent { rerun::Color::from_rgb(60, 120, 230) } else { rerun::Color::from_rgb(240, 140, 40) };
+            rerun::Points3D::new([p32(p)]).with_colors([c]).with_radii([if parent { 0.25_f32 } else { 0.1 }])
+        };
+        let child_at = |cycle: usize, j: usize| {
+            cycle.checked_sub(1).and_then(|c| dance.cycles.get(c)).and_then(|c| c.children.get(j)).copied()
+        };
+        rec.set_time_sequence("plan_step", 0);
+        if let Some(s0) = dance.stations.first() {
+            rr(rec.log(format!("world/{}/robots/{}", plan.root, plan.name(Robot::Parent)), &robot(&s0.position, true)))?;
+        }
+        let mut so_far: Vec<(Point3<f64>, String)> = Vec::new();
+        let (mut fix_steps, mut sigma_xy, mut sigma_heading) = (Vec::new(), Vec::new(), Vec::new());
+        for step in plan.steps {
+            rec.set_time_sequence("plan_step", step.index as i64);
+            match &step.action {
+                Action::MoveChild { child, from, to } => {
+                    rr(rec.log(format!("world/{}/moves", plan.root), &line(from, to, step.index)))?;
+                    rr(rec.log(
+                        format!("world/{}/robots/{}", plan.root, plan.name(Robot::Child(*child))),
+                        &robot(to, false),
+                    ))?;
+                }
+                Action::MoveParent { from, to } => {
+                    let (a, b) = (dance.stations[*from].position, dance.stations[*to].position);
+                    rr(rec.log(format!("world/{}/moves", plan.root), &line(&a, &b, step.index)))?;
+                    rr(rec.log(format!("world/{}/robots/{}", plan.root, plan.name(Robot::Parent)), &robot(&b, true)))?;
+                }
+                Action::Measure { child, station, .. } => {
+                    if let Some(c) = child_at(step.cycle, *child) {
+                        let from = dance.stations[*station].position;
+                        rr(rec.log(format!("world/{}/sight_lines", plan.root), &line(&from, &c, step.index)))?;
+                    }
+                }
+                Action::Fix { .. } | Action::Scan { .. } => {}
+            }
+            for e in plan.estimates.iter().filter(|e| e.step == step.index && !e.scan) {
+                let (half, q) = ellipsoid_95(&e.covariance.fixed_view::<3, 3>(0, 0).into_owned());
+                let half = half.map(|h| h * scale as f32);
+                rr(rec.log(
+                    format!("world/{}/uncertainty/{}/predicted_95pct_x{scale_name}", plan.root, plan.name(e.robot)),
+                    &rerun::Ellipsoids3D::from_centers_and_half_sizes([p32(&e.position)], [half])
+                        .with_quaternions([q])
+                        .with_colors([rerun::Color::from_rgb(230, 200, 40)])
+                        .with_fill_mode(rerun::FillMode::MajorWireframe),
+                ))?;
+                if e.robot == Robot::Parent {
+                    fix_steps.push(step.index as i64);
+                    sigma_xy.push(e.sigma_xy2_m2().sqrt());
+                    sigma_heading.push(e.covariance[(3, 3)].max(0.0).sqrt());
+                }
+            }
+            let here: Vec<&(Violation, String)> =
+                plan.violations.iter().filter(|(v, _)| v.step == step.index).collect();
+            for (v, text) in &here {
+                let at = match &step.action {
+                    Action::MoveChild { to, .. } => *to,
+                    Action::Measure { child, .. } => child_at(step.cycle, *child).unwrap_or(Point3::origin()),
+                    _ => dance.stations.get(v.station).map_or(Point3::origin(), |s| s.position),
+                };
+                so_far.push((at, format!("step {}: {}, {}", v.step, v.check.name(), plan.name(v.robot))));
+                rr(rec.log(
+                    format!("{}/log", plan.root),
+                    &rerun::TextLog::new(text.clone()).with_level(rerun::TextLogLevel::WARN),
+                ))?;
+            }
+            if !here.is_empty() {
+                rr(rec.log(
+                    format!("world/{}/violations", plan.root),
+                    &rerun::Points3D::new(so_far.iter().map(|(p, _)| p32(p)))
+                        .with_colors([red()])
+                        .with_radii([0.2_f32])
+                        .with_labels(so_far.iter().map(|(_, l)| l.clone())),
+                ))?;
+            }
+        }
+        for (series, values) in [("predicted_sigma_xy_m", sigma_xy), ("predicted_sigma_heading_rad", sigma_heading)] {
+            rr(rec.send_columns(
+                format!("{}/metrics/{series}", plan.root),
+                [rerun::TimeColumn::new_sequence("plan_step", fix_steps.clone())],
+                rr(rerun::Scalars::new(values).columns_of_unit_batches())?,
+            ))?;
+        }
+        rec.reset_time();
+        if self.step > 0 || self.sim_time_s > 0.0 {
+            rec.set_time_sequence("step", self.step);
+            rec.set_duration_secs("sim_time", self.sim_time_s);
         }
         Ok(())
     }
@@ -402,6 +661,67 @@ impl Recorder {
         Ok(())
     }
 
+    /// Every ICP iteration of the fusion on the `icp_iteration` timeline
+    /// (one tick per iteration, runs in the order they ran): each scan's
+    /// points once, in its own frame, under a transform that follows the
+    /// scan's world pose through the iterations, and how far each
+    /// iteration moved it. `names[k]` and `bodies[k]` are scan k's.
+    pub fn icp_iterations(
+        &mut self,
+        traces: &[fusion::multiview::IcpTrace],
+        names: &[String],
+        bodies: &[&[Point3<f32>]],
+    ) -> Result<()> {
+        let Some(rec) = &self.rec else { return Ok(()) };
+        rec.reset_time();
+        let mut tick = 0_i64;
+        let mut shown = vec![false; names.len()];
+        let (mut ticks, mut shifts) = (Vec::new(), Vec::new());
+        for t in traces {
+            let (Some(name), Some(body)) = (names.get(t.scan), bodies.get(t.scan)) else { continue };
+            let path = format!("world/scans/icp_iterations/{name}");
+            let mut previous: Option<nalgebra::Isometry3<f64>> = None;
+            for pose in &t.world_from_scan {
+                rec.set_time_sequence("icp_iteration", tick);
+                if !shown[t.scan] {
+                    shown[t.scan] = true;
+                    let thin = scanner::reduced_points(body, DISPLAY_VOXEL_M * 2.0).unwrap_or_else(|_| body.to_vec());
+                    rr(rec.log(
+                        format!("{path}/points"),
+                        &rerun::Points3D::new(thin.iter().map(|p| [p.x, p.y, p.z]))
+                            .with_colors([rerun::Color::from_rgb(230, 120, 40)])
+                            .with_radii([0.015_f32]),
+                    ))?;
+                }
+                let q = pose.rotation.coords;
+                rr(rec.log(
+                    path.as_str(),
+                    &rerun::Transform3D::from_translation_rotation(
+                        p32(&Point3::from(pose.translation.vector)),
+                        rerun::Quaternion::from_xyzw([q.x as f32, q.y as f32, q.z as f32, q.w as f32]),
+                    ),
+                ))?;
+                if let Some(p) = previous {
+                    ticks.push(tick);
+                    shifts.push((pose.translation.vector - p.translation.vector).norm());
+                }
+                previous = Some(*pose);
+                tick += 1;
+            }
+        }
+        if !ticks.is_empty() {
+            rr(rec.send_columns(
+                "metrics/icp_iteration_shift_m",
+                [rerun::TimeColumn::new_sequence("icp_iteration", ticks)],
+                rr(rerun::Scalars::new(shifts).columns_of_unit_batches())?,
+            ))?;
+        }
+        rec.reset_time();
+        rec.set_time_sequence("step", self.step);
+        rec.set_duration_secs("sim_time", self.sim_time_s);
+        Ok(())
+    }
+
     /// A mission event in the text log.
     pub fn event(&mut self, level: &'static str, text: impl Into<String>) -> Result<()> {
         let Some(rec) = &self.rec else { return Ok(()) };
@@ -440,6 +760,9 @@ impl Recorder {
         let Some(rec) = &self.rec else { return Ok(()) };
         let s = &self.series;
         let columns = |path: &str, steps: &[i64], values: &[f64]| -> Result<()> {
+            if steps.is_empty() {
+                return Ok(());
+            }
             rr(rec.send_columns(
                 path,
                 [rerun::TimeColumn::new_sequence("step", steps.to_vec())],
@@ -451,9 +774,7 @@ impl Recorder {
         columns("metrics/sigma_heading_rad", &s.station_steps, &s.sigma_heading_rad)?;
         columns("metrics/error_xy_m", &s.station_steps, &s.error_xy_m)?;
         columns("metrics/fix_sigma0_squared", &s.fix_steps, &s.sigma0_squared)?;
-        if !s.icp_steps.is_empty() {
-            columns("metrics/icp_rmse_m", &s.icp_steps, &s.icp_rmse_m)?;
-        }
+        columns("metrics/icp_rmse_m", &s.icp_steps, &s.icp_rmse_m)?;
         rr(rec.flush_blocking())?;
         Ok(())
     }

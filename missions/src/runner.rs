@@ -53,6 +53,9 @@ pub struct RunOptions {
     pub abort_after_events: Option<usize>,
     /// A live viewer to stream to besides `mission.rrd`.
     pub viewer: Viewer,
+    /// Log every ICP iteration of the fusion to the recording, on the
+    /// `icp_iteration` timeline.
+    pub log_icp_iterations: bool,
 }
 
 /// One parent station of a finished run.
@@ -267,6 +270,7 @@ struct Run<'m> {
     scan_times: Vec<(i64, f64)>,
     stations: Vec<StationRecord>,
     timings: Timings,
+    log_icp_iterations: bool,
 }
 
 /// Runs `mission` on the simulator into `dir`: a new run (an existing
@@ -317,10 +321,11 @@ pub fn run(mission: &Mission, dir: &Path, options: &RunOptions) -> Result<RunSum
     }
 
     let sim = SimTeam::new(mission, &dance, options.faults.clone())?;
-    let robots: Vec<String> = std::iter::once("parent".to_string()).chain(mission.children.iter().cloned()).collect();
     let rrd = mission.output.rerun.then(|| dir.join("mission.rrd"));
-    let mut rec = Recorder::new(&mission.name, rrd.as_deref(), &options.viewer, robots)?;
+    let mut rec = Recorder::new(&mission.name, rrd.as_deref(), &options.viewer, crate::plan::robot_names(mission))?;
+    rec.layout(crate::recording::Layout::Mission)?;
     rec.scene(sim.scene())?;
+    crate::plan::log_plan(&mut rec, mission, "plan", &dance, &prediction, &[])?;
 
     let progress = MultiProgress::with_draw_target(if options.quiet {
         ProgressDrawTarget::hidden()
@@ -363,6 +368,7 @@ pub fn run(mission: &Mission, dir: &Path, options: &RunOptions) -> Result<RunSum
         scan_times: Vec::new(),
         stations: Vec::new(),
         timings: Timings::default(),
+        log_icp_iterations: options.log_icp_iterations,
     };
     run.steps.rec.event(rerun::TextLogLevel::INFO, format!("mission \"{}\" starts", mission.name))?;
     run.station(0, mission.plan.start_covariance, None)?;
@@ -590,7 +596,8 @@ impl Run<'_> {
         let bar = &self.scan_bar;
         bar.set_prefix("fusion");
         let fused = timed(&mut self.timings.fusion_s, || {
-            crate::fuse::fuse(views, mode, &self.mission.fusion, &mut |done, total| {
+            let trace = self.log_icp_iterations && self.steps.rec.enabled();
+            crate::fuse::fuse(views, mode, &self.mission.fusion, trace, &mut |done, total| {
                 bar.set_length(total as u64);
                 bar.set_position(done as u64);
             })
@@ -600,6 +607,11 @@ impl Run<'_> {
         }
         // Each scan moved once, into the merged cloud and the recording.
         let rec = &mut self.steps.rec;
+        if !fused.traces.is_empty() {
+            let names: Vec<String> = views.iter().map(|v| format!("scan{:03}", v.station)).collect();
+            let bodies: Vec<&[Point3<f32>]> = views.iter().map(|v| v.body.as_slice()).collect();
+            timed(&mut self.timings.recording_s, || rec.icp_iterations(&fused.traces, &names, &bodies))?;
+        }
         let (merged, t) = (&mut self.merged, &mut self.timings);
         for ((view, at), f) in views.iter().zip(&self.scan_times).zip(&fused.scans) {
             let world = timed(&mut t.fusion_s, || fusion::direct::transform(&view.body, &f.world_from_body));

@@ -93,6 +93,24 @@ pub enum Check {
     },
 }
 
+impl Check {
+    /// The check's short name: `range`, `line-of-sight`, `tracking`,
+    /// `slope`, `clearance`, `separation`, `scan-nothing-in-range`,
+    /// `scan-gap`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Check::Range => "range",
+            Check::LineOfSight { .. } => "line-of-sight",
+            Check::Tracking { .. } => "tracking",
+            Check::Slope => "slope",
+            Check::Clearance { .. } => "clearance",
+            Check::Separation { .. } => "separation",
+            Check::ScanNothingInRange => "scan-nothing-in-range",
+            Check::ScanGap { .. } => "scan-gap",
+        }
+    }
+}
+
 /// One broken constraint.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Violation {
