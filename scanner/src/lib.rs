@@ -6,7 +6,9 @@
 //! - [`sim`]: the built-in simulator ([`sim::SimWorld`] and its devices);
 //! - [`assembly`]: slices + head angles + lever arm → a 3D [`Scan`];
 //! - [`reduce`]: reduced points (voxel means);
-//! - [`io`]: scan files (3DTK, PLY, XYZ, PCD, LAS, E57) as [`PointCloud`]s.
+//! - [`io`]: scan files (3DTK, PLY, XYZ, PCD, LAS, E57) as [`PointCloud`]s;
+//! - [`protocol`]: the real instruments' wire formats (SICK LMS-2xx
+//!   telegrams, Leica GeoCOM, NMEA XDR tilt lines), without I/O.
 //!
 //! Frames: scanner S (the 2D scanner's plane is its x-y plane), head H,
 //! body B (origin at the total-station centre, x forward, z up), world W.
@@ -16,6 +18,7 @@ pub mod assembly;
 pub mod devices;
 pub mod error;
 pub mod io;
+pub mod protocol;
 pub mod reduce;
 pub mod sim;
 

@@ -7,13 +7,7 @@ use tests::{cps_survey, example, rrd_rows};
 fn the_hall_recording_holds_every_entity() {
     let dir = tempfile::tempdir().expect("tempdir");
     let out = dir.path().join("hall");
-    let run = cps_survey([
-        "run".into(),
-        example("hall.toml").into_os_string(),
-        "--out".into(),
-        out.clone().into(),
-        "--quiet".into(),
-    ]);
+    let run = tests::run_mission(&example("hall.toml"), &out);
     assert_eq!(run.code, 0, "{}", run.stderr);
     let rows = rrd_rows(&out.join("mission.rrd")).expect("the recording decodes");
     let get =
