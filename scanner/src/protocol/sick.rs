@@ -3,9 +3,9 @@
 //! A telegram is `STX address length(u16 LE) payload crc(u16 LE)`; the
 //! length counts the payload (command code, data and — in replies only —
 //! the status byte); the CRC covers STX to the status byte. A device answers
-//! a valid request with a raw `ACK` byte and then its reply (code = request
-//! + 80h), a request with a bad CRC with a raw `NAK`. Multi-byte fields are
-//! little endian.
+//! a valid request with a raw `ACK` byte and then its reply (its code is the
+//! request's plus 80h), a request with a bad CRC with a raw `NAK`.
+//! Multi-byte fields are little endian.
 
 use super::{ProtocolError, hex_excerpt};
 
