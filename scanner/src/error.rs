@@ -85,6 +85,48 @@ pub enum ScannerError {
     /// An error of the CPS model or the scene.
     #[error(transparent)]
     Cps(#[from] cps::CpsError),
+    /// A device did not answer in time (after its retries).
+    #[error("{device}: no answer to {waiting_for} within {waited_s:.2} s ({attempts} attempt(s))")]
+    Timeout {
+        /// Device name (and port).
+        device: String,
+        /// The request or data waited for.
+        waiting_for: String,
+        /// Total time waited, seconds.
+        waited_s: f64,
+        /// Attempts made.
+        attempts: usize,
+    },
+    /// A device sent something the protocol does not allow, or rejected a
+    /// request, on every attempt.
+    #[error("{device}: {source}")]
+    Protocol {
+        /// Device name (and port).
+        device: String,
+        /// What was wrong.
+        #[source]
+        source: crate::protocol::ProtocolError,
+    },
+    /// A total station answered with a GeoCOM error code.
+    #[error("{device}: {request} failed: {code}")]
+    Instrument {
+        /// Device name (and port).
+        device: String,
+        /// The request, e.g. `AUT_FineAdjust (9037)`.
+        request: String,
+        /// The instrument's return code.
+        code: crate::protocol::geocom::ReturnCode,
+    },
+    /// A tilt sensor's last valid reading is too old.
+    #[error("{device}: no valid reading for {age_s:.2} s (stale; expected one every {period_s:.2} s)")]
+    Stale {
+        /// Device name (and port).
+        device: String,
+        /// Time since the last valid reading (or since asked), seconds.
+        age_s: f64,
+        /// The sensor's nominal period, seconds.
+        period_s: f64,
+    },
 }
 
 impl ScannerError {

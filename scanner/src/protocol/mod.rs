@@ -60,6 +60,70 @@ pub enum ProtocolError {
     },
 }
 
+/// Splits a byte stream into lines at CR, LF or CR LF (empty lines are
+/// skipped), dropping lines longer than its maximum (reported once each)
+/// and, if asked, the first line (a partial one when a port is opened
+/// mid-stream).
+#[derive(Debug, Clone)]
+pub struct LineSplitter {
+    buf: Vec<u8>,
+    max: usize,
+    overlong: bool,
+    skip_first: bool,
+}
+
+/// What a [`LineSplitter`] yields.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Line {
+    /// A complete line without its ending.
+    Text(String),
+    /// A line that was too long or not text, dropped.
+    Dropped(String),
+}
+
+impl LineSplitter {
+    /// A splitter for lines of at most `max` bytes; with `skip_first` the
+    /// first line is discarded.
+    pub fn new(max: usize, skip_first: bool) -> Self {
+        Self { buf: Vec::with_capacity(max), max, overlong: false, skip_first }
+    }
+
+    /// Forgets the partial line and discards the next one (after input
+    /// was dropped mid-line).
+    pub fn restart(&mut self) {
+        self.buf.clear();
+        self.overlong = false;
+        self.skip_first = true;
+    }
+
+    /// Feeds bytes; returns the lines they complete.
+    pub fn push(&mut self, bytes: &[u8]) -> Vec<Line> {
+        let mut out = Vec::new();
+        for &b in bytes {
+            if b == b'\r' || b == b'\n' {
+                if self.buf.is_empty() && !self.overlong {
+                    continue;
+                }
+                let line = std::mem::take(&mut self.buf);
+                let overlong = std::mem::take(&mut self.overlong);
+                if std::mem::take(&mut self.skip_first) {
+                    continue;
+                }
+                out.push(match (overlong, String::from_utf8(line)) {
+                    (false, Ok(s)) => Line::Text(s),
+                    (true, _) => Line::Dropped(format!("a line longer than {} characters", self.max)),
+                    (false, Err(e)) => Line::Dropped(format!("a line that is not text: {e}")),
+                });
+            } else if self.buf.len() >= self.max {
+                self.overlong = true;
+            } else {
+                self.buf.push(b);
+            }
+        }
+        out
+    }
+}
+
 /// The first `n` bytes of `bytes` in hex, for messages.
 pub(crate) fn hex_excerpt(bytes: &[u8], n: usize) -> String {
     let mut s: String = bytes.iter().take(n).map(|b| format!("{b:02X} ")).collect();

@@ -115,59 +115,6 @@ pub fn parse_xdr(line: &str) -> Result<TiltLine, ProtocolError> {
     }
 }
 
-/// Splits a byte stream into lines at CR, LF or CR LF, dropping lines
-/// longer than [`MAX_LINE`] (reported once each) and, if asked, the first
-/// line (a partial one when a port is opened mid-stream).
-#[derive(Debug, Clone, Default)]
-pub struct LineSplitter {
-    buf: Vec<u8>,
-    overlong: bool,
-    skip_first: bool,
-}
-
-/// What a [`LineSplitter`] yields.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum Line {
-    /// A complete line without its ending.
-    Text(String),
-    /// A line that was too long or not text, dropped.
-    Dropped(String),
-}
-
-impl LineSplitter {
-    /// A splitter; with `skip_first` the first line is discarded.
-    pub fn new(skip_first: bool) -> Self {
-        Self { skip_first, ..Self::default() }
-    }
-
-    /// Feeds bytes; returns the lines they complete.
-    pub fn push(&mut self, bytes: &[u8]) -> Vec<Line> {
-        let mut out = Vec::new();
-        for &b in bytes {
-            if b == b'\r' || b == b'\n' {
-                if self.buf.is_empty() && !self.overlong {
-                    continue;
-                }
-                let line = std::mem::take(&mut self.buf);
-                let overlong = std::mem::take(&mut self.overlong);
-                if std::mem::take(&mut self.skip_first) {
-                    continue;
-                }
-                out.push(match (overlong, String::from_utf8(line)) {
-                    (false, Ok(s)) => Line::Text(s),
-                    (true, _) => Line::Dropped(format!("a line longer than {MAX_LINE} characters")),
-                    (false, Err(e)) => Line::Dropped(format!("a line that is not text: {e}")),
-                });
-            } else if self.buf.len() >= MAX_LINE {
-                self.overlong = true;
-            } else {
-                self.buf.push(b);
-            }
-        }
-        out
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -210,7 +157,8 @@ mod tests {
 
     #[test]
     fn lines_split_at_any_ending_and_overlong_ones_are_dropped() {
-        let mut s = LineSplitter::new(true);
+        use crate::protocol::{Line, LineSplitter};
+        let mut s = LineSplitter::new(MAX_LINE, true);
         let mut lines = s.push(b"XDR,partial\r\n$A\r");
         lines.extend(s.push(b"\n$B\n$C\r"));
         lines.extend(s.push(&[b'x'; 100]));
