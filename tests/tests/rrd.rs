@@ -91,13 +91,7 @@ fn rerun_false_writes_no_recording() {
     let text = std::fs::read_to_string(example("hall.toml")).expect("hall.toml");
     let mission = tests::temp_mission(&text.replace("formats = [\"ply\"]", "formats = [\"ply\"]\nrerun = false"));
     let dir = tempfile::tempdir().expect("tempdir");
-    let run = cps_survey([
-        "run".into(),
-        mission.path.clone().into_os_string(),
-        "--out".into(),
-        dir.path().into(),
-        "--quiet".into(),
-    ]);
+    let run = tests::run_mission(&mission.path, dir.path());
     assert_eq!(run.code, 0, "{}", run.stderr);
     assert!(!dir.path().join("mission.rrd").exists());
     assert!(dir.path().join("report.json").exists());
