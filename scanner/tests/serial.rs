@@ -151,7 +151,8 @@ fn tilt_sensor(w: &SimWorld) -> (Emulator, NmeaTilt) {
     let sim = SimTilt::new(w.clone(), 1e-5, 3);
     let emulator = Emulator::spawn(NmeaTiltEmulator::new(sim, 50.0, 9600)).expect("emulator");
     let port = Port::open("tilt sensor", emulator.path(), 9600).expect("port");
-    (emulator, NmeaTilt::new(port, Duration::from_millis(20), 3.0))
+    // A generous staleness window (10 periods): the test machine may be busy.
+    (emulator, NmeaTilt::new(port, Duration::from_millis(20), 10.0))
 }
 
 #[test]
@@ -173,5 +174,7 @@ fn tilt_reads_the_truth_skips_bad_lines_and_reports_stale_data() {
     let started = Instant::now();
     let e = sensor.read().expect_err("stale");
     assert!(matches!(e, ScannerError::Stale { .. }), "{e}");
-    assert!(started.elapsed() < Duration::from_millis(500), "{:?}", started.elapsed());
+    // The deadline is 11 periods (220 ms); allow for a busy machine.
+    let took = started.elapsed();
+    assert!(took >= Duration::from_millis(220) && took < Duration::from_millis(2000), "{took:?}");
 }
