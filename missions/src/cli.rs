@@ -165,6 +165,10 @@ fn plotted(out: &mut dyn Write, file: &std::path::Path, s: &crate::plot::PlotSum
     )
 }
 
+fn recorded(out: &mut dyn Write, file: &std::path::Path) -> std::io::Result<()> {
+    writeln!(out, "recorded the plan in {} (view it with `rerun {}`)", file.display(), file.display())
+}
+
 /// Runs a parsed command, writing its report to `out`. Errors mean exit 2.
 pub fn run(cli: Cli, out: &mut dyn Write) -> anyhow::Result<Outcome> {
     match cli.command {
@@ -186,7 +190,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> anyhow::Result<Outcome> {
                 let dance = crate::predict::dance(&mission)?;
                 crate::plan::write_rrd(&mission, &file, &[("plan", &dance, &prediction, &[])])?;
                 if !json {
-                    writeln!(out, "recorded the plan in {} (view it with `rerun {}`)", file.display(), file.display())?;
+                    recorded(out, &file)?;
                 }
             }
             out.flush()?;
@@ -213,7 +217,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> anyhow::Result<Outcome> {
             if let Some(rrd) = rrd {
                 crate::plan::record(&m, &report, &rrd)?;
                 if !json {
-                    writeln!(out, "recorded the plan in {} (view it with `rerun {}`)", rrd.display(), rrd.display())?;
+                    recorded(out, &rrd)?;
                 }
             }
             if let (Some(file), Some(o)) = (file, &report.optimized) {

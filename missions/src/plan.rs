@@ -206,8 +206,7 @@ pub fn log_plan(
     prediction: &Prediction,
     violations: &[Violation],
 ) -> Result<()> {
-    let steps = dance.steps(|k| mission.scan.scans_at(k));
-    let estimates = planner::step_estimates(dance, prediction, &steps, &mission.plan.start_covariance);
+    let (steps, estimates) = crate::predict::steps_and_estimates(mission, dance, prediction);
     let name = robot_name(mission);
     let described: Vec<(Violation, String)> = violations.iter().map(|v| (v.clone(), v.describe(&name))).collect();
     let names = robot_names(mission);

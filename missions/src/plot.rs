@@ -12,8 +12,8 @@ use std::path::Path;
 use anyhow::{Context, Result, bail};
 use cps::geom::Scene;
 use cps::{CHI2_2D_95_SQRT, ErrorEllipse, RAD_PER_ARCSEC};
-use nalgebra::{Matrix2, Point2, Point3};
-use planner::{Action, Dance, Prediction, Step, Violation};
+use nalgebra::{Point2, Point3};
+use planner::{Dance, Prediction, Step, Violation};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
@@ -206,21 +206,6 @@ pub fn slice_heights(scene: &Scene, dance: &Dance) -> Vec<f64> {
     [b.min.z + 0.25, b.min.z + 1.0, stations].into_iter().map(|z| z + 1e-6).filter(|z| *z < b.max.z).collect()
 }
 
-/// Where a violation happened: the moving or measured child, else the
-/// parent's station.
-fn violation_point(plan: &PlotPlan, v: &Violation) -> Point3<f64> {
-    let station = |k: usize| plan.dance.stations.get(k).map(|s| s.position);
-    let here = match plan.steps.get(v.step).map(|s| &s.action) {
-        Some(Action::MoveChild { to, .. }) => Some(*to),
-        Some(Action::Measure { child, .. }) => {
-            v.cycle.checked_sub(1).and_then(|c| plan.dance.cycles.get(c)).and_then(|c| c.children.get(*child)).copied()
-        }
-        Some(Action::MoveParent { to, .. }) => station(*to),
-        _ => None,
-    };
-    here.or_else(|| station(v.station)).unwrap_or_else(Point3::origin)
-}
-
 fn top_view(
     area: &DrawingArea<SVGBackend, Shift>,
     plans: &[PlotPlan],
@@ -233,10 +218,7 @@ fn top_view(
         .prediction
         .cycles
         .iter()
-        .map(|c| {
-            let e = ErrorEllipse::from_covariance(&Matrix2::from_fn(|i, j| c.covariance[(i, j)]));
-            (c.parent.position.xy(), e.scaled(CHI2_2D_95_SQRT))
-        })
+        .map(|c| (c.parent.position.xy(), c.ellipse_1sigma().scaled(CHI2_2D_95_SQRT)))
         .collect();
     let largest = ellipses.iter().map(|(_, e)| e.semi_major_m).fold(0.0, f64::max);
     let mut gaps: Vec<f64> = dance.stations.windows(2).map(|w| (w[1].position - w[0].position).xy().norm()).collect();
@@ -297,7 +279,7 @@ fn top_view(
     let red = COLOURS[1];
     let crosses: Vec<(f64, f64)> = plans
         .iter()
-        .flat_map(|p| p.violations.iter().map(move |v| violation_point(p, v)))
+        .flat_map(|p| p.violations.iter().map(move |v| v.position(p.dance, p.steps)))
         .map(|q| (q.x, q.y))
         .collect();
     if !crosses.is_empty() {

@@ -80,13 +80,23 @@ pub fn plot(
     crate::plot::write_svg(path, &format!("cps-survey predict — mission {}", mission.name), &[plan], scene.as_ref())
 }
 
-/// Every robot's predicted estimate along the mission's schedule: each
-/// child after its placement, the parent after each fix, and the parent at
-/// each scan station (see [`planner::step_estimates`]).
-pub fn step_estimates(mission: &Mission, prediction: &Prediction) -> Result<Vec<StepEstimate>, MissionError> {
-    let dance = dance(mission)?;
+/// The steps of `dance` with the mission's scan stations, and every
+/// robot's predicted estimate along them: each child after its placement,
+/// the parent after each fix, and the parent at each scan station (see
+/// [`planner::step_estimates`]).
+pub fn steps_and_estimates(
+    mission: &Mission,
+    dance: &Dance,
+    prediction: &Prediction,
+) -> (Vec<planner::Step>, Vec<StepEstimate>) {
     let steps = dance.steps(|k| mission.scan.scans_at(k));
-    Ok(planner::step_estimates(&dance, prediction, &steps, &mission.plan.start_covariance))
+    let estimates = planner::step_estimates(dance, prediction, &steps, &mission.plan.start_covariance);
+    (steps, estimates)
+}
+
+/// [`steps_and_estimates`] of the mission's own schedule: its estimates.
+pub fn step_estimates(mission: &Mission, prediction: &Prediction) -> Result<Vec<StepEstimate>, MissionError> {
+    Ok(steps_and_estimates(mission, &dance(mission)?, prediction).1)
 }
 
 /// What a step that sets an estimate does, in words.
@@ -253,8 +263,7 @@ fn ellipse_95(e: &StepEstimate) -> EllipseJson {
 pub fn write_json(out: &mut dyn Write, mission: &Mission, prediction: &Prediction) -> anyhow::Result<()> {
     let name = crate::plan::robot_label(mission);
     let dance = dance(mission)?;
-    let steps = dance.steps(|k| mission.scan.scans_at(k));
-    let estimates = planner::step_estimates(&dance, prediction, &steps, &mission.plan.start_covariance);
+    let (steps, estimates) = steps_and_estimates(mission, &dance, prediction);
     let cycles = prediction
         .cycles
         .iter()

@@ -457,9 +457,6 @@ impl Recorder {
             let c = if parent { rerun::Color::from_rgb(60, 120, 230) } else { rerun::Color::from_rgb(240, 140, 40) };
             rerun::Points3D::new([p32(p)]).with_colors([c]).with_radii([if parent { 0.25_f32 } else { 0.1 }])
         };
-        let child_at = |cycle: usize, j: usize| {
-            cycle.checked_sub(1).and_then(|c| dance.cycles.get(c)).and_then(|c| c.children.get(j)).copied()
-        };
         rec.set_time_sequence("plan_step", 0);
         if let Some(s0) = dance.stations.first() {
             rr(rec.log(format!("world/{}/robots/{}", plan.root, plan.name(Robot::Parent)), &robot(&s0.position, true)))?;
@@ -482,7 +479,7 @@ impl Recorder {
                     rr(rec.log(format!("world/{}/robots/{}", plan.root, plan.name(Robot::Parent)), &robot(&b, true)))?;
                 }
                 Action::Measure { child, station, .. } => {
-                    if let Some(c) = child_at(step.cycle, *child) {
+                    if let Some(c) = dance.child_at(step.cycle, *child) {
                         let from = dance.stations[*station].position;
                         rr(rec.log(format!("world/{}/sight_lines", plan.root), &line(&from, &c, step.index)))?;
                     }
@@ -508,11 +505,7 @@ impl Recorder {
             let here: Vec<&(Violation, String)> =
                 plan.violations.iter().filter(|(v, _)| v.step == step.index).collect();
             for (v, text) in &here {
-                let at = match &step.action {
-                    Action::MoveChild { to, .. } => *to,
-                    Action::Measure { child, .. } => child_at(step.cycle, *child).unwrap_or(Point3::origin()),
-                    _ => dance.stations.get(v.station).map_or(Point3::origin(), |s| s.position),
-                };
+                let at = v.position(dance, plan.steps);
                 so_far.push((at, format!("step {}: {}, {}", v.step, v.check.name(), plan.name(v.robot))));
                 rr(rec.log(
                     format!("{}/log", plan.root),

@@ -132,6 +132,19 @@ pub struct Violation {
 }
 
 impl Violation {
+    /// Where it happens: the moving child's destination or the measured
+    /// child, else the parent's station during the step (the station
+    /// reached, for a parent move). `steps` are the dance's
+    /// [`Dance::steps`].
+    pub fn position(&self, dance: &Dance, steps: &[crate::dance::Step]) -> Point3<f64> {
+        let here = match steps.get(self.step).map(|s| &s.action) {
+            Some(Action::MoveChild { to, .. }) => Some(*to),
+            Some(Action::Measure { child, .. }) => dance.child_at(self.cycle, *child),
+            _ => None,
+        };
+        here.or_else(|| dance.stations.get(self.station).map(|s| s.position)).unwrap_or_else(Point3::origin)
+    }
+
     /// A sentence naming the step, the robots, the constraint and the value;
     /// `name` names a robot.
     pub fn describe(&self, name: &dyn Fn(Robot) -> String) -> String {

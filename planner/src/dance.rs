@@ -206,6 +206,12 @@ impl Dance {
         cps::ParentPose { position: s.position, heading_rad: s.heading_rad }
     }
 
+    /// Where child `j` stands during dance cycle `cycle` (1-based), if the
+    /// cycle exists.
+    pub fn child_at(&self, cycle: usize, j: usize) -> Option<Point3<f64>> {
+        self.cycles.get(cycle.checked_sub(1)?)?.children.get(j).copied()
+    }
+
     /// Every sight line that leaves the instrument's range, in schedule order.
     pub fn range_violations(&self, instrument: &Instrument) -> Vec<PlanError> {
         let mut out = Vec::new();

@@ -157,7 +157,7 @@ pub fn step_estimates(
                     cycle: s.cycle,
                     robot: Robot::Child(child),
                     scan: false,
-                    position: dance.cycles[s.cycle - 1].children[child],
+                    position: dance.child_at(s.cycle, child)?,
                     covariance: DMatrix::from_column_slice(3, 3, cov.as_slice()),
                 })
             }
