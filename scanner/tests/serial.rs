@@ -6,16 +6,19 @@
 use std::time::{Duration, Instant};
 
 use cps::{Instrument, ParentPose, RAD_PER_ARCSEC, observe};
+use nalgebra::Isometry3;
 use nalgebra::Point3;
 use scanner::emulate::geocom::GeoComEmulator;
 use scanner::emulate::nmea::NmeaTiltEmulator;
+use scanner::emulate::sick::LmsEmulator;
 use scanner::emulate::{Emulator, Faults};
 use scanner::protocol::geocom::ReturnCode;
 use scanner::serial::Port;
 use scanner::serial::geocom::{GeoCom, GeoComConfig};
 use scanner::serial::nmea::NmeaTilt;
-use scanner::sim::{SimTilt, SimWorld, Truth};
-use scanner::{ScannerError, Target, Tilt, TiltSensor, TotalStation};
+use scanner::serial::sick::{Lms, LmsSettings};
+use scanner::sim::{LmsConfig, SimLms, SimTilt, SimWorld, Truth};
+use scanner::{HeadKind, RangeFinder2D, ScannerError, Slice, Target, Tilt, TiltSensor, TotalStation};
 
 fn instrument() -> Instrument {
     Instrument {
@@ -177,4 +180,115 @@ fn tilt_reads_the_truth_skips_bad_lines_and_reports_stale_data() {
     // The deadline is 11 periods (220 ms); allow for a busy machine.
     let took = started.elapsed();
     assert!(took >= Duration::from_millis(220) && took < Duration::from_millis(2000), "{took:?}");
+}
+
+fn lms_world() -> SimWorld {
+    // Level in the hall, 4 m from the wall at y = 0, the end wall 28 m ahead.
+    SimWorld::new(cps::geom::builtin("hall").expect("hall"), ParentPose::new(12.0, 4.0, 1.0, 0.0), vec![])
+}
+
+fn sim_lms(w: &SimWorld, sigma: f64) -> SimLms {
+    let config = LmsConfig { sigma_range_m: sigma, ..LmsConfig::default() };
+    SimLms::new(w.clone(), config, HeadKind::PitchingMount, Isometry3::identity(), 5)
+}
+
+fn lms_settings() -> LmsSettings {
+    LmsSettings {
+        baud: 500_000,
+        reply_timeout: Duration::from_millis(300),
+        mode_timeout: Duration::from_millis(300),
+        baud_settle: Duration::from_millis(20),
+        ..LmsSettings::default()
+    }
+}
+
+/// Checks a slice against the noiseless simulator's (0.5°, mm, 32 m).
+fn same_as_sim(slice: &Slice, expected: &Slice) {
+    assert_eq!(slice.values.len(), 361);
+    assert_eq!((slice.metres_per_count, slice.max_valid, slice.step_rad), (0.001, 0x7FF7, 0.5f64.to_radians()));
+    assert_eq!(slice.values, expected.values);
+    assert_eq!(slice.range_m(180), Some(28.0));
+}
+
+#[test]
+fn lms_switches_rate_configures_and_scans_on_request_and_streaming() {
+    let w = lms_world();
+    let expected = sim_lms(&w, 0.0).scan().expect("sim");
+    let emulator = Emulator::spawn(LmsEmulator::new(sim_lms(&w, 0.0))).expect("emulator");
+    // The scanner powers on at 9600 Bd with 1°, 8 m: the driver finds it,
+    // goes to 500 kBd, 0.5° and the 32 m mode.
+    let mut lms = Lms::open(emulator.path(), lms_settings()).expect("connected");
+    for _ in 0..3 {
+        same_as_sim(&lms.scan().expect("slice"), &expected);
+    }
+    assert_eq!(lms.discarded, 0);
+    drop(lms);
+    // Left at 500 kBd, on request: a driver that wants 38400 and a stream
+    // finds it at the second candidate rate.
+    let settings = LmsSettings { baud: 38400, continuous: true, ..lms_settings() };
+    let mut lms = Lms::open(emulator.path(), settings).expect("connected again");
+    for _ in 0..3 {
+        same_as_sim(&lms.scan().expect("streamed slice"), &expected);
+    }
+    lms.close().expect("stream stopped, back to 9600");
+    drop(lms);
+    let mut lms = Lms::open(emulator.path(), LmsSettings { baud: 9600, ..lms_settings() }).expect("at 9600");
+    same_as_sim(&lms.scan().expect("slice"), &expected);
+}
+
+#[test]
+fn lms_recovers_from_every_recoverable_fault() {
+    let w = lms_world();
+    for continuous in [false, true] {
+        for faults in [
+            Faults { corrupt_every: Some(3), ..Faults::default() },
+            Faults { drop_every: Some(2003), ..Faults::default() },
+            Faults { duplicate_every: Some(2011), ..Faults::default() },
+            Faults { nak_every: Some(3), ..Faults::default() },
+            Faults { delay: Duration::from_millis(50), ..Faults::default() },
+        ] {
+            let emulator = Emulator::spawn(LmsEmulator::new(sim_lms(&w, 0.005))).expect("emulator");
+            let mut lms = Lms::open(emulator.path(), LmsSettings { continuous, ..lms_settings() }).expect("connected");
+            emulator.set_faults(faults.clone());
+            for _ in 0..8 {
+                let slice = lms.scan().unwrap_or_else(|e| panic!("{faults:?}, continuous {continuous}: {e}"));
+                let r = slice.range_m(180).expect("the end wall");
+                assert!((r - 28.0).abs() < 0.03, "{r}");
+            }
+            // A stream has no requests to refuse, and a delay loses nothing.
+            if faults.delay.is_zero() && !(continuous && faults.nak_every.is_some()) {
+                assert!(lms.discarded + lms.retries >= 1, "{faults:?}: the damage was seen");
+            }
+        }
+    }
+}
+
+#[test]
+fn lms_fails_typed_and_in_time() {
+    let w = lms_world();
+    let settings = LmsSettings { attempts: 2, ..lms_settings() };
+    // A scanner that stops answering: a timeout after 2 × 300 ms.
+    let emulator = Emulator::spawn(LmsEmulator::new(sim_lms(&w, 0.0))).expect("emulator");
+    let mut lms = Lms::open(emulator.path(), settings).expect("connected");
+    emulator.set_faults(Faults { stop_after: Some(emulator.messages()), ..Faults::default() });
+    let started = Instant::now();
+    let e = lms.scan().expect_err("silent");
+    let took = started.elapsed();
+    assert!(matches!(e, ScannerError::Timeout { attempts: 2, .. }), "{e}");
+    assert!(e.to_string().contains("measured values (30h)"), "{e}");
+    assert!(took >= Duration::from_millis(600) && took < Duration::from_millis(2000), "{took:?}");
+    // Every request refused: the NAK is the error.
+    emulator.set_faults(Faults { nak_every: Some(1), ..Faults::default() });
+    let e = lms.scan().expect_err("refused");
+    assert!(e.to_string().contains("NAK"), "{e}");
+    // The line at another rate: never understood, and not found either
+    // when the scanner is stuck at a rate the driver does not try.
+    emulator.set_faults(Faults { baud: Some(115_200), ..Faults::default() });
+    assert!(matches!(lms.scan(), Err(ScannerError::Timeout { .. })));
+    drop(lms);
+    let e = Lms::open(emulator.path(), settings).expect_err("not found");
+    assert!(e.to_string().contains("any of [500000, 9600, 38400, 19200] Bd"), "{e}");
+    // Healthy again: found and scanning.
+    emulator.set_faults(Faults::default());
+    assert!(Lms::open(emulator.path(), settings).expect("found").scan().is_ok());
 }

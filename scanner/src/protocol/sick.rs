@@ -68,6 +68,37 @@ pub mod mode {
     pub const BAUD_500000: u8 = 0x48;
 }
 
+/// The 34-byte configuration block of 74h (read) and 77h (write), §1.6.
+pub mod config {
+    /// Its length.
+    pub const LEN: usize = 34;
+    /// Availability flags; bit 1 appends the real-time scan indices to B0h.
+    pub const AVAILABILITY: usize = 4;
+    /// The measuring mode ([`super::Range::config_byte`]).
+    pub const MEASURING_MODE: usize = 5;
+    /// The unit: 00h cm, 01h mm.
+    pub const UNIT: usize = 6;
+    /// Bit of [`AVAILABILITY`] that appends the scan and telegram indices.
+    pub const INDICES: u8 = 0x02;
+
+    /// An LMS200's factory block: peak threshold 46h, 8 m mode, mm.
+    pub fn factory() -> [u8; LEN] {
+        let mut b = [0_u8; LEN];
+        b[2] = 0x46;
+        b[UNIT] = 0x01;
+        b
+    }
+}
+
+/// A 3Bh request for a field of view of `angle_deg` (100 or 180) at
+/// `resolution_cdeg` hundredths of a degree (100, 50 or 25).
+pub fn variant_request(angle_deg: u16, resolution_cdeg: u16) -> Vec<u8> {
+    let mut data = Vec::with_capacity(4);
+    data.extend(angle_deg.to_le_bytes());
+    data.extend(resolution_cdeg.to_le_bytes());
+    request(cmd::VARIANT, &data)
+}
+
 /// The [`cmd::MODE`] sub-command that switches to `baud`, if the LMS has it.
 pub fn baud_mode(baud: u32) -> Option<u8> {
     match baud {
@@ -374,6 +405,17 @@ impl Range {
     /// The first code that is not a distance (…F7h, "greater than maximum").
     pub fn max_valid(&self) -> u16 {
         self.mask() - 8
+    }
+
+    /// The range a configuration byte 5 selects (00h and 02h: 13 bits,
+    /// 04h: 14, 06h: 15); the reflectivity modes 01h/03h/05h give no range.
+    pub fn from_config_byte(b: u8) -> Option<Self> {
+        match b {
+            0x00 | 0x02 => Some(Range::Bits13),
+            0x04 => Some(Range::Bits14),
+            0x06 => Some(Range::Bits15),
+            _ => None,
+        }
     }
 
     /// Configuration byte 5 for this range.

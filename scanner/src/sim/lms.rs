@@ -113,6 +113,11 @@ impl SimLms {
     pub fn config(&self) -> &LmsConfig {
         &self.config
     }
+
+    /// Changes resolution, mode or noise (the noise stream goes on).
+    pub fn set_config(&mut self, config: LmsConfig) {
+        self.config = config;
+    }
 }
 
 impl RangeFinder2D for SimLms {
