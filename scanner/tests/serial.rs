@@ -10,15 +10,19 @@ use nalgebra::Isometry3;
 use nalgebra::Point3;
 use scanner::emulate::geocom::GeoComEmulator;
 use scanner::emulate::nmea::NmeaTiltEmulator;
+use scanner::emulate::robot::{Body, RobotEmulator};
 use scanner::emulate::sick::LmsEmulator;
 use scanner::emulate::{Emulator, Faults};
 use scanner::protocol::geocom::ReturnCode;
 use scanner::serial::Port;
 use scanner::serial::geocom::{GeoCom, GeoComConfig};
 use scanner::serial::nmea::NmeaTilt;
+use scanner::serial::robot::{RobotLink, SerialDrive, SerialHead};
 use scanner::serial::sick::{Lms, LmsSettings};
-use scanner::sim::{LmsConfig, SimLms, SimTilt, SimWorld, Truth};
-use scanner::{HeadKind, RangeFinder2D, ScannerError, Slice, Target, Tilt, TiltSensor, TotalStation};
+use scanner::sim::{LmsConfig, OdometryError, Robot, SimDrive, SimHead, SimLms, SimTilt, SimWorld, Truth};
+use scanner::{
+    Drive, HeadKind, PlanarPose, RangeFinder2D, ScanHead, ScannerError, Slice, Target, Tilt, TiltSensor, TotalStation,
+};
 
 fn instrument() -> Instrument {
     Instrument {
@@ -291,4 +295,64 @@ fn lms_fails_typed_and_in_time() {
     // Healthy again: found and scanning.
     emulator.set_faults(Faults::default());
     assert!(Lms::open(emulator.path(), settings).expect("found").scan().is_ok());
+}
+
+fn drive_link(path: &str) -> RobotLink {
+    RobotLink::new(Port::open("parent drive", path, 115_200).expect("port"), Duration::from_millis(200), 4)
+}
+
+/// Moves over the wire equal moves in process (same seed): a retried move
+/// is answered from the controller's last reply, never driven twice, under
+/// every recoverable fault.
+#[test]
+fn drives_and_head_move_the_world_once_per_move() {
+    let start = PlanarPose { x_m: 2.0, y_m: 4.5, heading_rad: 0.1 };
+    let goals: Vec<PlanarPose> =
+        (1..=6).map(|k| PlanarPose { x_m: 2.0 + 4.0 * k as f64, y_m: 4.5, heading_rad: 0.1 }).collect();
+    let error = OdometryError::default();
+    // In process.
+    let w = world();
+    let mut local = SimDrive::new(w.clone(), Robot::Parent, start, error, 9).expect("drive");
+    for g in &goals {
+        local.move_to(g).expect("moved");
+    }
+    let expected = w.truth().parent;
+    for faults in [
+        Faults::default(),
+        Faults { corrupt_every: Some(2), ..Faults::default() },
+        Faults { drop_every: Some(151), ..Faults::default() },
+        Faults { duplicate_every: Some(157), ..Faults::default() },
+        Faults { nak_every: Some(2), ..Faults::default() },
+    ] {
+        let w = world();
+        let sim = SimDrive::new(w.clone(), Robot::Parent, start, error, 9).expect("drive");
+        let emulator = Emulator::spawn(RobotEmulator::new("parent", Body::Drive(Box::new(sim)), 115_200)).expect("emulator");
+        emulator.set_faults(faults.clone());
+        let mut drive = SerialDrive::new(drive_link(emulator.path()));
+        for g in &goals {
+            let odo = drive.move_to(g).unwrap_or_else(|e| panic!("{faults:?}: {e}"));
+            assert!((odo.pose.x_m - g.x_m).abs() < 1e-9 && (odo.distance_m - 4.0).abs() < 1e-6, "{odo:?}");
+        }
+        assert_eq!(w.truth().parent, expected, "{faults:?}");
+        drive.relocalise(&start, true).expect("relocalised");
+    }
+    // The head; a refused angle is the controller's reason, typed.
+    let w = world();
+    let emulator = Emulator::spawn(RobotEmulator::new(
+        "head",
+        Body::Head(SimHead::new(w.clone(), HeadKind::RotatingTable)),
+        115_200,
+    ))
+    .expect("emulator");
+    let mut head = SerialHead::new(drive_link(emulator.path()), HeadKind::RotatingTable);
+    assert_eq!(head.move_to(1.25).expect("turned"), 1.25);
+    assert_eq!(w.truth().head_angle_rad, 1.25);
+    let e = head.move_to(7.0).expect_err("beyond a turn");
+    assert!(matches!(&e, ScannerError::Device { message, .. } if message.contains("0 ≤ angle < 2π")), "{e}");
+    // Silence: a typed timeout after 4 × 200 ms.
+    emulator.set_faults(Faults { stop_after: Some(emulator.messages()), ..Faults::default() });
+    let started = Instant::now();
+    let e = head.move_to(2.0).expect_err("silent");
+    assert!(matches!(e, ScannerError::Timeout { attempts: 4, .. }), "{e}");
+    assert!(started.elapsed() < Duration::from_secs(2));
 }

@@ -12,6 +12,7 @@
 
 pub mod geocom;
 pub mod nmea;
+pub mod robot;
 pub mod sick;
 
 use std::sync::atomic::{AtomicBool, Ordering};

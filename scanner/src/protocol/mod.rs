@@ -13,6 +13,7 @@
 
 pub mod geocom;
 pub mod nmea;
+pub mod robot;
 pub mod sick;
 
 use thiserror::Error;

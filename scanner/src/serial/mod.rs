@@ -11,6 +11,7 @@
 
 pub mod geocom;
 pub mod nmea;
+pub mod robot;
 pub mod sick;
 
 use std::io::{Read, Write};
