@@ -1,10 +1,14 @@
-//! The simulated team a mission runs on: one [`SimWorld`] and every device
-//! in it, with checkpoints (so a journaled run resumes bit for bit) and
-//! injected faults (so retries and clean stops can be exercised).
+//! The team a mission runs on ([`Team`]): the simulated one ([`SimTeam`]:
+//! one [`SimWorld`] and every device in it, with checkpoints, so a journaled
+//! run resumes bit for bit, and injected faults, so retries and clean stops
+//! can be exercised), or the real instruments over serial ports
+//! ([`SerialTeam`], `[backend] kind = "serial"`).
 
 use std::str::FromStr;
 
-use anyhow::{Context, Result};
+use std::time::Duration;
+
+use anyhow::{Context, Result, bail};
 use cps::ParentPose;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
 use planner::Dance;
@@ -16,7 +20,13 @@ use scanner::{
 };
 use serde_json::{Value, json};
 
-use crate::mission::Mission;
+use scanner::serial::Port;
+use scanner::serial::geocom::{GeoCom, GeoComConfig};
+use scanner::serial::nmea::NmeaTilt;
+use scanner::serial::robot::{RobotLink, SerialDrive, SerialHead};
+use scanner::serial::sick::{Lms, LmsSettings};
+
+use crate::mission::{Mission, SerialPorts};
 
 /// A device of the team, as named in faults and retry messages.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -101,6 +111,23 @@ pub struct SimTeam {
     commands: [usize; 4],
 }
 
+/// The simulated team taken apart ([`SimTeam::into_parts`]).
+#[derive(Debug)]
+pub struct SimParts {
+    /// The shared world.
+    pub world: SimWorld,
+    /// The parent's drive.
+    pub parent: SimDrive,
+    /// The children's drives.
+    pub children: Vec<SimDrive>,
+    /// The tilt sensor.
+    pub tilt: SimTilt,
+    /// The laser scanner.
+    pub lms: SimLms,
+    /// The scan head.
+    pub head: SimHead,
+}
+
 impl SimTeam {
     /// The team standing where `dance` starts: the parent truly at station
     /// 0, the children at their first formation points.
@@ -136,6 +163,18 @@ impl SimTeam {
             faults,
             commands: [0; 4],
         })
+    }
+
+    /// The world and the devices, for emulators that serve them on ports.
+    pub fn into_parts(self) -> SimParts {
+        SimParts {
+            world: self.world,
+            parent: self.parent,
+            children: self.children,
+            tilt: self.tilt,
+            lms: self.lms,
+            head: self.head,
+        }
     }
 
     /// The true state of the team.
@@ -305,6 +344,247 @@ impl SimTeam {
         self.tilt.set_noise_position(from_words(&n["tilt"])?);
         self.lms.set_noise_position(from_words(&n["scanner"])?);
         Ok(())
+    }
+}
+
+/// The devices a mission commands.
+#[derive(Debug)]
+pub enum Team {
+    /// The simulator.
+    Sim(Box<SimTeam>),
+    /// Real instruments (or their emulators) over serial ports.
+    Serial(Box<SerialTeam>),
+}
+
+impl Team {
+    /// The mission's backend, standing where `dance` starts; `faults` are
+    /// for the simulator only.
+    pub fn new(mission: &Mission, dance: &Dance, faults: Vec<Fault>) -> Result<Self> {
+        match &mission.backend.serial {
+            None => Ok(Team::Sim(Box::new(SimTeam::new(mission, dance, faults)?))),
+            Some(_) if !faults.is_empty() => {
+                bail!("--sim-fault injects faults into the simulator; this mission runs on serial ports")
+            }
+            Some(ports) => Ok(Team::Serial(Box::new(SerialTeam::connect(mission, dance, ports)?))),
+        }
+    }
+
+    /// `"sim"` or `"serial"`.
+    pub fn backend(&self) -> &'static str {
+        match self {
+            Team::Sim(_) => "sim",
+            Team::Serial(_) => "serial",
+        }
+    }
+
+    /// The true state of the team (simulator only).
+    pub fn truth(&self) -> Option<Truth> {
+        match self {
+            Team::Sim(t) => Some(t.truth()),
+            Team::Serial(_) => None,
+        }
+    }
+
+    /// The parent learns its pose from a CPS fix.
+    pub fn relocalise_parent(&mut self, pose: &ParentPose) -> Result<()> {
+        match self {
+            Team::Sim(t) => t.relocalise_parent(pose),
+            Team::Serial(t) => t.relocalise(0, PlanarPose::from(pose), true)?,
+        }
+        Ok(())
+    }
+
+    /// Child `j` learns its position from its placement measurement.
+    pub fn relocalise_child(&mut self, j: usize, at: &Point3<f64>) -> Result<()> {
+        match self {
+            Team::Sim(t) => t.relocalise_child(j, at),
+            Team::Serial(t) => t.relocalise(1 + j, PlanarPose { x_m: at.x, y_m: at.y, heading_rad: 0.0 }, false)?,
+        }
+        Ok(())
+    }
+
+    /// Where the parent's drive believes it stands (its odometry).
+    pub fn parent_believed(&self) -> PlanarPose {
+        match self {
+            Team::Sim(t) => t.parent_believed(),
+            Team::Serial(t) => t.parent_believed,
+        }
+    }
+
+    /// The scene (the site model the plan was checked against).
+    pub fn scene(&self) -> &cps::geom::Scene {
+        match self {
+            Team::Sim(t) => t.scene(),
+            Team::Serial(t) => &t.scene,
+        }
+    }
+
+    /// Drives `robot` to `goal`.
+    pub fn drive(&mut self, robot: Robot, goal: &PlanarPose) -> scanner::Result<Odometry> {
+        match self {
+            Team::Sim(t) => t.drive(robot, goal),
+            Team::Serial(t) => t.drive(robot, goal),
+        }
+    }
+
+    /// Measures a child with the total station.
+    pub fn measure(&mut self, target: &Target) -> scanner::Result<TsMeasurement> {
+        match self {
+            Team::Sim(t) => t.measure(target),
+            Team::Serial(t) => match &mut t.total_station {
+                Some(ts) => ts.measure(target),
+                None => Err(ScannerError::Device {
+                    device: "total station".into(),
+                    message: "the team has no total station (no children)".into(),
+                }),
+            },
+        }
+    }
+
+    /// Reads the tilt sensor.
+    pub fn tilt(&mut self) -> scanner::Result<Tilt> {
+        match self {
+            Team::Sim(t) => t.tilt(),
+            Team::Serial(t) => t.tilt.read(),
+        }
+    }
+
+    /// Takes a 3D scan of `slices` slices, reporting progress per slice.
+    pub fn scan(&mut self, slices: usize, progress: &mut dyn FnMut(usize, usize)) -> scanner::Result<Scan> {
+        match self {
+            Team::Sim(t) => t.scan(slices, progress),
+            Team::Serial(t) => scan_3d(&mut t.head, &mut t.lms, slices, &t.body_from_head, progress),
+        }
+    }
+
+    /// The team's state for the journal: the simulator's whole state, or on
+    /// serial ports the parent's odometry (`drives[0].believed`, as in the
+    /// simulator's checkpoint).
+    pub fn checkpoint(&self) -> Value {
+        match self {
+            Team::Sim(t) => t.checkpoint(),
+            Team::Serial(t) => {
+                let b = t.parent_believed;
+                json!({"drives": [{"believed": [b.x_m, b.y_m, b.heading_rad]}]})
+            }
+        }
+    }
+
+    /// Puts the team back into a checkpoint: the simulator, or on serial
+    /// ports the parent's odometry (the robots are where the replayed
+    /// journal left them).
+    pub fn restore(&mut self, c: &Value) -> Result<()> {
+        match self {
+            Team::Sim(t) => t.restore(c),
+            Team::Serial(t) => {
+                let b = c["drives"][0]["believed"]
+                    .as_array()
+                    .filter(|a| a.len() == 3)
+                    .and_then(|a| a.iter().map(Value::as_f64).collect::<Option<Vec<f64>>>())
+                    .with_context(|| format!("checkpoint {c}: expected drives[0].believed = [x, y, heading]"))?;
+                t.parent_believed = PlanarPose { x_m: b[0], y_m: b[1], heading_rad: b[2] };
+                Ok(())
+            }
+        }
+    }
+}
+
+/// The real instruments on their serial ports.
+#[derive(Debug)]
+pub struct SerialTeam {
+    scene: cps::geom::Scene,
+    total_station: Option<GeoCom>,
+    tilt: NmeaTilt,
+    lms: Lms,
+    head: SerialHead,
+    /// The parent's drive first, then the children's.
+    drives: Vec<SerialDrive>,
+    body_from_head: Isometry3<f64>,
+    parent_believed: PlanarPose,
+}
+
+impl SerialTeam {
+    /// Opens every port of `ports` and sets the instruments up (the LMS
+    /// rate and configuration, the GeoCOM link); the drives are told where
+    /// the dance starts.
+    pub fn connect(mission: &Mission, dance: &Dance, ports: &SerialPorts) -> Result<Self> {
+        let resolution_cdeg = match mission.scan.resolution {
+            scanner::sim::LmsResolution::One => 100,
+            scanner::sim::LmsResolution::Half => 50,
+            scanner::sim::LmsResolution::Quarter => {
+                bail!("[scan] resolution_deg = 0.25: the LMS-2xx scans 180° at 1° or 0.5° only; choose 1 or 0.5")
+            }
+        };
+        let total_station = match &ports.total_station {
+            Some(path) => {
+                let config = GeoComConfig {
+                    reply_timeout: Duration::from_secs_f64(ports.total_station_timeout_s),
+                    ..GeoComConfig::default()
+                };
+                Some(GeoCom::open(path, ports.total_station_baud, config)?)
+            }
+            None => None,
+        };
+        let period = Duration::from_secs_f64(1.0 / ports.tilt_rate_hz);
+        let tilt = NmeaTilt::open(&ports.tilt, ports.tilt_baud, period)?;
+        let settings = LmsSettings {
+            baud: ports.scanner_baud,
+            resolution_cdeg,
+            continuous: ports.scanner_continuous,
+            ..LmsSettings::default()
+        };
+        let lms = Lms::open(&ports.scanner, settings)?;
+        let link = |kind: &str, path: &str, timeout_s: f64| -> Result<RobotLink> {
+            let port = Port::open(kind, path, ports.robot_baud)?;
+            Ok(RobotLink::new(port, Duration::from_secs_f64(timeout_s), 3))
+        };
+        let head = SerialHead::new(link("scan head", &ports.head, 30.0)?, mission.scan.head);
+        let mut drives = Vec::with_capacity(ports.drives.len());
+        for (k, path) in ports.drives.iter().enumerate() {
+            let kind =
+                if k == 0 { "parent drive".to_string() } else { format!("drive of {}", mission.children[k - 1]) };
+            drives.push(SerialDrive::new(link(&kind, path, ports.move_timeout_s)?));
+        }
+        let start = PlanarPose::from(&dance.station_pose(0));
+        let mut team = Self {
+            scene: mission.scene()?,
+            total_station,
+            tilt,
+            lms,
+            head,
+            drives,
+            body_from_head: Isometry3::from_parts(
+                Translation3::from(mission.scan.body_from_head_m),
+                UnitQuaternion::identity(),
+            ),
+            parent_believed: start,
+        };
+        team.relocalise(0, start, false)?;
+        Ok(team)
+    }
+
+    fn relocalise(&mut self, k: usize, pose: PlanarPose, keep_heading: bool) -> scanner::Result<()> {
+        if k == 0 {
+            self.parent_believed = pose;
+        }
+        match self.drives.get_mut(k) {
+            Some(d) => d.relocalise(&pose, keep_heading),
+            None => Ok(()),
+        }
+    }
+
+    fn drive(&mut self, robot: Robot, goal: &PlanarPose) -> scanner::Result<Odometry> {
+        let k = match robot {
+            Robot::Parent => 0,
+            Robot::Child(j) => 1 + j,
+        };
+        let team = self.drives.len() - 1;
+        let drive = self.drives.get_mut(k).ok_or(cps::CpsError::UnknownChild { child: k.saturating_sub(1), team })?;
+        let odometry = drive.move_to(goal)?;
+        if k == 0 {
+            self.parent_believed = odometry.pose;
+        }
+        Ok(odometry)
     }
 }
 

@@ -127,6 +127,29 @@ pub enum Command {
     },
     /// Align one scan file to another with ICP.
     Register(crate::register::RegisterArgs),
+    /// Serve a mission's instruments on pseudo-terminals (total station,
+    /// tilt sensor, LMS-2xx, scan head, drives), answering from the
+    /// simulated world; prints the [backend.serial] table with the ports and
+    /// runs until stopped (Ctrl-C).
+    Emulate {
+        /// The mission file (TOML).
+        mission: PathBuf,
+        /// Print one JSON object with the ports instead of the TOML table.
+        #[arg(long)]
+        json: bool,
+        /// Append the simulated truth to this file (JSON lines: at the
+        /// start and after every drive move).
+        #[arg(long, value_name = "FILE")]
+        truth: Option<PathBuf>,
+        /// Inject a fault: ROLE:KIND=N, ROLE total-station, tilt, scanner,
+        /// head, parent or a child's name, KIND drop-every, duplicate-every,
+        /// corrupt-every, nak-every, delay-ms, stop-after or baud. Repeatable.
+        #[arg(long, value_name = "FAULT")]
+        fault: Vec<crate::emulate::EmulatorFault>,
+        /// Stop after this many seconds instead of running until stopped.
+        #[arg(long, value_name = "S")]
+        seconds: Option<f64>,
+    },
 }
 
 fn parse_mode(s: &str) -> Result<crate::mission::FusionMode, String> {
@@ -273,6 +296,29 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> anyhow::Result<Outcome> {
         Command::Register(args) => {
             crate::register::register(&args, out)?;
             out.flush()?;
+            Ok(Outcome::Success)
+        }
+        Command::Emulate { mission, json, truth, fault, seconds } => {
+            let m = Mission::load(&mission)?;
+            let team = crate::emulate::start(&m, truth.as_deref(), &fault)?;
+            if json {
+                writeln!(out, "{}", crate::emulate::ports_json(&m, &team))?;
+            } else {
+                writeln!(
+                    out,
+                    "# cps-survey emulate {}: {} instruments on pseudo-terminals (seed {}); Ctrl-C stops.\n\
+                     # Put this table in the mission with [backend] kind = \"serial\":",
+                    mission.display(),
+                    team.served.len(),
+                    m.backend.seed
+                )?;
+                write!(out, "{}", crate::emulate::backend_toml(&m, &team))?;
+            }
+            out.flush()?;
+            let until = seconds.map(|s| std::time::Instant::now() + std::time::Duration::from_secs_f64(s.max(0.0)));
+            while until.is_none_or(|u| std::time::Instant::now() < u) {
+                std::thread::sleep(std::time::Duration::from_millis(100));
+            }
             Ok(Outcome::Success)
         }
         Command::Validate { mission } => {

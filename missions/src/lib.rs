@@ -11,6 +11,7 @@
 pub mod backend;
 pub mod cli;
 pub mod diagnostics;
+pub mod emulate;
 pub mod fuse;
 pub mod journal;
 pub mod mission;

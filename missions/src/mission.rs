@@ -87,6 +87,44 @@ pub struct Backend {
     pub retry_delay_s: f64,
     /// The simulated drives' odometry error (`odometry_*`, `terrain_tilt_sigma_deg`).
     pub odometry: scanner::sim::OdometryError,
+    /// The instruments' ports with `kind = "serial"` (`[backend.serial]`);
+    /// `None` runs on the simulator.
+    pub serial: Option<SerialPorts>,
+}
+
+/// Where the real instruments are (`[backend.serial]`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SerialPorts {
+    /// The total station's port (`total_station`; required with children).
+    pub total_station: Option<String>,
+    /// Its baud rate (`total_station_baud`, default 9600).
+    pub total_station_baud: u32,
+    /// Deadline of one GeoCOM reply, seconds (`total_station_timeout_s`,
+    /// default 5; a distance measurement takes 1–3 s).
+    pub total_station_timeout_s: f64,
+    /// The tilt sensor's port (`tilt`).
+    pub tilt: String,
+    /// Its baud rate (`tilt_baud`, default 9600).
+    pub tilt_baud: u32,
+    /// Its sentence rate (`tilt_rate_hz`, default 10).
+    pub tilt_rate_hz: f64,
+    /// The LMS-2xx's port (`scanner`).
+    pub scanner: String,
+    /// The session baud rate the scanner is switched to (`scanner_baud`:
+    /// 9600, 19200, 38400 or 500000; default 38400).
+    pub scanner_baud: u32,
+    /// Continuous output instead of one request per slice
+    /// (`scanner_continuous`, default false).
+    pub scanner_continuous: bool,
+    /// The scan head's port (`head`).
+    pub head: String,
+    /// The drives' ports: the parent's first, then the children's in
+    /// `[team] children` order (`drives`).
+    pub drives: Vec<String>,
+    /// The drives' and the head's baud rate (`robot_baud`, default 115200).
+    pub robot_baud: u32,
+    /// Deadline of one drive move, seconds (`move_timeout_s`, default 120).
+    pub move_timeout_s: f64,
 }
 
 /// What the scanner does (`[scan]`).
@@ -441,14 +479,19 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>, scene_override: Op
 
     let backend_given = root.has("backend");
     let mut b = root.table(r, "backend");
-    let kind = b.optional(r, "kind", |r, v, f| {
-        let k = r.choice(v, f, &["sim", "serial"])?;
-        if k.get_ref() == "serial" {
-            r.problem(&k.span(), f, "the serial backend is not in this build yet; expected \"sim\"");
-            return None;
+    let kind = b.optional(r, "kind", |r, v, f| r.choice(v, f, &["sim", "serial"]));
+    let serial_given = b.has("serial");
+    let mut sp = b.table(r, "serial");
+    let serial = if kind.as_ref().and_then(|k| k.as_ref()).is_some_and(|k| k.get_ref() == "serial") {
+        let ports = read_serial(r, &mut sp, children.as_ref().map(Vec::len));
+        sp.finish(r);
+        Some(ports)
+    } else {
+        if serial_given {
+            r.problem(&sp.span(), "backend.serial", "[backend.serial] is used with kind = \"serial\" only");
         }
-        Some(())
-    });
+        None
+    };
     let scene = b.optional(r, "scene", |r, v, f| r.choice(v, f, &cps::geom::BUILTIN_SCENES).map(At::into_inner));
     let scene_file = b.optional(r, "scene_file", |r, v, f| {
         let name = r.string(v, f)?;
@@ -591,6 +634,10 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>, scene_override: Op
         backend: {
             kind?;
             Backend {
+                serial: match serial {
+                    Some(p) => Some(p?),
+                    None => None,
+                },
                 scene: match (&scene_file, scene?) {
                     (Some((written, _, _, _)), _) => written.clone(),
                     (_, Some(name)) => name,
@@ -919,4 +966,71 @@ fn read_formation_kind(r: &mut Reader<'_>, g: &mut Table<'_, '_>) -> Option<(pla
         }
     };
     Some((kind, up?.unwrap_or(0.0)))
+}
+
+/// `[backend.serial]`: the instruments' ports and line settings.
+fn read_serial(r: &mut Reader<'_>, t: &mut Table<'_, '_>, children: Option<usize>) -> Option<SerialPorts> {
+    let port = |r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, f: &str| {
+        let p = r.string(v, f)?;
+        if p.get_ref().trim().is_empty() {
+            r.problem(&p.span(), f, "an empty port path; expected e.g. \"/dev/ttyUSB0\"");
+            return None;
+        }
+        Some(p.into_inner())
+    };
+    let baud = |choices: &'static [u64]| {
+        move |r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, f: &str| {
+            let b = r.integer_in(v, f, 1, 4_000_000)?;
+            if !choices.is_empty() && !choices.contains(&b) {
+                r.problem(&v.span(), f, format!("{b} Bd; expected one of {choices:?}"));
+                return None;
+            }
+            Some(b as u32)
+        }
+    };
+    let expected_ts = "the total station's port, e.g. \"/dev/ttyUSB0\"";
+    let total_station = match children {
+        Some(n) if n > 0 => t.required(r, "total_station", expected_ts, port).map(Some),
+        _ => t.optional(r, "total_station", port),
+    };
+    let total_station_baud = t.optional(r, "total_station_baud", baud(&[]));
+    let ts_timeout = t.optional(r, "total_station_timeout_s", |r, v, f| {
+        r.number_in(v, f, 0.0, false, Some(600.0)).map(At::into_inner)
+    });
+    let tilt = t.required(r, "tilt", "the tilt sensor's port", port);
+    let tilt_baud = t.optional(r, "tilt_baud", baud(&[]));
+    let tilt_rate =
+        t.optional(r, "tilt_rate_hz", |r, v, f| r.number_in(v, f, 0.0, false, Some(1000.0)).map(At::into_inner));
+    let scanner = t.required(r, "scanner", "the LMS-2xx's port", port);
+    let scanner_baud = t.optional(r, "scanner_baud", baud(&[9600, 19200, 38400, 500_000]));
+    let continuous = t.optional(r, "scanner_continuous", |r, v, f| r.boolean(v, f));
+    let head = t.required(r, "head", "the scan head's port", port);
+    let drives = t.required(r, "drives", "the drives' ports, the parent's first", |r, v, f| {
+        let list = r.array(v, f, port)?;
+        let n = 1 + children.unwrap_or(0);
+        if list.len() != n {
+            let got = list.len();
+            r.problem(&v.span(), f, format!("{got} ports; expected {n}: the parent's, then one per child in order"));
+            return None;
+        }
+        Some(list)
+    });
+    let robot_baud = t.optional(r, "robot_baud", baud(&[]));
+    let move_timeout =
+        t.optional(r, "move_timeout_s", |r, v, f| r.number_in(v, f, 0.0, false, Some(3600.0)).map(At::into_inner));
+    Some(SerialPorts {
+        total_station: total_station?,
+        total_station_baud: total_station_baud?.unwrap_or(9600),
+        total_station_timeout_s: ts_timeout?.unwrap_or(5.0),
+        tilt: tilt?,
+        tilt_baud: tilt_baud?.unwrap_or(9600),
+        tilt_rate_hz: tilt_rate?.unwrap_or(10.0),
+        scanner: scanner?,
+        scanner_baud: scanner_baud?.unwrap_or(38400),
+        scanner_continuous: continuous?.unwrap_or(false),
+        head: head?,
+        drives: drives?,
+        robot_baud: robot_baud?.unwrap_or(115_200),
+        move_timeout_s: move_timeout?.unwrap_or(120.0),
+    })
 }

@@ -183,6 +183,7 @@ struct Series {
     sigma_xy_m: Vec<f64>,
     predicted_sigma_xy_m: Vec<f64>,
     sigma_heading_rad: Vec<f64>,
+    error_steps: Vec<i64>,
     error_xy_m: Vec<f64>,
     fix_steps: Vec<i64>,
     sigma0_squared: Vec<f64>,
@@ -552,7 +553,7 @@ impl Recorder {
     pub fn team(
         &mut self,
         team: &TeamState,
-        truth: &scanner::sim::Truth,
+        truth: Option<&scanner::sim::Truth>,
         predicted: Option<(&Matrix4<f64>, &[Matrix3<f64>])>,
     ) -> Result<()> {
         let Some(rec) = &self.rec else { return Ok(()) };
@@ -563,14 +564,20 @@ impl Recorder {
             )
         };
         let parent = team.parent();
-        let mut poses = vec![(parent.position, parent.heading_rad, truth.parent.position, truth.parent.heading_rad)];
+        // (estimate, heading, true position and heading); a child not yet
+        // placed is shown where it truly stands (sim) or not at all.
+        let mut poses =
+            vec![(Some(parent.position), parent.heading_rad, truth.map(|t| (t.parent.position, t.parent.heading_rad)))];
         for j in 0..team.n_children() {
-            let est = team.child(j).unwrap_or(truth.children[j]);
-            poses.push((est, 0.0, truth.children[j], 0.0));
+            let true_p = truth.and_then(|t| t.children.get(j).copied());
+            poses.push((team.child(j).or(true_p), 0.0, true_p.map(|p| (p, 0.0))));
         }
-        for (k, (name, (est, heading, true_p, true_heading))) in self.robots.iter().zip(&poses).enumerate() {
+        for (k, (name, (est, heading, true_pose))) in self.robots.iter().zip(&poses).enumerate() {
+            let Some(est) = est else { continue };
             rr(rec.log(format!("world/robots/{name}"), &transform(est, *heading)))?;
-            rr(rec.log(format!("world/truth/{name}"), &transform(true_p, *true_heading)))?;
+            if let Some((true_p, true_heading)) = true_pose {
+                rr(rec.log(format!("world/truth/{name}"), &transform(true_p, *true_heading)))?;
+            }
             let achieved = if k == 0 {
                 team.parent_covariance().fixed_view::<3, 3>(0, 0).into_owned()
             } else {
@@ -611,13 +618,14 @@ impl Recorder {
     }
 
     /// Adds the parent's estimated and true position to its trajectories.
-    pub fn trajectory(&mut self, estimate: &ParentPose, truth: &ParentPose) -> Result<()> {
+    pub fn trajectory(&mut self, estimate: &ParentPose, truth: Option<&ParentPose>) -> Result<()> {
         let Some(rec) = &self.rec else { return Ok(()) };
         let parent = self.robots.first().map_or("parent", String::as_str);
         for (what, p, colour) in [
-            ("estimate", estimate, rerun::Color::from_rgb(60, 120, 230)),
+            ("estimate", Some(estimate), rerun::Color::from_rgb(60, 120, 230)),
             ("truth", truth, rerun::Color::from_unmultiplied_rgba(60, 120, 230, 90)),
         ] {
+            let Some(p) = p else { continue };
             let line = self.trajectories.entry(what).or_default();
             line.push(p32(&p.position));
             rr(rec.log(
@@ -721,14 +729,18 @@ impl Recorder {
         rr(rec.log("log", &rerun::TextLog::new(text.into()).with_level(level)))
     }
 
-    /// A parent station's figures, for the `metrics/` series.
-    pub fn station_metrics(&mut self, covariance: &Matrix4<f64>, predicted: &Matrix4<f64>, error_xy_m: f64) {
+    /// A parent station's figures for the `metrics/` series: σxy, predicted
+    /// σxy, σθ and (sim) its error to the truth.
+    pub fn station_metrics(&mut self, covariance: &Matrix4<f64>, predicted: &Matrix4<f64>, error_xy_m: Option<f64>) {
         let s = &mut self.series;
         s.station_steps.push(self.step);
         s.sigma_xy_m.push(cps::sigma_xy2(covariance).sqrt());
         s.predicted_sigma_xy_m.push(cps::sigma_xy2(predicted).sqrt());
         s.sigma_heading_rad.push(covariance[(3, 3)].max(0.0).sqrt());
-        s.error_xy_m.push(error_xy_m);
+        if let Some(e) = error_xy_m {
+            s.error_steps.push(self.step);
+            s.error_xy_m.push(e);
+        }
     }
 
     /// A parent fix's variance factor σ0², for `metrics/fix_sigma0_squared`.
@@ -765,7 +777,7 @@ impl Recorder {
         columns("metrics/sigma_xy_m", &s.station_steps, &s.sigma_xy_m)?;
         columns("metrics/predicted_sigma_xy_m", &s.station_steps, &s.predicted_sigma_xy_m)?;
         columns("metrics/sigma_heading_rad", &s.station_steps, &s.sigma_heading_rad)?;
-        columns("metrics/error_xy_m", &s.station_steps, &s.error_xy_m)?;
+        columns("metrics/error_xy_m", &s.error_steps, &s.error_xy_m)?;
         columns("metrics/fix_sigma0_squared", &s.fix_steps, &s.sigma0_squared)?;
         columns("metrics/icp_rmse_m", &s.icp_steps, &s.icp_rmse_m)?;
         rr(rec.flush_blocking())?;

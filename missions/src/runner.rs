@@ -33,7 +33,7 @@ use scanner::{PlanarPose, Target, Tilt, TsMeasurement, TsStatus};
 use serde::{Deserialize, Serialize, de::DeserializeOwned};
 use serde_json::{Value, json};
 
-use crate::backend::{DeviceKind, Fault, SimTeam};
+use crate::backend::{DeviceKind, Fault, Team};
 use crate::fuse::{Fused, ScanView};
 use crate::journal::Journal;
 use crate::mission::{FusionMode, Mission};
@@ -69,10 +69,10 @@ pub struct StationRecord {
     pub covariance: Matrix4<f64>,
     /// The prediction's covariance for this station.
     pub predicted_covariance: Matrix4<f64>,
-    /// The simulator's true pose.
-    pub truth: ParentPose,
-    /// Horizontal error against the truth, metres.
-    pub error_xy_m: f64,
+    /// The simulator's true pose (sim backend only).
+    pub truth: Option<ParentPose>,
+    /// Horizontal error against the truth, metres (sim backend only).
+    pub error_xy_m: Option<f64>,
     /// The scan file taken here, relative to the run directory.
     pub scan: Option<String>,
 }
@@ -155,7 +155,7 @@ fn matrix_json(m: &Matrix4<f64>) -> Value {
 /// goes through [`Steps::step`].
 struct Steps {
     journal: Journal,
-    sim: SimTeam,
+    sim: Team,
     rec: Recorder,
     max_retries: u32,
     retry_delay: Duration,
@@ -174,12 +174,12 @@ impl Steps {
         &mut self,
         key: Value,
         device: DeviceKind,
-        mut command: impl FnMut(&mut SimTeam) -> scanner::Result<T>,
+        mut command: impl FnMut(&mut Team) -> scanner::Result<T>,
     ) -> Result<T> {
         self.bar.inc(1);
         if let Some(event) = self.journal.next_recorded(&key)? {
             self.replayed += 1;
-            self.sim.restore(&event["sim"]).context("restoring the simulator from the journal")?;
+            self.sim.restore(&event["sim"]).context("restoring the team's state from the journal")?;
             return serde_json::from_value(event["data"].clone())
                 .with_context(|| format!("journal event {event}: unreadable data"));
         }
@@ -320,7 +320,7 @@ pub fn run(mission: &Mission, dir: &Path, options: &RunOptions) -> Result<RunSum
         journal.append(json!({"event": "resume"}))?;
     }
 
-    let sim = SimTeam::new(mission, &dance, options.faults.clone())?;
+    let sim = Team::new(mission, &dance, options.faults.clone())?;
     let rrd = mission.output.rerun.then(|| dir.join("mission.rrd"));
     let mut rec = Recorder::new(&mission.name, rrd.as_deref(), &options.viewer, crate::plan::robot_names(mission))?;
     rec.layout(crate::recording::Layout::Mission)?;
@@ -409,7 +409,7 @@ impl Run<'_> {
             self.team.place_child(j, &m.measurement().to_reading(inst), inst)?;
             self.steps.rec.advance(MEASURE_S);
             let placed = self.team.child(j).context("a placed child has a position")?;
-            self.steps.sim.relocalise_child(j, &placed);
+            self.steps.sim.relocalise_child(j, &placed)?;
             self.steps.rec.sight_lines("placement", &from.position, &[(placed, None)])?;
             self.log_team(Some(&predicted.covariance), &predicted.children_covariance)?;
         }
@@ -428,7 +428,7 @@ impl Run<'_> {
         }
         let fix = self.team.fix_parent(&readings, inst, &FixOptions::default())?;
         let pose = self.team.parent();
-        self.steps.sim.relocalise_parent(&pose);
+        self.steps.sim.relocalise_parent(&pose)?;
         self.steps.note(
             json!({"event": "fix", "cycle": cycle.cycle, "station": cycle.to}),
             json!({"pose": pose_json(&pose), "covariance": matrix_json(&self.team.parent_covariance()),
@@ -495,7 +495,7 @@ impl Run<'_> {
     /// Logs the team's estimate, truth and ellipsoids to the recording.
     fn log_team(&mut self, predicted: Option<&Matrix4<f64>>, children: &[nalgebra::Matrix3<f64>]) -> Result<()> {
         let truth = self.steps.sim.truth();
-        self.steps.rec.team(&self.team, &truth, predicted.map(|p| (p, children)))
+        self.steps.rec.team(&self.team, truth.as_ref(), predicted.map(|p| (p, children)))
     }
 
     /// The parent stands at station `index`: the scan if one is due, then
@@ -510,11 +510,11 @@ impl Run<'_> {
             self.log_team(None, &[])?;
         }
         let scan = if self.mission.scan.scans_at(index) { Some(self.scan(index)?) } else { None };
-        let truth = self.steps.sim.truth().parent;
+        let truth = self.steps.sim.truth().map(|t| t.parent);
         let pose = self.team.parent();
-        let error_xy_m = (pose.position.xy() - truth.position.xy()).norm();
+        let error_xy_m = truth.map(|t| (pose.position.xy() - t.position.xy()).norm());
         let covariance = self.team.parent_covariance();
-        self.steps.rec.trajectory(&pose, &truth)?;
+        self.steps.rec.trajectory(&pose, truth.as_ref())?;
         self.steps.rec.station_metrics(&covariance, &predicted, error_xy_m);
         self.stations.push(StationRecord {
             index,
@@ -578,7 +578,7 @@ impl Run<'_> {
             covariance: self.team.parent_covariance(),
             tilt: Tilt { roll_rad: tilt.roll_rad, pitch_rad: tilt.pitch_rad },
             odometry: ParentPose::new(believed.x_m, believed.y_m, nominal_z, believed.heading_rad),
-            truth: Some(truth.tilt.world_from_body(&truth.parent)),
+            truth: truth.map(|t| t.tilt.world_from_body(&t.parent)),
         };
         self.views.push(view);
         self.scan_times.push(self.steps.rec.now());
@@ -678,7 +678,8 @@ fn mission_accepted(mission: &Mission, stations: &[StationRecord], views: &[Scan
         let (view, f) = views.iter().zip(&fused.scans).find(|(v, _)| v.station == index)?;
         view.truth.map(|truth| crate::fuse::error_xy(&f.world_from_body, &truth))
     };
-    let max_error = stations.iter().map(|s| refined(s.index).unwrap_or(s.error_xy_m)).fold(0.0, f64::max);
+    // Without a truth (serial ports) there is no station error to check.
+    let max_error = stations.iter().filter_map(|s| refined(s.index).or(s.error_xy_m)).fold(0.0, f64::max);
     mission.acceptance.max_final_sigma_xy_m.is_none_or(|m| sigma_xy <= m)
         && mission.acceptance.max_station_error_m.is_none_or(|m| max_error <= m)
 }
@@ -694,21 +695,23 @@ fn write_reports(
     timings: &Timings,
 ) -> Result<()> {
     let last = stations.last().context("a run has at least the start station")?;
-    let distance_m: f64 = stations.windows(2).map(|w| (w[1].truth.position - w[0].truth.position).norm()).sum();
+    // Along the true path on the simulator, the estimated one on serial ports.
+    let at = |s: &StationRecord| s.truth.unwrap_or(s.pose).position;
+    let distance_m: f64 = stations.windows(2).map(|w| (at(&w[1]) - at(&w[0])).norm()).sum();
     let sigma_xy2 = cps::sigma_xy2(&last.covariance);
     let mut timings = serde_json::to_value(timings)?;
     timings["wall_s"] = json!(wall_s);
     let report = json!({
         "mission": mission.name,
         "seed": mission.backend.seed,
-        "backend": "sim",
+        "backend": if mission.backend.serial.is_some() { "serial" } else { "sim" },
         "scene": mission.backend.scene,
         "stations": stations.iter().map(|s| json!({
             "index": s.index,
             "pose": pose_json(&s.pose),
             "covariance": matrix_json(&s.covariance),
             "predicted_covariance": matrix_json(&s.predicted_covariance),
-            "truth": pose_json(&s.truth),
+            "truth": s.truth.as_ref().map(pose_json),
             "error_m": s.error_xy_m,
             "scan": s.scan,
         })).collect::<Vec<_>>(),
@@ -716,7 +719,7 @@ fn write_reports(
             "distance_m": distance_m,
             "sigma_xy2_m2": sigma_xy2,
             "error_xy_m": last.error_xy_m,
-            "drift_percent": if distance_m > 0.0 { 100.0 * last.error_xy_m / distance_m } else { 0.0 },
+            "drift_percent": last.error_xy_m.map(|e| if distance_m > 0.0 { 100.0 * e / distance_m } else { 0.0 }),
         },
         "fusion": fusion,
         "accepted": accepted,
@@ -729,9 +732,16 @@ fn write_reports(
     );
     for s in stations {
         let sd = |k: usize| s.covariance[(k, k)].max(0.0).sqrt();
-        let (p, t) = (&s.pose, &s.truth);
+        let p = &s.pose;
+        // Empty cells without a truth (serial ports).
+        let truth = match (&s.truth, s.error_xy_m) {
+            (Some(t), Some(e)) => {
+                format!("{},{},{},{},{}", t.position.x, t.position.y, t.position.z, t.heading_rad, e)
+            }
+            _ => ",,,,".to_string(),
+        };
         csv += &format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{}\n",
             s.index,
             p.position.x,
             p.position.y,
@@ -742,11 +752,7 @@ fn write_reports(
             sd(2),
             sd(3),
             cps::sigma_xy2(&s.predicted_covariance).sqrt(),
-            t.position.x,
-            t.position.y,
-            t.position.z,
-            t.heading_rad,
-            s.error_xy_m
+            truth
         );
     }
     std::fs::write(dir.join("stations.csv"), csv)
@@ -779,13 +785,13 @@ pub fn write_summary(out: &mut dyn Write, mission: &Mission, s: &RunSummary) -> 
     for st in &s.stations {
         writeln!(
             out,
-            "{:>7} {:>10.3} {:>10.3} {:>9.2} {:>11.2} {:>11.2} {:>9}",
+            "{:>7} {:>10.3} {:>10.3} {:>9.2} {:>11.2} {:>11} {:>9}",
             st.index,
             st.pose.position.x,
             st.pose.position.y,
             1e3 * cps::sigma_xy2(&st.covariance).sqrt(),
             1e3 * cps::sigma_xy2(&st.predicted_covariance).sqrt(),
-            1e3 * st.error_xy_m,
+            st.error_xy_m.map_or("-".to_string(), |e| format!("{:.2}", 1e3 * e)),
             if st.scan.is_some() { "yes" } else { "-" }
         )?;
     }

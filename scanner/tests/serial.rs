@@ -326,7 +326,8 @@ fn drives_and_head_move_the_world_once_per_move() {
     ] {
         let w = world();
         let sim = SimDrive::new(w.clone(), Robot::Parent, start, error, 9).expect("drive");
-        let emulator = Emulator::spawn(RobotEmulator::new("parent", Body::Drive(Box::new(sim)), 115_200)).expect("emulator");
+        let emulator =
+            Emulator::spawn(RobotEmulator::new("parent", Body::Drive(Box::new(sim)), 115_200)).expect("emulator");
         emulator.set_faults(faults.clone());
         let mut drive = SerialDrive::new(drive_link(emulator.path()));
         for g in &goals {

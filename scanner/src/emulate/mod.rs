@@ -86,9 +86,10 @@ impl FaultState {
         self.faults.corrupt_every.is_some_and(|k| k > 0 && self.messages.is_multiple_of(k))
     }
 
-    /// True once the device is to stop answering.
+    /// True once the device is to stop answering: the message just counted
+    /// is beyond `stop_after`.
     pub fn stopped(&self) -> bool {
-        self.faults.stop_after.is_some_and(|n| self.messages >= n)
+        self.faults.stop_after.is_some_and(|n| self.messages > n)
     }
 
     /// The bytes as they go on the wire, with dropped and duplicated ones.
