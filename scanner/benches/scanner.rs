@@ -62,5 +62,36 @@ fn files(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, simulate, reduce, files);
+/// Decoding continuous LMS output (20h 24h): 100 telegrams of 361 values
+/// (0.5°, mm; 732 bytes each) arriving in 64-byte reads, each telegram's
+/// CRC checked, its values decoded and classified (distance or no-return
+/// code). At 500 kBd (10 bits per byte) the line carries 50,000 bytes/s.
+fn decode_stream(c: &mut Criterion) {
+    use scanner::protocol::sick::{
+        Decoder, Direction, Event, Range, STATUS_OK, Unit, decode_measured, distance, encode_measured,
+    };
+    let words: Vec<u16> = (0..361).map(|i| if i % 50 == 7 { 0x7FF7 } else { 1000 + 37 * i as u16 }).collect();
+    let stream: Vec<u8> = (0..100).flat_map(|_| encode_measured(&words, Unit::Mm, STATUS_OK)).collect();
+    let mut g = c.benchmark_group("LMS continuous output");
+    g.throughput(Throughput::Bytes(stream.len() as u64));
+    g.bench_function(format!("{} bytes, 100 scans of 361 values, 64-byte reads", stream.len()), |b| {
+        b.iter(|| {
+            let mut d = Decoder::new(Direction::FromDevice);
+            let mut returns = 0_usize;
+            for chunk in stream.chunks(64) {
+                d.push(chunk);
+                while let Some(e) = d.next_event() {
+                    if let Event::Frame(f) = e {
+                        let m = decode_measured(&f, false).expect("B0h");
+                        returns += m.words.iter().filter(|w| distance(**w, Range::Bits15).is_ok()).count();
+                    }
+                }
+            }
+            black_box(returns)
+        })
+    });
+    g.finish();
+}
+
+criterion_group!(benches, simulate, reduce, files, decode_stream);
 criterion_main!(benches);
