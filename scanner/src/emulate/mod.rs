@@ -110,6 +110,15 @@ impl FaultState {
     }
 }
 
+/// Spoils an NMEA-framed line's checksum (`…*hh`, CR LF optional): flips
+/// its last hex digit between 0 and 1.
+pub(crate) fn spoil_nmea_checksum(line: &mut String) {
+    let Some(star) = line.rfind('*') else { return };
+    if let Some(&digit) = line.as_bytes().get(star + 2) {
+        line.replace_range(star + 2..star + 3, if digit == b'0' { "1" } else { "0" });
+    }
+}
+
 /// A running emulator.
 #[derive(Debug)]
 pub struct Emulator {

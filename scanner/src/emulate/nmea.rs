@@ -50,11 +50,7 @@ impl Device for NmeaTiltEmulator {
         let Ok(tilt) = self.sensor.read() else { return Vec::new() };
         let mut line = format_tilt("II", &tilt);
         if faults.corrupt_now() {
-            // Flip the checksum's last hex digit.
-            let star = line.rfind('*').unwrap_or(0);
-            let digit = line.as_bytes().get(star + 2).copied().unwrap_or(b'0');
-            let flipped = if digit == b'0' { '1' } else { '0' };
-            line.replace_range(star + 2..star + 3, &flipped.to_string());
+            super::spoil_nmea_checksum(&mut line);
         }
         vec![line.into_bytes()]
     }

@@ -112,10 +112,7 @@ impl Device for RobotEmulator {
                 }
             };
             if faults.corrupt_now() {
-                // Flip the checksum's last hex digit.
-                let at = reply.len() - 3;
-                let flipped = if reply.as_bytes()[at] == b'0' { "1" } else { "0" };
-                reply.replace_range(at..at + 1, flipped);
+                super::spoil_nmea_checksum(&mut reply);
             }
             out.push(reply.into_bytes());
         }
