@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use anyhow::{Context, Result, bail};
 use cps::ParentPose;
-use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
+use nalgebra::{Isometry3, Point3};
 use planner::Dance;
 use scanner::sim::{
     LmsConfig, LmsRangeMode, NoiseStream, Robot, SimDrive, SimHead, SimLms, SimTilt, SimTotalStation, SimWorld, Truth,
@@ -147,8 +147,7 @@ impl SimTeam {
                 SimDrive::new(world.clone(), Robot::Child(j), at, odometry, seed)
             })
             .collect::<scanner::Result<Vec<_>>>()?;
-        let body_from_head =
-            Isometry3::from_parts(Translation3::from(mission.scan.body_from_head_m), UnitQuaternion::identity());
+        let body_from_head = mission.scan.body_from_head();
         let lms_config =
             LmsConfig { resolution: mission.scan.resolution, mode: LmsRangeMode::Mm32, sigma_range_m: 0.005 };
         Ok(Self {
@@ -275,8 +274,6 @@ impl SimTeam {
     /// The whole simulated state as JSON: the truth, each drive's believed
     /// and true pose, and every device's noise position.
     pub fn checkpoint(&self) -> Value {
-        let t = self.world.truth();
-        let p = &t.parent;
         let pose = |q: PlanarPose| [q.x_m, q.y_m, q.heading_rad];
         let drives: Vec<Value> = std::iter::once(&self.parent)
             .chain(&self.children)
@@ -286,12 +283,7 @@ impl SimTeam {
             })
             .collect();
         json!({
-            "truth": {
-                "parent": [p.position.x, p.position.y, p.position.z, p.heading_rad],
-                "tilt": [t.tilt.roll_rad, t.tilt.pitch_rad],
-                "children": t.children.iter().map(|c| [c.x, c.y, c.z]).collect::<Vec<_>>(),
-                "head_rad": t.head_angle_rad,
-            },
+            "truth": truth_json(&self.world.truth()),
             "drives": drives,
             "noise": {
                 "total_station": self.total_station.as_ref().map(|t| words(t.noise_position())),
@@ -366,14 +358,6 @@ impl Team {
                 bail!("--sim-fault injects faults into the simulator; this mission runs on serial ports")
             }
             Some(ports) => Ok(Team::Serial(Box::new(SerialTeam::connect(mission, dance, ports)?))),
-        }
-    }
-
-    /// `"sim"` or `"serial"`.
-    pub fn backend(&self) -> &'static str {
-        match self {
-            Team::Sim(_) => "sim",
-            Team::Serial(_) => "serial",
         }
     }
 
@@ -477,12 +461,8 @@ impl Team {
         match self {
             Team::Sim(t) => t.restore(c),
             Team::Serial(t) => {
-                let b = c["drives"][0]["believed"]
-                    .as_array()
-                    .filter(|a| a.len() == 3)
-                    .and_then(|a| a.iter().map(Value::as_f64).collect::<Option<Vec<f64>>>())
+                t.parent_believed = parent_believed_in(c)
                     .with_context(|| format!("checkpoint {c}: expected drives[0].believed = [x, y, heading]"))?;
-                t.parent_believed = PlanarPose { x_m: b[0], y_m: b[1], heading_rad: b[2] };
                 Ok(())
             }
         }
@@ -553,10 +533,7 @@ impl SerialTeam {
             lms,
             head,
             drives,
-            body_from_head: Isometry3::from_parts(
-                Translation3::from(mission.scan.body_from_head_m),
-                UnitQuaternion::identity(),
-            ),
+            body_from_head: mission.scan.body_from_head(),
             parent_believed: start,
         };
         team.relocalise(0, start, false)?;
@@ -586,6 +563,26 @@ impl SerialTeam {
         }
         Ok(odometry)
     }
+}
+
+/// The team's truth as JSON (`parent` [x, y, z, heading], `tilt` [roll,
+/// pitch], `children` [[x, y, z]…], `head_rad`): in checkpoints and the
+/// emulator's truth log.
+pub fn truth_json(t: &Truth) -> Value {
+    let p = &t.parent;
+    json!({
+        "parent": [p.position.x, p.position.y, p.position.z, p.heading_rad],
+        "tilt": [t.tilt.roll_rad, t.tilt.pitch_rad],
+        "children": t.children.iter().map(|c| [c.x, c.y, c.z]).collect::<Vec<_>>(),
+        "head_rad": t.head_angle_rad,
+    })
+}
+
+/// The parent's odometry in a checkpoint (`drives[0].believed`), on either
+/// backend.
+pub fn parent_believed_in(checkpoint: &Value) -> Option<PlanarPose> {
+    let b = checkpoint["drives"][0]["believed"].as_array().filter(|a| a.len() == 3)?;
+    Some(PlanarPose { x_m: b[0].as_f64()?, y_m: b[1].as_f64()?, heading_rad: b[2].as_f64()? })
 }
 
 /// A noise position as a JSON string (a u128 does not fit a JSON number

@@ -100,16 +100,11 @@ impl EmulatedTeam {
     }
 }
 
-/// One JSON line of the truth log.
+/// One JSON line of the truth log: the checkpoint's truth and who moved.
 fn truth_line(world: &SimWorld, robot: &str) -> Value {
-    let t = world.truth();
-    let p = &t.parent;
-    json!({
-        "moved": robot,
-        "parent": [p.position.x, p.position.y, p.position.z, p.heading_rad],
-        "tilt": [t.tilt.roll_rad, t.tilt.pitch_rad],
-        "children": t.children.iter().map(|c| [c.x, c.y, c.z]).collect::<Vec<_>>(),
-    })
+    let mut line = crate::backend::truth_json(&world.truth());
+    line["moved"] = json!(robot);
+    line
 }
 
 /// Starts the mission's team on pseudo-terminals; with `truth`, appends the

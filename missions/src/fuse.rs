@@ -268,13 +268,8 @@ pub fn load_run(dir: &Path) -> Result<(Mission, Vec<ScanView>)> {
                     Some(Tilt { roll_rad: f(&t[0])?, pitch_rad: f(&t[1])? }.world_from_body(&p))
                 });
                 let nominal = dance.station_pose(station.min(dance.stations.len() - 1));
-                let odometry = sim["drives"][0]["believed"]
-                    .as_array()
-                    .filter(|a| a.len() == 3)
-                    .and_then(|b| {
-                        Some(ParentPose::new(b[0].as_f64()?, b[1].as_f64()?, nominal.position.z, b[2].as_f64()?))
-                    })
-                    .unwrap_or(nominal);
+                let odometry = crate::backend::parent_believed_in(sim)
+                    .map_or(nominal, |b| ParentPose::new(b.x_m, b.y_m, nominal.position.z, b.heading_rad));
                 views.push(ScanView {
                     station,
                     file,

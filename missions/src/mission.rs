@@ -161,6 +161,14 @@ impl Default for ScanPlan {
 }
 
 impl ScanPlan {
+    /// The scan head's mount on the body: `body_from_head_m`, no rotation.
+    pub fn body_from_head(&self) -> nalgebra::Isometry3<f64> {
+        nalgebra::Isometry3::from_parts(
+            nalgebra::Translation3::from(self.body_from_head_m),
+            nalgebra::UnitQuaternion::identity(),
+        )
+    }
+
     /// Whether the scanner scans at station `k`.
     pub fn scans_at(&self, k: usize) -> bool {
         match &self.stations {

@@ -175,15 +175,14 @@ impl Lms {
     fn find_baud(&mut self) -> Result<u32> {
         let mut rates = vec![self.settings.baud];
         rates.extend(CANDIDATE_BAUDS.iter().filter(|b| **b != self.settings.baud));
-        let quick = LmsSettings { attempts: 1, ..self.settings };
+        let timeout = self.settings.reply_timeout;
         let started = Instant::now();
         for &baud in &rates {
             self.port.set_baud(baud)?;
             self.flush()?;
             // Stop a stream, then ask for the status; one try each.
-            let _ =
-                self.transact_with(&request(cmd::MODE, &[mode::ON_REQUEST]), cmd::MODE, &quick, quick.reply_timeout);
-            if self.transact_with(&request(cmd::STATUS, &[]), cmd::STATUS, &quick, quick.reply_timeout).is_ok() {
+            let _ = self.transact_with(&request(cmd::MODE, &[mode::ON_REQUEST]), cmd::MODE, 1, timeout);
+            if self.transact_with(&request(cmd::STATUS, &[]), cmd::STATUS, 1, timeout).is_ok() {
                 return Ok(baud);
             }
         }
@@ -263,14 +262,13 @@ impl Lms {
 
     /// Sends `telegram` and waits for the reply with `code` + 80h.
     pub fn transact(&mut self, telegram: &[u8], code: u8, timeout: Duration) -> Result<Frame> {
-        let s = self.settings;
-        self.transact_with(telegram, code, &s, timeout)
+        self.transact_with(telegram, code, self.settings.attempts, timeout)
     }
 
-    fn transact_with(&mut self, telegram: &[u8], code: u8, s: &LmsSettings, timeout: Duration) -> Result<Frame> {
+    fn transact_with(&mut self, telegram: &[u8], code: u8, attempts: usize, timeout: Duration) -> Result<Frame> {
         let started = Instant::now();
         let mut last: Option<ProtocolError> = None;
-        let attempts = s.attempts.max(1);
+        let attempts = attempts.max(1);
         for attempt in 0..attempts {
             if attempt > 0 {
                 self.retries += 1;
@@ -417,9 +415,8 @@ impl Drop for Lms {
     fn drop(&mut self) {
         if self.streaming {
             // Best effort: a stream left running slows the next start.
-            let quick = LmsSettings { attempts: 1, reply_timeout: Duration::from_millis(200), ..self.settings };
-            let _ =
-                self.transact_with(&request(cmd::MODE, &[mode::ON_REQUEST]), cmd::MODE, &quick, quick.reply_timeout);
+            let stop = request(cmd::MODE, &[mode::ON_REQUEST]);
+            let _ = self.transact_with(&stop, cmd::MODE, 1, Duration::from_millis(200));
         }
     }
 }
