@@ -233,8 +233,11 @@ pub struct Anomaly {
     pub axial_m: (f64, f64),
     /// Axis-aligned bounding box (min, max) in the points' frame.
     pub bounds: (Point3<f64>, Point3<f64>),
-    /// The largest |deviation|, metres.
+    /// The largest |deviation|, metres (a single point: the noise adds).
     pub max_deviation_m: f64,
+    /// The 95th percentile of |deviation|, metres: the anomaly's depth (or
+    /// height) robust to a few noisy points.
+    pub depth_m: f64,
 }
 
 /// Signed deviation of every point from the fitted surface, metres.
@@ -312,8 +315,10 @@ fn summarise(
         axial_m: (f64::INFINITY, f64::NEG_INFINITY),
         bounds: (Point3::from([f64::INFINITY; 3]), Point3::from([f64::NEG_INFINITY; 3])),
         max_deviation_m: 0.0,
+        depth_m: 0.0,
     };
     let mut sum = Vector3::zeros();
+    let mut depths = Vec::new();
     for i in members {
         let p = points[i].cast::<f64>();
         sum += p.coords;
@@ -322,7 +327,10 @@ fn summarise(
         a.axial_m = (a.axial_m.0.min(s), a.axial_m.1.max(s));
         a.bounds = (a.bounds.0.inf(&p), a.bounds.1.sup(&p));
         a.max_deviation_m = a.max_deviation_m.max(f64::from(dev[i].abs()));
+        depths.push(f64::from(dev[i].abs()));
     }
+    depths.sort_unstable_by(f64::total_cmp);
+    a.depth_m = depths[((depths.len() - 1) as f64 * 0.95).round() as usize];
     a.centroid = Point3::from(sum / a.points as f64);
     a
 }

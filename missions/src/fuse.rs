@@ -289,7 +289,8 @@ pub fn load_run(dir: &Path) -> Result<(Mission, Vec<ScanView>)> {
 
 /// `cps-survey fuse RUN_DIR --mode M`: re-fuses a run from its journal and
 /// scans into `RUN_DIR/fusion/<mode>/` (the cloud in the mission's formats
-/// and `fusion.json`), and prints per scan the fused pose and, on the
+/// and `fusion.json`; with `[pipe]` also the pipe inspection of the new
+/// cloud: `fusion.json`'s `pipe` and the deviation map), and prints per scan the fused pose and, on the
 /// simulator, its error next to the direct fusion's.
 pub fn fuse_run(dir: &Path, mode: Option<FusionMode>, json_out: bool, out: &mut dyn Write) -> Result<PathBuf> {
     let (mission, views) = load_run(dir)?;
@@ -307,12 +308,20 @@ pub fn fuse_run(dir: &Path, mode: Option<FusionMode>, json_out: bool, out: &mut 
     }
     let mut report = report_json(&views, &fused);
     report["seconds"] = json!(fused.seconds);
+    if let Some(plan) = &mission.pipe {
+        let inspection = crate::pipe::inspect(plan, &cloud.points)?;
+        crate::pipe::write_deviation_map(&target, &cloud.points, &inspection)?;
+        report["pipe"] = crate::pipe::report_json(plan, &inspection);
+    }
     std::fs::write(target.join("fusion.json"), serde_json::to_string_pretty(&report)? + "\n")
         .with_context(|| format!("writing {}", target.join("fusion.json").display()))?;
     if json_out {
         writeln!(out, "{report}")?;
     } else {
         write_table(out, &views, &fused)?;
+        if let Some(pipe) = report.get("pipe") {
+            crate::pipe::write_summary(out, pipe)?;
+        }
         writeln!(out, "outputs in {}", target.display())?;
     }
     Ok(target)

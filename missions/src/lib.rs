@@ -16,6 +16,7 @@ pub mod fuse;
 pub mod journal;
 pub mod mission;
 pub mod montecarlo;
+pub mod pipe;
 pub mod plan;
 pub mod plot;
 pub mod predict;

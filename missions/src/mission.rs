@@ -265,6 +265,23 @@ pub struct Output {
     pub rerun: bool,
 }
 
+/// Pipe inspection of the fused cloud (`[pipe]`, seed 000 §5): a tube is
+/// fitted from the nominal one and every point's deviation from it mapped.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PipePlan {
+    /// The nominal tube the fit starts from (`axis_from_m`, `axis_to_m`,
+    /// `radius_m`), world frame.
+    pub nominal: fusion::pipe::Pipe,
+    /// A point deviating more than this is anomalous (`threshold_m`,
+    /// default 0.02).
+    pub threshold_m: f64,
+    /// Anomalous points closer than this belong to one anomaly (`link_m`,
+    /// default 0.05).
+    pub link_m: f64,
+    /// Smaller groups are dropped as noise (`min_points`, default 20).
+    pub min_points: usize,
+}
+
 /// Cloud formats `[output] formats` accepts.
 pub const OUTPUT_FORMATS: [&str; 5] = ["ply", "las", "e57", "pcd", "xyz"];
 
@@ -316,6 +333,8 @@ pub struct Mission {
     pub fusion: FusionPlan,
     /// The outputs.
     pub output: Output,
+    /// The pipe inspection, when `[pipe]` is given.
+    pub pipe: Option<PipePlan>,
     /// Spans for later diagnostics.
     pub spans: Spans,
 }
@@ -399,23 +418,32 @@ impl Mission {
         let parsed = read_mission(&mut r, &mut root, scene_file);
         root.finish(&mut r);
         match parsed {
-            Some(Parts { name, children, total_station, plan, acceptance, backend, scan, fusion, output, spans })
-                if r.problems.is_empty() =>
-            {
-                Ok(Mission {
-                    source,
-                    name,
-                    children,
-                    total_station,
-                    plan,
-                    acceptance,
-                    backend,
-                    scan,
-                    fusion,
-                    output,
-                    spans,
-                })
-            }
+            Some(Parts {
+                name,
+                children,
+                total_station,
+                plan,
+                acceptance,
+                backend,
+                scan,
+                fusion,
+                output,
+                pipe,
+                spans,
+            }) if r.problems.is_empty() => Ok(Mission {
+                source,
+                name,
+                children,
+                total_station,
+                plan,
+                acceptance,
+                backend,
+                scan,
+                fusion,
+                output,
+                pipe,
+                spans,
+            }),
             _ => Err(invalid(&source, r.problems)),
         }
     }
@@ -436,6 +464,7 @@ struct Parts {
     scan: ScanPlan,
     fusion: FusionPlan,
     output: Output,
+    pipe: Option<PipePlan>,
     spans: Spans,
 }
 
@@ -626,6 +655,15 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>, scene_override: Op
     let rerun = o.optional(r, "rerun", |r, v, f| r.boolean(v, f));
     o.finish(r);
 
+    let pipe = if root.has("pipe") {
+        let mut t = root.table(r, "pipe");
+        let pipe = read_pipe(r, &mut t);
+        t.finish(r);
+        pipe.map(Some)
+    } else {
+        Some(None)
+    };
+
     let (mut plan, mut spans) = plan?;
     plan.footprint_radius_m = footprint?.unwrap_or(plan.footprint_radius_m);
     let listed = listed?;
@@ -688,7 +726,37 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>, scene_override: Op
             icp_variance_factor: variance_factor?.unwrap_or(fd.icp_variance_factor),
         },
         output: Output { formats: formats?.unwrap_or_else(|| vec!["ply".into()]), rerun: rerun?.unwrap_or(true) },
+        pipe: pipe?,
         spans,
+    })
+}
+
+fn read_pipe(r: &mut Reader<'_>, t: &mut Table<'_, '_>) -> Option<PipePlan> {
+    let end = |r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, f: &str| {
+        r.point3(v, f).map(|p| (nalgebra::Point3::from(*p.get_ref()), p.span()))
+    };
+    let from = t.required(r, "axis_from_m", "one end of the nominal pipe axis, [x, y, z] in the world frame", end);
+    let to = t.required(r, "axis_to_m", "the other end of the nominal pipe axis, [x, y, z]", end);
+    let radius = t.required(r, "radius_m", "the nominal inner radius (m)", |r, v, f| {
+        r.number_in(v, f, 0.0, false, Some(100.0)).map(At::into_inner)
+    });
+    let length = |r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, f: &str| {
+        r.number_in(v, f, 0.0, false, Some(10.0)).map(At::into_inner)
+    };
+    let threshold = t.optional(r, "threshold_m", length);
+    let link = t.optional(r, "link_m", length);
+    let min_points = t.optional(r, "min_points", |r, v, f| r.integer_in(v, f, 1, 100_000_000));
+    let (from, to) = (from?, to?);
+    if (to.0 - from.0).norm() < 1e-3 {
+        let message = format!("the axis ends {} and {} coincide; expected two points ≥ 1 mm apart", from.0, to.0);
+        r.problem(&to.1, "pipe.axis_to_m", message);
+        return None;
+    }
+    Some(PipePlan {
+        nominal: fusion::pipe::Pipe { a: from.0, b: to.0, radius_m: radius? },
+        threshold_m: threshold?.unwrap_or(0.02),
+        link_m: link?.unwrap_or(0.05),
+        min_points: min_points?.map_or(20, |n| n as usize),
     })
 }
 

@@ -20,6 +20,8 @@
 //! | `metrics/{sigma_xy_m,predicted_sigma_xy_m,sigma_heading_rad,error_xy_m}` | `Scalars`, column-wise | each station |
 //! | `metrics/fix_sigma0_squared` | `Scalars`, column-wise | each parent fix |
 //! | `metrics/icp_rmse_m` | `Scalars`, column-wise, at each scan's step | ICP fusion modes |
+//! | `world/pipe/deviation` | `Points3D` of the cloud coloured by deviation from the fitted pipe (blue inside, red outside, grey within the threshold) | `[pipe]`, at the end |
+//! | `world/pipe/axis`, `world/pipe/anomalies` | `LineStrips3D` of the fitted axis; `Boxes3D` around each anomaly, labelled | likewise |
 //! | `log` | `TextLog` of mission events, warnings for retries and blunders | as they happen |
 //! | `world/scans/icp_iterations/scanNNN` (+ `/points`) | `Transform3D` of the scan per ICP iteration over `Points3D` in the scan's frame | `run --log-icp-iterations`, timeline `icp_iteration` |
 //! | `metrics/icp_iteration_shift_m` | `Scalars`: how far each iteration moved its scan | likewise |
@@ -242,6 +244,24 @@ pub fn w_colour(w: Option<f64>) -> rerun::Color {
         Some(w) if w < 2.0 => rerun::Color::from_rgb(40, 200, 80),
         Some(w) if w <= W_CRITICAL => rerun::Color::from_rgb(240, 170, 30),
         Some(_) => rerun::Color::from_rgb(230, 40, 40),
+    }
+}
+
+/// The most points of the deviation map logged to `world/pipe/deviation`.
+pub const PIPE_DISPLAY_POINTS: usize = 400_000;
+
+/// Colour of a deviation from a fitted surface: grey within `threshold_m`,
+/// then towards full blue (inside) or red (outside) at twice it.
+fn deviation_colour(deviation_m: f64, threshold_m: f64) -> rerun::Color {
+    let t = (deviation_m.abs() / threshold_m.max(1e-9) - 1.0).clamp(0.0, 1.0);
+    if deviation_m.abs() <= threshold_m {
+        return rerun::Color::from_rgb(190, 190, 190);
+    }
+    let mix = |from: f64, to: f64| (from + (to - from) * (0.5 + 0.5 * t)) as u8;
+    if deviation_m < 0.0 {
+        rerun::Color::from_rgb(mix(190.0, 30.0), mix(190.0, 80.0), mix(190.0, 240.0))
+    } else {
+        rerun::Color::from_rgb(mix(190.0, 235.0), mix(190.0, 40.0), mix(190.0, 40.0))
     }
 }
 
@@ -721,6 +741,46 @@ impl Recorder {
         rec.set_time_sequence("step", self.step);
         rec.set_duration_secs("sim_time", self.sim_time_s);
         Ok(())
+    }
+
+    /// The pipe inspection: the cloud coloured by deviation (at most
+    /// [`PIPE_DISPLAY_POINTS`], evenly picked), the fitted axis and a
+    /// labelled box around each anomaly.
+    pub fn pipe(
+        &mut self,
+        cloud: &[Point3<f32>],
+        inspection: &crate::pipe::Inspection,
+        threshold_m: f64,
+    ) -> Result<()> {
+        let Some(rec) = &self.rec else { return Ok(()) };
+        let every = cloud.len().div_ceil(PIPE_DISPLAY_POINTS).max(1);
+        let shown = cloud.iter().zip(&inspection.deviations).step_by(every);
+        let (points, colours): (Vec<[f32; 3]>, Vec<rerun::Color>) =
+            shown.map(|(p, d)| ([p.x, p.y, p.z], deviation_colour(f64::from(*d), threshold_m))).unzip();
+        rr(rec.log("world/pipe/deviation", &rerun::Points3D::new(points).with_colors(colours).with_radii([0.004_f32])))?;
+        let pipe = &inspection.fit.pipe;
+        rr(rec.log("world/pipe/axis", &rerun::LineStrips3D::new([[p32(&pipe.a), p32(&pipe.b)]])))?;
+        if inspection.anomalies.is_empty() {
+            return Ok(());
+        }
+        let (mins, sizes): (Vec<[f32; 3]>, Vec<[f32; 3]>) = inspection
+            .anomalies
+            .iter()
+            .map(|a| (p32(&a.bounds.0), p32(&Point3::from(a.bounds.1 - a.bounds.0))))
+            .unzip();
+        let labels: Vec<String> = inspection
+            .anomalies
+            .iter()
+            .map(|a| {
+                let kind = if a.kind == fusion::pipe::AnomalyKind::Intrusion { "intrusion" } else { "bulge" };
+                let clock = crate::pipe::clock_text(crate::pipe::clock_hour(pipe, &a.centroid));
+                format!("{kind} {:.0} mm at {clock}", 1e3 * a.depth_m)
+            })
+            .collect();
+        rr(rec.log(
+            "world/pipe/anomalies",
+            &rerun::Boxes3D::from_mins_and_sizes(mins, sizes).with_labels(labels).with_colors([red()]),
+        ))
     }
 
     /// A mission event in the text log.

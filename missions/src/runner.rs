@@ -92,6 +92,8 @@ pub struct RunSummary {
     pub replayed: usize,
     /// The fusion's figures as in `report.json`'s `fusion`.
     pub fusion: Value,
+    /// The pipe inspection as in `report.json`'s `pipe`, with `[pipe]`.
+    pub pipe: Option<Value>,
 }
 
 /// A drive's report, as journaled.
@@ -244,6 +246,9 @@ struct Timings {
     /// Recording `mission.rrd` (on the mission's thread; scans are thinned
     /// and logged on a worker, waited for at the end).
     recording_s: f64,
+    /// The pipe inspection (fit, deviation map, anomalies) and its file.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pipe_s: Option<f64>,
 }
 
 /// Adds the seconds `f` takes to `total`.
@@ -644,26 +649,71 @@ impl Run<'_> {
             }
             Ok(())
         })?;
-        let accepted = mission_accepted(self.mission, &self.stations, &self.views, &fused);
+        let pipe = match &self.mission.pipe {
+            Some(plan) => Some(self.inspect_pipe(plan, &merged.points)?),
+            None => None,
+        };
+        // A pipe mission without its deviation report has not done its job.
+        let pipe_failed = pipe.as_ref().is_some_and(|p| p.get("error").is_some());
+        let accepted = mission_accepted(self.mission, &self.stations, &self.views, &fused) && !pipe_failed;
         self.steps.rec.event(
             rerun::TextLogLevel::INFO,
             format!("mission ends: acceptance {}", if accepted { "passed" } else { "FAILED" }),
         )?;
         let recording = std::mem::replace(&mut self.steps.rec, Recorder::disabled());
         timed(&mut self.timings.recording_s, || recording.finish())?;
+        let results = Results { fusion: fusion.clone(), pipe: pipe.clone(), accepted };
         write_reports(
             self.mission,
             &self.dir,
             &self.stations,
-            fusion.clone(),
-            accepted,
+            &results,
             started.elapsed().as_secs_f64(),
             &self.timings,
         )?;
         self.steps.note(json!({"event": "end"}), json!({"accepted": accepted}))?;
         let replayed = self.steps.replayed;
-        Ok(RunSummary { dir: self.dir, stations: self.stations, points: merged.len(), accepted, replayed, fusion })
+        Ok(RunSummary {
+            dir: self.dir,
+            stations: self.stations,
+            points: merged.len(),
+            accepted,
+            replayed,
+            fusion,
+            pipe,
+        })
     }
+
+    /// The `[pipe]` inspection of the merged cloud: the deviation map
+    /// written, the recording's `world/pipe/…`, `report.json`'s `pipe`. A
+    /// fit that fails is reported (`{"error": …}`) after everything else
+    /// has been written, not raised.
+    fn inspect_pipe(&mut self, plan: &crate::mission::PipePlan, cloud: &[Point3<f32>]) -> Result<Value> {
+        let started = Instant::now();
+        let result = crate::pipe::inspect(plan, cloud).and_then(|inspection| {
+            crate::pipe::write_deviation_map(&self.dir, cloud, &inspection)?;
+            Ok(inspection)
+        });
+        self.timings.pipe_s = Some(started.elapsed().as_secs_f64());
+        match result {
+            Ok(inspection) => {
+                timed(&mut self.timings.recording_s, || self.steps.rec.pipe(cloud, &inspection, plan.threshold_m))?;
+                Ok(crate::pipe::report_json(plan, &inspection))
+            }
+            Err(e) => {
+                let message = format!("{e:#}");
+                self.steps.rec.event(rerun::TextLogLevel::WARN, format!("pipe inspection failed: {message}"))?;
+                Ok(json!({ "error": message }))
+            }
+        }
+    }
+}
+
+/// What `report.json` says beyond the stations.
+struct Results {
+    fusion: Value,
+    pipe: Option<Value>,
+    accepted: bool,
 }
 
 /// Whether the mission's acceptance tolerances hold. A station's error is
@@ -689,8 +739,7 @@ fn write_reports(
     mission: &Mission,
     dir: &Path,
     stations: &[StationRecord],
-    fusion: Value,
-    accepted: bool,
+    results: &Results,
     wall_s: f64,
     timings: &Timings,
 ) -> Result<()> {
@@ -701,7 +750,7 @@ fn write_reports(
     let sigma_xy2 = cps::sigma_xy2(&last.covariance);
     let mut timings = serde_json::to_value(timings)?;
     timings["wall_s"] = json!(wall_s);
-    let report = json!({
+    let mut report = json!({
         "mission": mission.name,
         "seed": mission.backend.seed,
         "backend": if mission.backend.serial.is_some() { "serial" } else { "sim" },
@@ -721,10 +770,13 @@ fn write_reports(
             "error_xy_m": last.error_xy_m,
             "drift_percent": last.error_xy_m.map(|e| if distance_m > 0.0 { 100.0 * e / distance_m } else { 0.0 }),
         },
-        "fusion": fusion,
-        "accepted": accepted,
+        "fusion": results.fusion,
+        "accepted": results.accepted,
         "timings": timings,
     });
+    if let Some(pipe) = &results.pipe {
+        report["pipe"] = pipe.clone();
+    }
     std::fs::write(dir.join("report.json"), serde_json::to_string_pretty(&report)? + "\n")
         .with_context(|| format!("writing {}", dir.join("report.json").display()))?;
     let mut csv = String::from(
@@ -807,13 +859,17 @@ pub fn write_summary(out: &mut dyn Write, mission: &Mission, s: &RunSummary) -> 
             1e3 * direct
         )?;
     }
+    if let Some(pipe) = &s.pipe {
+        crate::pipe::write_summary(out, pipe)?;
+    }
     if s.replayed > 0 {
         writeln!(out, "resumed: {} journal events replayed", s.replayed)?;
     }
     writeln!(
         out,
-        "outputs in {} (report.json, stations.csv, journal.jsonl, scans/, cloud.*{})",
+        "outputs in {} (report.json, stations.csv, journal.jsonl, scans/, cloud.*{}{})",
         s.dir.display(),
+        if s.pipe.is_some() { format!(", {}", crate::pipe::DEVIATION_FILE) } else { String::new() },
         if mission.output.rerun { ", mission.rrd — view with: rerun mission.rrd" } else { "" }
     )?;
     writeln!(out, "acceptance: {}", if s.accepted { "passed" } else { "FAILED" })

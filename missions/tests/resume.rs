@@ -13,11 +13,14 @@ fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_cps-survey"))
 }
 
-/// The hall example with a coarser scan (fast) or a finer one (slow enough
-/// to kill mid-run), and no pause between retries.
+/// The hall example's first leg (8 stations) with a coarser scan (fast) or
+/// a finer one (slow enough to kill mid-run), and no pause between retries.
 fn mission(dir: &Path, slices: usize, resolution_deg: f64) -> PathBuf {
     let text = std::fs::read_to_string(format!("{}/examples/hall.toml", env!("CARGO_MANIFEST_DIR"))).expect("hall");
+    let route = "route_m = [[1.5, 4.2, 1.5], [37.5, 4.2, 1.5], [37.5, 7.8, 1.5], [1.5, 7.8, 1.5]]";
+    assert!(text.contains(route), "hall.toml's route changed");
     let text = text
+        .replace(route, "route_m = [[1.5, 4.2, 1.5], [26.7, 4.2, 1.5]]")
         .replace("slices = 180", &format!("slices = {slices}"))
         .replace("resolution_deg = 1", &format!("resolution_deg = {resolution_deg}"))
         .replace("seed = 1", "seed = 1\nretry_delay_s = 0");

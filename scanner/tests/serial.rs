@@ -129,6 +129,15 @@ fn geocom_fails_typed_and_in_time() {
         }
         other => panic!("expected no target, got {other:?}"),
     }
+    // 2° off: no prism in the 1° window, found in the 3° one.
+    let (emulator, mut driver) = station(&w, config);
+    let exact = driver.measure(&target(&w, 0)).expect("aimed well");
+    let mut near = target(&w, 0);
+    near.predicted.azimuth_rad += 2f64.to_radians();
+    let before = emulator.messages();
+    let found = driver.measure(&near).expect("found by the wider search");
+    assert_eq!(emulator.messages() - before, 5, "positioning, fine adjust twice, measure, read");
+    assert!((found.hz_rad - exact.hz_rad).abs() < 1e-4 && (found.slope_raw_m - exact.slope_raw_m).abs() < 0.01);
 
     // Replies too slow for the deadline: the late reply to the first
     // attempt is recognised by its transaction id and skipped.

@@ -37,8 +37,8 @@ fn paper_1km_predicts_100_cycles_near_the_model_floor() {
 
 #[test]
 fn predict_reports_every_robot_and_every_scan_station() {
-    // hall: 7 leapfrog cycles, two children placed every cycle, a scan at
-    // every station (8).
+    // hall: 21 leapfrog cycles, two children placed every cycle, a scan at
+    // every station (22).
     let run = cps_survey(["predict".into(), example("hall.toml").into_os_string(), "--json".into()]);
     assert_eq!(run.code, 0, "{}", run.stderr);
     let v = json(&run);
@@ -46,7 +46,7 @@ fn predict_reports_every_robot_and_every_scan_station() {
     let steps = v["steps"].as_array().expect("steps");
     let scans = v["scans"].as_array().expect("scans");
     let of = |a: &str| steps.iter().filter(|s| s["action"] == a).count();
-    assert_eq!((of("placement"), of("fix"), scans.len()), (14, 7, 8));
+    assert_eq!((of("placement"), of("fix"), scans.len()), (42, 21, 22));
     for (k, scan) in scans.iter().enumerate() {
         assert_eq!(scan["station"], k);
         let cov = &scan["covariance"];

@@ -406,6 +406,36 @@ const CASES: &[Case] = &[
         "plan.max_slope_deg",
         "out of range",
     ),
+    (
+        "pipe axis of no length",
+        (
+            "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]",
+            "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]\n[pipe]\naxis_from_m = [0, 0, 1]\naxis_to_m = [0, 0, 1]\nradius_m = 0.5",
+        ),
+        "20:13",
+        "pipe.axis_to_m",
+        "coincide",
+    ),
+    (
+        "pipe without a radius",
+        (
+            "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]",
+            "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]\n[pipe]\naxis_from_m = [0, 0, 1]\naxis_to_m = [9, 0, 1]",
+        ),
+        "18:1",
+        "pipe.radius_m",
+        "missing key",
+    ),
+    (
+        "pipe threshold zero",
+        (
+            "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]",
+            "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]\n[pipe]\naxis_from_m = [0, 0, 1]\naxis_to_m = [9, 0, 1]\nradius_m = 0.5\nthreshold_m = 0",
+        ),
+        "22:15",
+        "pipe.threshold_m",
+        "out of range",
+    ),
     ("broken TOML", ("[plan]", "[plan"), "14:6", "", "invalid TOML"),
     ("duplicate key", ("stride_m = 10.0", "stride_m = 10.0\nstride_m = 5.0"), "17:1", "", "invalid TOML"),
 ];

@@ -15,7 +15,7 @@ fn hall_positioning_agrees_with_its_prediction() {
 
     assert_eq!(mc["trials"], 400);
     let stations = mc["stations"].as_array().expect("stations");
-    assert_eq!(stations.len(), 7, "one per dance cycle");
+    assert_eq!(stations.len(), 21, "one per dance cycle");
     // The predicted figure is predict's final σx² + σy².
     let predicted = mc["predicted_sigma_xy2_m2"].as_f64().expect("predicted");
     let from_predict = predict["cycles"].as_array().and_then(|c| c.last()).expect("cycles")["sigma_xy2_m2"]

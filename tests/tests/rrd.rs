@@ -13,14 +13,14 @@ fn the_hall_recording_holds_every_entity() {
     let get =
         |path: &str| rows.get(path).copied().unwrap_or_else(|| panic!("{path} missing; entities: {:?}", rows.keys()));
 
-    // 7 cycles, 2 children, 8 stations (0–7), a scan at each.
-    let (cycles, children, stations) = (7, 2, 8);
+    // 21 cycles, 2 children, 22 stations (0–21), a scan at each.
+    let (cycles, children, stations) = (21, 2, 22);
     // The team is logged after each child's placement, after each fix and at the start.
     let team_rows = cycles * (children + 1) + 1;
-    for static_path in ["/world", "/world/scene", "/world/robots/parent/body", "/world/truth/left/body"] {
+    for static_path in ["/world", "/world/scene", "/world/robots/parent/body", "/world/truth/ahead/body"] {
         assert_eq!(get(static_path), (1, true), "{static_path}");
     }
-    for robot in ["parent", "left", "right"] {
+    for robot in ["parent", "ahead", "behind"] {
         assert_eq!(get(&format!("/world/robots/{robot}")), (team_rows, false), "{robot}");
         assert_eq!(get(&format!("/world/truth/{robot}")), (team_rows, false), "{robot}");
         assert_eq!(get(&format!("/world/uncertainty/{robot}/achieved_95pct")).0, team_rows);
@@ -115,11 +115,11 @@ fn log_icp_iterations_puts_every_iteration_on_its_own_timeline() {
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.path().join("report.json")).expect("report")).expect("json");
     let matches = report["fusion"]["matches"].as_u64().expect("matches") as usize;
-    assert!(matches >= 14, "coarse and fine pass over 7 scans at least: {matches}");
+    assert!(matches >= 42, "coarse and fine pass over 21 scans at least: {matches}");
     let rows = rrd_rows(&dir.path().join("mission.rrd")).expect("the recording decodes");
     // Scan 0 holds the frame; every other scan moves, its points shown once.
-    let transforms: usize = (1..8).map(|k| rows[&format!("/world/scans/icp_iterations/scan{k:03}")].0).sum();
-    for k in 1..8 {
+    let transforms: usize = (1..22).map(|k| rows[&format!("/world/scans/icp_iterations/scan{k:03}")].0).sum();
+    for k in 1..22 {
         assert_eq!(rows[&format!("/world/scans/icp_iterations/scan{k:03}/points")], (1, false));
     }
     assert!(!rows.contains_key("/world/scans/icp_iterations/scan000"));

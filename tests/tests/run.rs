@@ -20,7 +20,7 @@ fn hall_runs_end_to_end() {
     assert_eq!(report["mission"], "hall");
     assert_eq!(report["seed"], 1);
     let stations = report["stations"].as_array().expect("stations");
-    assert_eq!(stations.len(), 8);
+    assert_eq!(stations.len(), 22);
     for (k, s) in stations.iter().enumerate() {
         assert_eq!(s["index"], k);
         let cov: Vec<Vec<f64>> = serde_json::from_value(s["covariance"].clone()).expect("4×4");
@@ -44,7 +44,7 @@ fn hall_runs_end_to_end() {
     let last = stations.last().expect("last");
     assert_eq!(report["final"]["error_xy_m"], last["error_m"]);
     let distance = report["final"]["distance_m"].as_f64().expect("distance");
-    assert!((distance - 28.0).abs() < 0.5, "the route is 28 m: {distance}");
+    assert!((distance - 75.6).abs() < 0.5, "the route is 75.6 m: {distance}");
 
     // stations.csv: a header with units and one row per station matching the report.
     let csv = std::fs::read_to_string(out.join("stations.csv")).expect("csv");
@@ -52,7 +52,7 @@ fn hall_runs_end_to_end() {
     let header: Vec<&str> = lines.next().expect("header").split(',').collect();
     assert!(header.iter().skip(1).all(|h| h.ends_with("_m") || h.ends_with("_rad")), "{header:?}");
     let rows: Vec<Vec<f64>> = lines.map(|l| l.split(',').map(|v| v.parse().expect("a number")).collect()).collect();
-    assert_eq!(rows.len(), 8);
+    assert_eq!(rows.len(), 22);
     let col = |name: &str| header.iter().position(|h| *h == name).expect("column");
     for (row, s) in rows.iter().zip(stations) {
         // (serde_json parses floats to within an ulp or two.)
@@ -68,9 +68,9 @@ fn hall_runs_end_to_end() {
     assert_eq!(events[0]["event"], "start");
     assert_eq!(events.last().expect("end")["event"], "end");
     let count = |kind: &str| events.iter().filter(|e| e["event"] == kind).count();
-    assert_eq!(count("measure"), 7 * 2 * 2, "two children, placement and fix, 7 cycles");
-    assert_eq!(count("fix"), 7);
-    assert_eq!(count("scan"), 8);
+    assert_eq!(count("measure"), 21 * 2 * 2, "two children, placement and fix, 21 cycles");
+    assert_eq!(count("fix"), 21);
+    assert_eq!(count("scan"), 22);
     for e in events.iter().filter(|e| e["event"] == "scan") {
         let file = out.join(e["data"]["file"].as_str().expect("file"));
         let cloud = scanner::io::read(&file).expect("the scan file reads");
@@ -111,14 +111,15 @@ fn acceptance_failure_exits_1_with_outputs_written() {
 /// `[backend]` odometry settings reach the simulated drives, which navigate
 /// by their CPS estimate: with every error zero the parent truly stands at
 /// the planned stations up to the CPS's own error (millimetres), and a 2 %
-/// scale error overshoots each 4 m stride by 8 cm — it does not pile up
-/// over the 28 m, since every drive starts from the last fix.
+/// scale error overshoots each 3.6 m stride by 7.2 cm — it does not pile
+/// up over the hall's first 25 m leg, since every drive starts from the
+/// last fix.
 #[test]
 fn odometry_settings_drive_the_simulator() {
     let text = std::fs::read_to_string(example("hall.toml")).expect("hall.toml");
     let truth_x = |extra: &str| -> Vec<f64> {
         let mission = temp_mission(
-            &text
+            &tests::hall_first_leg(&text)
                 .replace("every_n_stations = 1", "every_n_stations = 0")
                 .replace("seed = 1", &format!("seed = 1\n{extra}")),
         );
@@ -137,11 +138,13 @@ fn odometry_settings_drive_the_simulator() {
     };
     let perfect = "odometry_scale_error_percent = 0\nodometry_sigma_distance_mm_per_sqrt_m = 0\n\
                    odometry_heading_drift_mrad_per_m = 0\nodometry_sigma_heading_mrad_per_sqrt_m = 0\nterrain_tilt_sigma_deg = 0";
-    for (k, x) in truth_x(perfect).iter().enumerate() {
-        assert!((x - (2.0 + 4.0 * k as f64)).abs() < 0.01, "station {k}: {x}");
+    let stations = truth_x(perfect);
+    assert_eq!(stations.len(), 8);
+    for (k, x) in stations.iter().enumerate() {
+        assert!((x - (1.5 + 3.6 * k as f64)).abs() < 0.01, "station {k}: {x}");
     }
     let long = perfect.replace("odometry_scale_error_percent = 0", "odometry_scale_error_percent = 2");
     for (k, x) in truth_x(&long).iter().enumerate().skip(1) {
-        assert!((x - (2.0 + 4.0 * k as f64 + 0.02 * 4.0)).abs() < 0.01, "station {k}: {x}");
+        assert!((x - (1.5 + 3.6 * k as f64 + 0.02 * 3.6)).abs() < 0.01, "station {k}: {x}");
     }
 }

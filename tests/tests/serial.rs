@@ -59,7 +59,7 @@ fn a_mission_over_serial_ports_matches_the_simulator() {
         .map(|l| [l["parent"][0].as_f64().expect("x"), l["parent"][1].as_f64().expect("y")])
         .collect();
     let (ss, sm) = (rs["stations"].as_array().expect("stations"), rm["stations"].as_array().expect("stations"));
-    assert_eq!((ss.len(), sm.len(), truths.len()), (8, 8, 8));
+    assert_eq!((ss.len(), sm.len(), truths.len()), (22, 22, 22));
     for (k, ((s, m), t)) in ss.iter().zip(sm).zip(&truths).enumerate() {
         let sigma = |r: &Value| {
             let c = &r["covariance"];
@@ -120,7 +120,7 @@ fn emulate_prints_the_ports_and_bad_faults_are_named() {
     let v: Value = serde_json::from_str(json.stdout.trim()).expect("one JSON object");
     let roles: Vec<&str> =
         v["instruments"].as_array().expect("list").iter().map(|i| i["role"].as_str().expect("role")).collect();
-    assert_eq!(roles, ["total-station", "tilt", "scanner", "head", "parent", "left", "right"]);
+    assert_eq!(roles, ["total-station", "tilt", "scanner", "head", "parent", "ahead", "behind"]);
     assert_eq!(v["instruments"][2]["protocol"], "SICK LMS-2xx");
     let bad = cps_survey(["emulate", path, "--fault", "laser:stop-after=1", "--seconds", "0"]);
     assert_eq!(bad.code, 2);

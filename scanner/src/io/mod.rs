@@ -113,6 +113,27 @@ pub fn read(path: &Path) -> Result<PointCloud> {
     }
 }
 
+/// Writes `points` with one named float field per point (e.g. a deviation
+/// map) as binary little-endian PLY (via a temporary file and rename); viewers
+/// such as CloudCompare show the field as a scalar field.
+pub fn write_ply_with_field(path: &Path, points: &[Point3<f32>], field: &str, values: &[f32]) -> Result<()> {
+    if values.len() != points.len() || ["x", "y", "z"].contains(&field) || field.is_empty() {
+        return Err(ScannerError::file(
+            path,
+            Location::File,
+            format!(
+                "field `{field}` with {} values for {} points: expected a name other than x, y, z and one value per point",
+                values.len(),
+                points.len()
+            ),
+        ));
+    }
+    let tmp = temporary(path);
+    let result =
+        with_writer(&tmp, |w| ply::write_scalar(w, points, Some((field, values)), PlyEncoding::BinaryLittleEndian));
+    finish_write(path, &tmp, result)
+}
+
 /// Writes `cloud` to `path` in `format` (via a temporary file and rename).
 pub fn write(path: &Path, cloud: &PointCloud, format: Format) -> Result<()> {
     if let Some(i) = &cloud.intensity
@@ -133,10 +154,16 @@ pub fn write(path: &Path, cloud: &PointCloud, format: Format) -> Result<()> {
         Format::Las => las::write(&tmp, cloud),
         Format::E57 => e57::write(&tmp, cloud),
     };
+    finish_write(path, &tmp, result)
+}
+
+/// Renames the written temporary file into place, or removes it after an
+/// error (reported against `path`).
+fn finish_write(path: &Path, tmp: &Path, result: Result<()>) -> Result<()> {
     match result {
-        Ok(()) => std::fs::rename(&tmp, path).map_err(|e| ScannerError::io(path, e)),
+        Ok(()) => std::fs::rename(tmp, path).map_err(|e| ScannerError::io(path, e)),
         Err(e) => {
-            let _ = std::fs::remove_file(&tmp);
+            let _ = std::fs::remove_file(tmp);
             Err(match e {
                 ScannerError::Io { source, .. } => ScannerError::io(path, source),
                 other => other,

@@ -61,8 +61,8 @@ impl PropertyAccess for Vertex {
             "x" => Some(self.p[0]),
             "y" => Some(self.p[1]),
             "z" => Some(self.p[2]),
-            "intensity" => Some(self.intensity),
-            _ => None,
+            // The one scalar field, under whatever name the header gives it.
+            _ => Some(self.intensity),
         }
     }
 }
@@ -114,6 +114,16 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
 }
 
 pub(super) fn write(w: &mut impl Write, cloud: &PointCloud, encoding: PlyEncoding) -> std::io::Result<()> {
+    write_scalar(w, &cloud.points, cloud.intensity.as_deref().map(|v| ("intensity", v)), encoding)
+}
+
+/// Float x, y, z and, when given, one float scalar field per vertex.
+pub(super) fn write_scalar(
+    w: &mut impl Write,
+    points: &[Point3<f32>],
+    scalar: Option<(&str, &[f32])>,
+    encoding: PlyEncoding,
+) -> std::io::Result<()> {
     let mut ply = Ply::<Vertex>::new();
     ply.header.encoding = match encoding {
         PlyEncoding::Ascii => Encoding::Ascii,
@@ -122,18 +132,17 @@ pub(super) fn write(w: &mut impl Write, cloud: &PointCloud, encoding: PlyEncodin
     ply.header.comments.push("written by cps-survey; metres, x forward, y left, z up".into());
     let mut vertex = ElementDef::new("vertex".into());
     let mut names = vec!["x", "y", "z"];
-    if cloud.intensity.is_some() {
-        names.push("intensity");
+    if let Some((name, _)) = scalar {
+        names.push(name);
     }
     for n in &names {
         vertex.properties.add(PropertyDef::new((*n).into(), PropertyType::Scalar(ScalarType::Float)));
     }
     ply.header.elements.add(vertex);
-    let items = cloud
-        .points
+    let items = points
         .iter()
         .enumerate()
-        .map(|(i, p)| Vertex { p: [p.x, p.y, p.z], intensity: cloud.intensity.as_ref().map_or(0.0, |v| v[i]) })
+        .map(|(i, p)| Vertex { p: [p.x, p.y, p.z], intensity: scalar.map_or(0.0, |(_, v)| v[i]) })
         .collect();
     ply.payload.insert("vertex".into(), items);
     Writer::new().write_ply(w, &mut ply).map(|_| ()).map_err(|e| std::io::Error::other(e.to_string()))

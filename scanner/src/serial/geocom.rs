@@ -1,7 +1,9 @@
 //! A Leica total station over GeoCOM ([`crate::protocol::geocom`]).
 //!
 //! A measurement of child j: `AUT_MakePositioning` to the predicted Hz/V,
-//! `AUT_FineAdjust` (ATR onto the prism), `TMC_DoMeasure` (distance), then
+//! `AUT_FineAdjust` (ATR onto the prism; with no prism in the window, again
+//! in one three times as wide, up to [`ATR_WIDENINGS`] times),
+//! `TMC_DoMeasure` (distance), then
 //! `TMC_GetSimpleMea` for Hz, V and the slope distance. Each RPC has its
 //! own deadline; a missed deadline, a corrupted or malformed reply, or a
 //! transient return code (busy, COM timeout, checksum) is retried with a
@@ -31,7 +33,9 @@ pub struct GeoComConfig {
     pub attempts: usize,
     /// Send (and expect) the CRC-16/ARC field. Default true.
     pub checksum: bool,
-    /// ATR search window, half-width in Hz and V, radians. Default 1°.
+    /// ATR search window, half-width in Hz and V, radians. Default 1°;
+    /// without a prism in it the search is repeated [`ATR_WIDENINGS`] times,
+    /// each time three times as wide.
     pub atr_window_rad: f64,
     /// How long the instrument may wait for the distance, ms. Default 3000.
     pub measure_wait_ms: u32,
@@ -48,6 +52,10 @@ impl Default for GeoComConfig {
         }
     }
 }
+
+/// How often `AUT_FineAdjust` is repeated with a window three times as
+/// wide when it finds no prism.
+pub const ATR_WIDENINGS: usize = 3;
 
 /// A total station speaking GeoCOM.
 #[derive(Debug)]
@@ -201,8 +209,21 @@ impl TotalStation for GeoCom {
             rpc::MAKE_POSITIONING,
             &[Param::Double(hz), Param::Double(v), Param::Int(0), Param::Int(0), Param::Int(0)],
         )?;
-        let w = self.config.atr_window_rad;
-        self.call_ok(rpc::FINE_ADJUST, &[Param::Double(w), Param::Double(w), Param::Int(0)])?;
+        // The prism is where the estimate puts it only within the
+        // estimate's error: no prism in a window → search again in one
+        // three times as wide, up to 27 × (a prism twice is an error).
+        let mut w = self.config.atr_window_rad;
+        for widenings in 0.. {
+            match self.call_ok(rpc::FINE_ADJUST, &[Param::Double(w), Param::Double(w), Param::Int(0)]) {
+                Err(ScannerError::Instrument { code: ReturnCode::NoTarget, .. }) if widenings < ATR_WIDENINGS => {
+                    w *= 3.0;
+                }
+                other => {
+                    other?;
+                    break;
+                }
+            }
+        }
         self.call_ok(rpc::DO_MEASURE, &[Param::Int(1), Param::Int(1)])?;
         let wait = i64::from(self.config.measure_wait_ms);
         let reply = self.call_ok(rpc::GET_SIMPLE_MEA, &[Param::Int(wait), Param::Int(1)])?;
