@@ -1,5 +1,5 @@
-//! The hall mission at full resolution (720 slices × 0.5°, 8 stations,
-//! 2.1 M points), with and without `mission.rrd`:
+//! The hall mission at full resolution (720 slices × 0.5°, 22 stations,
+//! 5.7 M points), with and without `mission.rrd`:
 //! `cargo bench -p missions --bench mission`.
 
 use std::path::Path;
