@@ -62,6 +62,14 @@ pub enum CpsError {
         /// Team size.
         team: usize,
     },
+    /// A station clone that does not exist.
+    #[error("station clone {clone} does not exist; the team state holds {clones} clone(s)")]
+    UnknownClone {
+        /// The index asked for.
+        clone: usize,
+        /// Clones held.
+        clones: usize,
+    },
     /// A child is used in a fix before it was ever placed.
     #[error("child {child} has not been placed yet; place it before the parent uses it")]
     ChildNotPlaced {

@@ -13,6 +13,12 @@
 //!   error moves by Ad(Tₜ⁻¹)·δₛ, with Tₜ ← exp(δₜ)Tₜ by −Ad(Tₜ⁻¹)·δₜ, where
 //!   Ad(R, t) = [[R, 0], [[t]×R, R]] in the (ω, v) order.
 //!
+//! - or a **joint** prior on all scans ([`JointPrior`]): the stacked
+//!   errors e = (ξ(T₁·P₁⁻¹), …, ξ(T_N·P_N⁻¹)) with a full 6N×6N covariance
+//!   contribute eᵀΛe. The CPS poses of a mission's stations are correlated
+//!   (each fix rests on children placed from the station before), and
+//!   independent priors would count their common error once per station.
+//!
 //! The normal equations are dense (6N unknowns; N is a mission's scan
 //! count) and solved with faer's Cholesky factorisation; each pose's 6×6
 //! covariance is the matching diagonal block of their inverse.
@@ -50,6 +56,163 @@ pub struct GraphResult {
     pub chi2: f64,
     /// Redundancy: 6 × (priors + edges) − 6 × scans.
     pub redundancy: usize,
+}
+
+/// A joint Gaussian prior on the poses of N scans: means Pᵢ and the 6N×6N
+/// covariance of the stacked left perturbations ξᵢ (Tᵢ = exp(ξᵢ)·Pᵢ), with
+/// its information (eigenvalues of the covariance below 1e-12 are floored
+/// there, so a pose known exactly — a mission's start — stays finite).
+#[derive(Debug, Clone)]
+pub struct JointPrior {
+    means: Vec<Isometry3<f64>>,
+    covariance: Mat<f64>,
+    information: Mat<f64>,
+}
+
+/// The covariance eigenvalue floor of priors (see [`JointPrior`]).
+const VARIANCE_FLOOR: f64 = 1e-12;
+
+impl JointPrior {
+    /// The prior with `means` and their joint `covariance` (6N×6N,
+    /// symmetric, finite).
+    pub fn new(means: Vec<Isometry3<f64>>, covariance: Mat<f64>) -> Result<Self> {
+        let n = 6 * means.len();
+        if covariance.nrows() != n || covariance.ncols() != n || n == 0 {
+            return Err(FusionError::OutOfRange {
+                what: "joint prior covariance size".into(),
+                value: covariance.nrows() as f64,
+                expected: format!("6 × {} poses = {n} rows and columns", means.len()),
+            });
+        }
+        let mut worst: f64 = 0.0;
+        for i in 0..n {
+            for j in 0..n {
+                let v = covariance[(i, j)];
+                if !v.is_finite() {
+                    return Err(FusionError::OutOfRange {
+                        what: format!("joint prior covariance entry ({i}, {j})"),
+                        value: v,
+                        expected: "finite".into(),
+                    });
+                }
+                worst = worst.max((v - covariance[(j, i)]).abs());
+            }
+        }
+        let scale = (0..n).map(|i| covariance[(i, i)].abs()).fold(0.0, f64::max);
+        if worst > 1e-9 * scale.max(VARIANCE_FLOOR) {
+            return Err(FusionError::Degenerate {
+                what: format!("joint prior covariance is not symmetric ({worst:e})"),
+            });
+        }
+        let eig = covariance
+            .self_adjoint_eigen(Side::Lower)
+            .map_err(|_| FusionError::Degenerate { what: "joint prior covariance eigendecomposition".into() })?;
+        let (u, values) = (eig.U(), eig.S().column_vector());
+        let scaled = Mat::<f64>::from_fn(n, n, |i, k| u[(i, k)] / values[k].max(VARIANCE_FLOOR));
+        let information = &scaled * u.transpose();
+        let information = Mat::from_fn(n, n, |i, j| 0.5 * (information[(i, j)] + information[(j, i)]));
+        Ok(Self { means, covariance, information })
+    }
+
+    /// Independent priors as one joint prior (block diagonal).
+    pub fn independent(priors: &[Prior]) -> Result<Self> {
+        let n = priors.len();
+        let mut covariance = Mat::<f64>::zeros(6 * n, 6 * n);
+        for (i, p) in priors.iter().enumerate() {
+            let eig = (0.5 * (p.information + p.information.transpose())).symmetric_eigen();
+            let values = eig.eigenvalues.map(|v| 1.0 / v.max(VARIANCE_FLOOR));
+            let block = eig.eigenvectors * Matrix6::from_diagonal(&values) * eig.eigenvectors.transpose();
+            for r in 0..6 {
+                for c in 0..6 {
+                    covariance[(6 * i + r, 6 * i + c)] = 0.5 * (block[(r, c)] + block[(c, r)]);
+                }
+            }
+        }
+        Self::new(priors.iter().map(|p| p.target_from_source).collect(), covariance)
+    }
+
+    /// The prior CPS gives the scanners of N stations: each station's
+    /// `world_from_scanner` as the mean, the stations' joint 4N×4N CPS
+    /// covariance (order x, y, z, θ per station, with every cross-term)
+    /// mapped through each station's [`cps_jacobian`], plus the tilt
+    /// sensor's roll and pitch σ, independent per station.
+    pub fn cps(
+        world_from_scanner: &[Isometry3<f64>],
+        poses: &[cps::ParentPose],
+        tilts: &[scanner::Tilt],
+        covariance: &Mat<f64>,
+        tilt_sigma_rad: f64,
+    ) -> Result<Self> {
+        FusionError::require_non_negative("tilt sigma (rad)", tilt_sigma_rad)?;
+        let n = world_from_scanner.len();
+        if poses.len() != n || tilts.len() != n || covariance.nrows() != 4 * n || covariance.ncols() != 4 * n {
+            return Err(FusionError::OutOfRange {
+                what: "CPS joint prior sizes".into(),
+                value: covariance.nrows() as f64,
+                expected: format!("{n} poses and tilts and a {0}×{0} covariance", 4 * n),
+            });
+        }
+        let jacobians: Vec<Matrix6<f64>> = poses.iter().zip(tilts).map(|(p, t)| cps_jacobian(p, t)).collect();
+        let mut joint = Mat::<f64>::zeros(6 * n, 6 * n);
+        for i in 0..n {
+            for k in 0..n {
+                // J_i[:, 0..4] · C_ik · J_k[:, 0..4]ᵀ (+ the tilt on the diagonal).
+                let mut full = Matrix6::zeros();
+                for r in 0..4 {
+                    for c in 0..4 {
+                        full[(r, c)] = covariance[(4 * i + r, 4 * k + c)];
+                    }
+                }
+                if i == k {
+                    full[(4, 4)] = tilt_sigma_rad * tilt_sigma_rad;
+                    full[(5, 5)] = tilt_sigma_rad * tilt_sigma_rad;
+                }
+                let block = jacobians[i] * full * jacobians[k].transpose();
+                for r in 0..6 {
+                    for c in 0..6 {
+                        joint[(6 * i + r, 6 * k + c)] = block[(r, c)];
+                    }
+                }
+            }
+        }
+        let joint = Mat::from_fn(6 * n, 6 * n, |i, j| 0.5 * (joint[(i, j)] + joint[(j, i)]));
+        Self::new(world_from_scanner.to_vec(), joint)
+    }
+
+    /// Number of poses.
+    pub fn len(&self) -> usize {
+        self.means.len()
+    }
+
+    /// True when it holds no pose.
+    pub fn is_empty(&self) -> bool {
+        self.means.is_empty()
+    }
+
+    /// The mean of pose i.
+    pub fn mean(&self, i: usize) -> Isometry3<f64> {
+        self.means[i]
+    }
+
+    /// cov(ξᵢ, ξⱼ), 6×6.
+    pub fn covariance_block(&self, i: usize, j: usize) -> Matrix6<f64> {
+        Matrix6::from_fn(|r, c| self.covariance[(6 * i + r, 6 * j + c)])
+    }
+
+    /// Pose i's marginal prior (mean and the inverse of its 6×6 block).
+    pub fn marginal(&self, i: usize) -> Prior {
+        let eig = self.covariance_block(i, i).symmetric_eigen();
+        let values = eig.eigenvalues.map(|v| 1.0 / v.max(VARIANCE_FLOOR));
+        let information = eig.eigenvectors * Matrix6::from_diagonal(&values) * eig.eigenvectors.transpose();
+        Prior { target_from_source: self.means[i], information: 0.5 * (information + information.transpose()) }
+    }
+}
+
+/// The priors of a pose graph: one (or none) per scan, or a joint one.
+#[derive(Debug, Clone, Copy)]
+enum Priors<'a> {
+    Each(&'a [Option<Prior>]),
+    Joint(&'a JointPrior),
 }
 
 /// ξ = (ω, v) with `a ≈ exp(ξ) · b` to first order.
@@ -152,6 +315,28 @@ pub fn optimize(
     if priors.iter().all(Option::is_none) {
         return Err(FusionError::Degenerate { what: "pose graph without any prior: the world frame is free".into() });
     }
+    solve(init, Priors::Each(priors), edges, max_iterations)
+}
+
+/// [`optimize`] with a joint prior on every scan.
+pub fn optimize_joint(
+    init: &[Isometry3<f64>],
+    prior: &JointPrior,
+    edges: &[Edge],
+    max_iterations: usize,
+) -> Result<GraphResult> {
+    if prior.len() != init.len() {
+        return Err(FusionError::OutOfRange {
+            what: "joint prior poses".into(),
+            value: prior.len() as f64,
+            expected: format!("one per scan: {}", init.len()),
+        });
+    }
+    solve(init, Priors::Joint(prior), edges, max_iterations)
+}
+
+fn solve(init: &[Isometry3<f64>], priors: Priors<'_>, edges: &[Edge], max_iterations: usize) -> Result<GraphResult> {
+    let n = init.len();
     for e in edges {
         if e.target >= n || e.source >= n || e.target == e.source {
             return Err(FusionError::OutOfRange {
@@ -198,7 +383,11 @@ pub fn optimize(
                     0.5 * (m + m.transpose())
                 })
                 .collect();
-            let observations = 6 * (priors.iter().flatten().count() + edges.len());
+            let prior_count = match priors {
+                Priors::Each(each) => each.iter().flatten().count(),
+                Priors::Joint(joint) => joint.len(),
+            };
+            let observations = 6 * (prior_count + edges.len());
             return Ok(GraphResult {
                 world_from_scan: poses,
                 covariance,
@@ -211,7 +400,7 @@ pub fn optimize(
 }
 
 /// H = Σ JᵀΛJ, b = Σ JᵀΛe and Σ eᵀΛe at `poses`.
-fn normal_equations(poses: &[Isometry3<f64>], priors: &[Option<Prior>], edges: &[Edge]) -> (Mat<f64>, Mat<f64>, f64) {
+fn normal_equations(poses: &[Isometry3<f64>], priors: Priors<'_>, edges: &[Edge]) -> (Mat<f64>, Mat<f64>, f64) {
     let n = poses.len();
     let mut h = Mat::<f64>::zeros(6 * n, 6 * n);
     let mut b = Mat::<f64>::zeros(6 * n, 1);
@@ -223,15 +412,32 @@ fn normal_equations(poses: &[Isometry3<f64>], priors: &[Option<Prior>], edges: &
             }
         }
     };
-    for (i, prior) in priors.iter().enumerate() {
-        if let Some(p) = prior {
-            let e = left_difference(&poses[i], &p.target_from_source);
-            chi2 += (e.transpose() * p.information * e)[(0, 0)];
-            add(&mut h, i, i, &p.information);
-            let g = p.information * e;
-            for r in 0..6 {
-                b[(6 * i + r, 0)] += g[r];
+    match priors {
+        Priors::Each(each) => {
+            for (i, prior) in each.iter().enumerate() {
+                if let Some(p) = prior {
+                    let e = left_difference(&poses[i], &p.target_from_source);
+                    chi2 += (e.transpose() * p.information * e)[(0, 0)];
+                    add(&mut h, i, i, &p.information);
+                    let g = p.information * e;
+                    for r in 0..6 {
+                        b[(6 * i + r, 0)] += g[r];
+                    }
+                }
             }
+        }
+        Priors::Joint(joint) => {
+            let mut e = Mat::<f64>::zeros(6 * n, 1);
+            for (i, pose) in poses.iter().enumerate() {
+                let ei = left_difference(pose, &joint.means[i]);
+                for r in 0..6 {
+                    e[(6 * i + r, 0)] = ei[r];
+                }
+            }
+            let g = &joint.information * &e;
+            chi2 += (e.transpose() * &g)[(0, 0)];
+            h += &joint.information;
+            b += &g;
         }
     }
     for edge in edges {
@@ -284,6 +490,42 @@ mod tests {
             let col = j.column(k);
             assert!((fd - col).amax() < 1e-7, "column {k}: {fd} vs {col}");
         }
+    }
+
+    /// The CPS joint prior: each marginal is the per-station prior
+    /// [`cps_prior`] gives, and a cross block is J₀·C₀₁·J₁ᵀ (no tilt term:
+    /// the tilt readings are independent).
+    #[test]
+    fn cps_joint_prior_blocks() {
+        let poses = [cps::ParentPose::new(1.0, 2.0, 0.5, 0.3), cps::ParentPose::new(5.0, 2.5, 0.4, 0.35)];
+        let tilts =
+            [scanner::Tilt { roll_rad: 0.01, pitch_rad: -0.02 }, scanner::Tilt { roll_rad: 0.0, pitch_rad: 0.01 }];
+        let scanners: Vec<Isometry3<f64>> = poses.iter().zip(&tilts).map(|(p, t)| t.world_from_body(p)).collect();
+        let c00 = nalgebra::Matrix4::from_diagonal(&nalgebra::Vector4::new(1e-6, 2e-6, 4e-6, 1e-8));
+        let c11 = 3.0 * c00;
+        let c01 = 0.8 * c00;
+        let mut joint = Mat::<f64>::zeros(8, 8);
+        for r in 0..4 {
+            for c in 0..4 {
+                joint[(r, c)] = c00[(r, c)];
+                joint[(4 + r, 4 + c)] = c11[(r, c)];
+                joint[(r, 4 + c)] = c01[(r, c)];
+                joint[(4 + c, r)] = c01[(r, c)];
+            }
+        }
+        let sigma = 1e-4;
+        let prior = JointPrior::cps(&scanners, &poses, &tilts, &joint, sigma).expect("prior");
+        for (i, c) in [c00, c11].iter().enumerate() {
+            let single = cps_prior(&scanners[i], &poses[i], c, &tilts[i], sigma).expect("single");
+            let m = prior.marginal(i);
+            assert_eq!(m.target_from_source, scanners[i]);
+            assert!((m.information - single.information).amax() < 1e-6 * single.information.amax());
+        }
+        let j0 = cps_jacobian(&poses[0], &tilts[0]).fixed_columns::<4>(0).into_owned();
+        let j1 = cps_jacobian(&poses[1], &tilts[1]).fixed_columns::<4>(0).into_owned();
+        let expected = j0 * c01 * j1.transpose();
+        assert!((prior.covariance_block(0, 1) - expected).amax() < 1e-15);
+        assert!(JointPrior::cps(&scanners, &poses[..1], &tilts, &joint, sigma).is_err());
     }
 
     /// The adjoint moves a left perturbation through a transform.

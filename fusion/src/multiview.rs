@@ -31,8 +31,8 @@ use nalgebra::{Isometry3, Matrix6, Point3};
 use rayon::prelude::*;
 
 use crate::error::{FusionError, Result};
-use crate::graph::Edge;
-use crate::icp::{IcpConfig, IcpResult, Kernel, Method, Prior, Target, align};
+use crate::graph::{Edge, JointPrior};
+use crate::icp::{IcpConfig, IcpResult, Kernel, Method, Target, align};
 
 /// How each new scan is registered.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -221,14 +221,21 @@ pub struct PriorFusionResult {
 /// the previous round's adjusted poses.
 pub fn register_with_priors<S: AsRef<[Point3<f32>]> + Sync>(
     scans: &[S],
-    priors: &[Prior],
+    prior: &JointPrior,
     config: &MultiviewConfig,
     max_partners: usize,
     edge_variance_factor: f64,
     schedule: &[f64],
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<PriorFusionResult> {
-    let guesses: Vec<Isometry3<f64>> = priors.iter().map(|p| p.target_from_source).collect();
+    if prior.len() != scans.len() {
+        return Err(FusionError::OutOfRange {
+            what: "prior poses".into(),
+            value: prior.len() as f64,
+            expected: format!("one per scan: {}", scans.len()),
+        });
+    }
+    let guesses: Vec<Isometry3<f64>> = (0..prior.len()).map(|i| prior.mean(i)).collect();
     check(scans, &guesses, config)?;
     FusionError::require_positive("edge variance factor", edge_variance_factor)?;
     if config.icp.method != Method::PointToPlane {
@@ -285,7 +292,7 @@ pub fn register_with_priors<S: AsRef<[Point3<f32>]> + Sync>(
                     let world_from_scan = r.trace.iter().map(|t| m.poses[j] * t).collect();
                     traces.push(IcpTrace { scan: c, partners: vec![j], world_from_scan });
                 }
-                match r.and_then(|r| gate(&r, &priors[j], &priors[c], edge_variance_factor).map(|()| r)) {
+                match r.and_then(|r| gate(&r, prior, j, c, edge_variance_factor).map(|()| r)) {
                     Ok(r) => matches.push((j, c, r)),
                     Err(e) => failed.push((j, c, e.to_string())),
                 }
@@ -300,8 +307,7 @@ pub fn register_with_priors<S: AsRef<[Point3<f32>]> + Sync>(
                 information: r.information / edge_variance_factor,
             })
             .collect();
-        let with_priors: Vec<Option<Prior>> = priors.iter().copied().map(Some).collect();
-        let g = crate::graph::optimize(&m.poses, &with_priors, &edges, 20)?;
+        let g = crate::graph::optimize_joint(&m.poses, prior, &edges, 20)?;
         prepared = m.prepared;
         poses = g.world_from_scan.clone();
         result = Some(PriorFusionResult {
@@ -327,17 +333,20 @@ pub const GATE_CHI2: f64 = 22.458;
 
 /// Checks that an ICP match between scans j (target) and c (source) agrees
 /// with their priors: e = ξ(Z · (Pⱼ⁻¹ P_c)⁻¹), whose covariance is the
-/// match's (times `factor`) plus Ad(Pⱼ⁻¹)(Σⱼ + Σ_c)Ad(Pⱼ⁻¹)ᵀ (the priors taken
-/// as independent), must give eᵀS⁻¹e ≤ [`GATE_CHI2`]. A match that converged
-/// into the wrong place (too little overlap, a degenerate geometry) fails.
-fn gate(r: &IcpResult, pj: &Prior, pc: &Prior, factor: f64) -> Result<()> {
-    let inv_j = pj.target_from_source.inverse();
-    let predicted = inv_j * pc.target_from_source;
+/// match's (times `factor`) plus Ad(Pⱼ⁻¹)(Σⱼⱼ + Σ_cc − Σⱼ_c − Σ_cⱼ)Ad(Pⱼ⁻¹)ᵀ —
+/// the relative uncertainty of the two priors, their correlation included
+/// — must give eᵀS⁻¹e ≤ [`GATE_CHI2`]. A match that converged into the
+/// wrong place (too little overlap, a degenerate geometry) fails.
+fn gate(r: &IcpResult, prior: &JointPrior, j: usize, c: usize, factor: f64) -> Result<()> {
+    let inv_j = prior.mean(j).inverse();
+    let predicted = inv_j * prior.mean(c);
     let e = crate::graph::left_difference(&r.target_from_source, &predicted);
     let ad = crate::graph::adjoint(&inv_j);
-    let cov = |info: &Matrix6<f64>| info.try_inverse().unwrap_or_else(|| Matrix6::from_diagonal_element(f64::INFINITY));
     let match_cov = r.covariance().map(|c| c * factor).unwrap_or_else(|| Matrix6::from_diagonal_element(f64::INFINITY));
-    let s = match_cov + ad * (cov(&pj.information) + cov(&pc.information)) * ad.transpose();
+    let relative = prior.covariance_block(j, j) + prior.covariance_block(c, c)
+        - prior.covariance_block(j, c)
+        - prior.covariance_block(c, j);
+    let s = match_cov + ad * relative * ad.transpose();
     let chi2 = s.try_inverse().map_or(f64::INFINITY, |si| (e.transpose() * si * e)[(0, 0)]);
     if chi2.is_finite() && chi2 <= GATE_CHI2 {
         Ok(())

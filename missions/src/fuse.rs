@@ -5,14 +5,16 @@
 //! - `icp`: scan matching alone — simultaneous matching (seed 000 §4.2)
 //!   from the odometry's guesses (where each drive believed it stopped, with
 //!   the measured tilt), the first scan held at its CPS pose;
-//! - `cps-icp`: every scan's CPS pose as a prior (its 4×4 covariance and the
-//!   tilt sensor's σ, [`fusion::graph::cps_prior`]) and ICP between
-//!   overlapping scans as relative measurements, adjusted together
-//!   ([`fusion::multiview::register_with_priors`]).
+//! - `cps-icp`: the scans' CPS poses as a joint prior (every station's 4×4
+//!   covariance and the cross-covariances the leapfrog chain creates between
+//!   stations, and the tilt sensor's σ: [`fusion::graph::JointPrior::cps`])
+//!   and ICP between overlapping scans as relative measurements, adjusted
+//!   together ([`fusion::multiview::register_with_priors`]).
 //!
 //! A run's scans are in its journal: each `scan` event names its file (body
 //! frame, 3DTK layout), the `tilt` event before it holds the tilt, the
-//! `fix` event of that station the CPS pose and covariance, and the
+//! `fix` event of that station the CPS pose, its covariance and its
+//! cross-covariances with the earlier scan stations, and the
 //! simulator's state the truth and the drive's believed pose.
 
 use std::io::Write;
@@ -43,6 +45,10 @@ pub struct ScanView {
     pub pose: ParentPose,
     /// Its 4×4 covariance (x, y, z, θ).
     pub covariance: Matrix4<f64>,
+    /// cov(this station, each earlier scan's station), 4×4 each, in scan
+    /// order, as the CPS chain correlates them (shorter or empty where
+    /// nothing is known: taken as zero).
+    pub cross_covariance: Vec<Matrix4<f64>>,
     /// The measured tilt.
     pub tilt: Tilt,
     /// Where the parent's drive believed it stood (odometry).
@@ -147,13 +153,10 @@ pub fn fuse(
             (r.world_from_scan, rmse, coarse.matches + r.matches)
         }
         FusionMode::CpsIcp => {
-            let priors = views
-                .iter()
-                .map(|v| fusion::graph::cps_prior(&v.direct(), &v.pose, &v.covariance, &v.tilt, TILT_SIGMA_RAD))
-                .collect::<fusion::Result<Vec<_>>>()?;
+            let prior = joint_prior(views)?;
             let r = fusion::multiview::register_with_priors(
                 &scans,
-                &priors,
+                &prior,
                 &traced(multiview_config(plan, Strategy::Pairwise)),
                 plan.max_partners,
                 plan.icp_variance_factor,
@@ -178,6 +181,29 @@ pub fn fuse(
     Ok(Fused { mode, scans, matches, seconds: started.elapsed().as_secs_f64(), traces })
 }
 
+/// The scans' joint CPS prior: the 4N×4N covariance of their stations
+/// from each view's covariance and cross-covariances, mapped to the
+/// scanners' poses with the tilt ([`fusion::graph::JointPrior::cps`]).
+pub fn joint_prior(views: &[ScanView]) -> Result<fusion::graph::JointPrior> {
+    let n = views.len();
+    let mut joint = faer::Mat::<f64>::zeros(4 * n, 4 * n);
+    for (i, v) in views.iter().enumerate() {
+        let blocks = v.cross_covariance.iter().take(i).enumerate().chain([(i, &v.covariance)]);
+        for (k, block) in blocks {
+            for r in 0..4 {
+                for c in 0..4 {
+                    joint[(4 * i + r, 4 * k + c)] = block[(r, c)];
+                    joint[(4 * k + c, 4 * i + r)] = block[(r, c)];
+                }
+            }
+        }
+    }
+    let scanners: Vec<Isometry3<f64>> = views.iter().map(ScanView::direct).collect();
+    let poses: Vec<ParentPose> = views.iter().map(|v| v.pose).collect();
+    let tilts: Vec<Tilt> = views.iter().map(|v| v.tilt).collect();
+    Ok(fusion::graph::JointPrior::cps(&scanners, &poses, &tilts, &joint, TILT_SIGMA_RAD)?)
+}
+
 /// Horizontal distance between the body origins of two poses, metres.
 pub fn error_xy(a: &Isometry3<f64>, b: &Isometry3<f64>) -> f64 {
     (a.translation.vector.xy() - b.translation.vector.xy()).norm()
@@ -200,6 +226,18 @@ pub fn merged(views: &[ScanView], fused: &Fused) -> Vec<Point3<f32>> {
 
 fn number(v: &Value, what: &str, line: usize) -> Result<f64> {
     v.as_f64().with_context(|| format!("journal line {line}: {what}: expected a number, found {v}"))
+}
+
+fn matrix_of(v: &Value, what: &str, line: usize) -> Result<Matrix4<f64>> {
+    let rows = v.as_array().filter(|r| r.len() == 4);
+    let rows = rows.with_context(|| format!("journal line {line}: {what}: expected 4×4"))?;
+    let mut m = Matrix4::zeros();
+    for (i, row) in rows.iter().enumerate() {
+        for j in 0..4 {
+            m[(i, j)] = number(&row[j], what, line)?;
+        }
+    }
+    Ok(m)
 }
 
 fn pose_of(v: &Value, line: usize) -> Result<ParentPose> {
@@ -227,6 +265,7 @@ pub fn load_run(dir: &Path) -> Result<(Mission, Vec<ScanView>)> {
     let dance = crate::predict::dance(&mission)?;
     let (lines, _) = crate::journal::read(&dir.join("journal.jsonl"))?;
     let mut pose = (dance.station_pose(0), mission.plan.start_covariance);
+    let mut cross: Vec<Matrix4<f64>> = Vec::new();
     let mut tilt = None;
     let mut views = Vec::new();
     for l in &lines {
@@ -234,15 +273,15 @@ pub fn load_run(dir: &Path) -> Result<(Mission, Vec<ScanView>)> {
         match e["event"].as_str() {
             Some("fix") => {
                 let d = &e["data"];
-                let rows = d["covariance"].as_array().filter(|r| r.len() == 4);
-                let rows = rows.with_context(|| format!("journal line {}: fix covariance: expected 4×4", l.line))?;
-                let mut c = Matrix4::zeros();
-                for (i, row) in rows.iter().enumerate() {
-                    for j in 0..4 {
-                        c[(i, j)] = number(&row[j], "fix covariance", l.line)?;
-                    }
-                }
+                let c = matrix_of(&d["covariance"], "fix covariance", l.line)?;
                 pose = (pose_of(&d["pose"], l.line)?, c);
+                cross = match d["scan_cross_covariances"].as_array() {
+                    Some(list) => list
+                        .iter()
+                        .map(|m| matrix_of(m, "fix scan_cross_covariances", l.line))
+                        .collect::<Result<Vec<_>>>()?,
+                    None => Vec::new(),
+                };
             }
             Some("tilt") => {
                 let d = &e["data"];
@@ -276,6 +315,7 @@ pub fn load_run(dir: &Path) -> Result<(Mission, Vec<ScanView>)> {
                     body: cloud.points,
                     pose: pose.0,
                     covariance: pose.1,
+                    cross_covariance: std::mem::take(&mut cross),
                     tilt,
                     odometry,
                     truth,

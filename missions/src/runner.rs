@@ -434,10 +434,15 @@ impl Run<'_> {
         let fix = self.team.fix_parent(&readings, inst, &FixOptions::default())?;
         let pose = self.team.parent();
         self.steps.sim.relocalise_parent(&pose)?;
+        // cov(this station, each earlier scan station): the scans' joint prior.
+        let cross = (0..self.team.clones())
+            .map(|a| self.team.parent_clone_covariance(a).map(|c| matrix_json(&c)))
+            .collect::<cps::Result<Vec<_>>>()?;
         self.steps.note(
             json!({"event": "fix", "cycle": cycle.cycle, "station": cycle.to}),
             json!({"pose": pose_json(&pose), "covariance": matrix_json(&self.team.parent_covariance()),
-                "sigma0_squared": fix.sigma0_squared, "redundancy": fix.redundancy}),
+                "sigma0_squared": fix.sigma0_squared, "redundancy": fix.redundancy,
+                "scan_cross_covariances": cross}),
         )?;
 
         // Sight lines coloured by each child's largest |w|; a blunder is logged.
@@ -574,6 +579,12 @@ impl Run<'_> {
         let truth = self.steps.sim.truth();
         let believed = self.steps.sim.parent_believed();
         let nominal_z = self.dance.station_pose(index).position.z;
+        // The station joins the scan stations whose joint covariance the
+        // team carries (a robot alone, by odometry, carries none).
+        let cross_covariance = (0..self.team.clones().min(self.views.len()))
+            .map(|a| self.team.parent_clone_covariance(a))
+            .collect::<cps::Result<Vec<_>>>()?;
+        self.team.clone_parent();
         let view = ScanView {
             station: index,
             file: scanned.file.clone(),
@@ -581,6 +592,7 @@ impl Run<'_> {
             body: if self.mission.fusion.mode == FusionMode::Direct { Vec::new() } else { cloud.points },
             pose: self.team.parent(),
             covariance: self.team.parent_covariance(),
+            cross_covariance,
             tilt: Tilt { roll_rad: tilt.roll_rad, pitch_rad: tilt.pitch_rad },
             odometry: ParentPose::new(believed.x_m, believed.y_m, nominal_z, believed.heading_rad),
             truth: truth.map(|t| t.tilt.world_from_body(&t.parent)),
