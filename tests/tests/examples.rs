@@ -15,6 +15,13 @@ fn f(v: &Value) -> f64 {
     v.as_f64().unwrap_or_else(|| panic!("expected a number, found {v}"))
 }
 
+/// `cps-survey fuse DIR --mode MODE --json`, which must succeed.
+fn fuse_json(dir: &std::path::Path, mode: &str) -> Value {
+    let out = cps_survey(["fuse".into(), dir.as_os_str().to_owned(), "--mode".into(), mode.into(), "--json".into()]);
+    assert_eq!(out.code, 0, "{mode}: {}", out.stderr);
+    serde_json::from_str(&out.stdout).expect("fuse --json")
+}
+
 /// The fraction of a PLY cloud's points within `tolerance_m` of a scene.
 fn on_scene(scene: &str, cloud: &std::path::Path, tolerance_m: f64) -> f64 {
     let scene = cps::geom::builtin(scene).expect("scene");
@@ -47,15 +54,7 @@ fn hall_fusion_modes_compare() {
     let mut rms = std::collections::BTreeMap::new();
     let mut worst = std::collections::BTreeMap::new();
     for mode in ["direct", "icp", "cps-icp"] {
-        let out = cps_survey([
-            "fuse".into(),
-            dir.path().as_os_str().to_owned(),
-            "--mode".into(),
-            mode.into(),
-            "--json".into(),
-        ]);
-        assert_eq!(out.code, 0, "{mode}: {}", out.stderr);
-        let j: Value = serde_json::from_str(&out.stdout).expect("fuse --json");
+        let j = fuse_json(dir.path(), mode);
         assert_eq!(j, json_file(&dir.path().join(format!("fusion/{mode}/fusion.json"))));
         assert!(dir.path().join(format!("fusion/{mode}/cloud.ply")).exists());
         rms.insert(mode, f(&j["rms_error_xy_m"]));
@@ -125,15 +124,7 @@ fn building_fusion_modes_compare() {
     assert_eq!(run.code, 0, "{}\n{}", run.stdout, run.stderr);
     let mut figures = std::collections::BTreeMap::new();
     for mode in ["icp", "cps-icp"] {
-        let out = cps_survey([
-            "fuse".into(),
-            dir.path().as_os_str().to_owned(),
-            "--mode".into(),
-            mode.into(),
-            "--json".into(),
-        ]);
-        assert_eq!(out.code, 0, "{mode}: {}", out.stderr);
-        let j: Value = serde_json::from_str(&out.stdout).expect("fuse --json");
+        let j = fuse_json(dir.path(), mode);
         let scans = j["scans"].as_array().expect("scans");
         let worst = |key: &str| scans.iter().map(|s| f(&s[key])).fold(0.0, f64::max);
         figures.insert(mode, (f(&j["rms_error_xy_m"]), worst("error_xy_m")));
@@ -367,15 +358,7 @@ fn sewer_example_fits_the_pipe_and_finds_the_brick() {
     }
 
     // `fuse` inspects the re-fused cloud: CPS+ICP keeps the pipe.
-    let fused = cps_survey([
-        "fuse".into(),
-        dir.path().as_os_str().to_owned(),
-        "--mode".into(),
-        "cps-icp".into(),
-        "--json".into(),
-    ]);
-    assert_eq!(fused.code, 0, "{}", fused.stderr);
-    let j: Value = serde_json::from_str(&fused.stdout).expect("fuse --json");
+    let j = fuse_json(dir.path(), "cps-icp");
     assert!((f(&j["pipe"]["fitted"]["radius_m"]) - SEWER_RADIUS_M).abs() < 0.002, "{}", j["pipe"]);
     // In the pipe CPS+ICP is better than the CPS alone (ICP alone cannot
     // tell where along the axis a scan belongs).
