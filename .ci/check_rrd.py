@@ -1,6 +1,6 @@
 """Reads a mission.rrd with Rerun's Python reader (independent of our Rust
 code) and checks the entities the README promises, with their row counts
-for the hall example (7 cycles, 2 children, 8 stations, a scan at each)."""
+for the hall example (21 cycles, 2 children, 22 stations, a scan at each)."""
 import sys
 from collections import defaultdict
 
@@ -11,18 +11,18 @@ rows = defaultdict(int)
 for chunk in RrdReader(path).stream().to_chunks():
     rows[str(chunk.entity_path)] += chunk.num_rows
 
-cycles, children, stations = 7, 2, 8
+cycles, children, stations = 21, 2, 22
 team = cycles * (children + 1) + 1
 expected = {
     "/world/scene": 1,
     "/world/robots/parent": team,
-    "/world/truth/left": team,
-    "/world/uncertainty/right/achieved_95pct": team,
+    "/world/truth/ahead": team,
+    "/world/uncertainty/behind/achieved_95pct": team,
     "/world/uncertainty/parent/predicted_95pct": team - 1,
     "/world/sight_lines/placement": cycles * children,
     "/world/sight_lines/fix": cycles,
     "/world/trajectories/parent/estimate": stations,
-    "/world/scans/direct/scan007": 1,
+    "/world/scans/direct/scan021": 1,
     "/metrics/sigma_xy_m": stations,
     "/metrics/fix_sigma0_squared": cycles,
     "/world/plan/route": 1,
