@@ -699,13 +699,14 @@ impl Run<'_> {
     /// The `[pipe]` inspection of the merged cloud: the deviation map
     /// written, the recording's `world/pipe/…`, `report.json`'s `pipe`. A
     /// fit that fails is reported (`{"error": …}`) after everything else
-    /// has been written, not raised.
+    /// has been written, not raised (a file that cannot be written is an
+    /// error).
     fn inspect_pipe(&mut self, plan: &crate::mission::PipePlan, cloud: &[Point3<f32>]) -> Result<Value> {
         let started = Instant::now();
-        let result = crate::pipe::inspect(plan, cloud).and_then(|inspection| {
-            crate::pipe::write_deviation_map(&self.dir, cloud, &inspection)?;
-            Ok(inspection)
-        });
+        let result = crate::pipe::inspect(plan, cloud);
+        if let Ok(inspection) = &result {
+            crate::pipe::write_deviation_map(&self.dir, cloud, inspection)?;
+        }
         self.timings.pipe_s = Some(started.elapsed().as_secs_f64());
         match result {
             Ok(inspection) => {
