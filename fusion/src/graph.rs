@@ -72,6 +72,16 @@ pub struct JointPrior {
 /// The covariance eigenvalue floor of priors (see [`JointPrior`]).
 const VARIANCE_FLOOR: f64 = 1e-12;
 
+/// The inverse of a symmetric positive semi-definite 6×6 (covariance ↔
+/// information) with its eigenvalues floored at [`VARIANCE_FLOOR`], so a
+/// zero one (a quantity known exactly) stays finite; symmetric.
+fn floored_inverse(m: &Matrix6<f64>) -> Matrix6<f64> {
+    let eig = (0.5 * (m + m.transpose())).symmetric_eigen();
+    let values = eig.eigenvalues.map(|v| 1.0 / v.max(VARIANCE_FLOOR));
+    let inverse = eig.eigenvectors * Matrix6::from_diagonal(&values) * eig.eigenvectors.transpose();
+    0.5 * (inverse + inverse.transpose())
+}
+
 impl JointPrior {
     /// The prior with `means` and their joint `covariance` (6N×6N,
     /// symmetric, finite).
@@ -119,12 +129,10 @@ impl JointPrior {
         let n = priors.len();
         let mut covariance = Mat::<f64>::zeros(6 * n, 6 * n);
         for (i, p) in priors.iter().enumerate() {
-            let eig = (0.5 * (p.information + p.information.transpose())).symmetric_eigen();
-            let values = eig.eigenvalues.map(|v| 1.0 / v.max(VARIANCE_FLOOR));
-            let block = eig.eigenvectors * Matrix6::from_diagonal(&values) * eig.eigenvectors.transpose();
+            let block = floored_inverse(&p.information);
             for r in 0..6 {
                 for c in 0..6 {
-                    covariance[(6 * i + r, 6 * i + c)] = 0.5 * (block[(r, c)] + block[(c, r)]);
+                    covariance[(6 * i + r, 6 * i + c)] = block[(r, c)];
                 }
             }
         }
@@ -201,10 +209,7 @@ impl JointPrior {
 
     /// Pose i's marginal prior (mean and the inverse of its 6×6 block).
     pub fn marginal(&self, i: usize) -> Prior {
-        let eig = self.covariance_block(i, i).symmetric_eigen();
-        let values = eig.eigenvalues.map(|v| 1.0 / v.max(VARIANCE_FLOOR));
-        let information = eig.eigenvectors * Matrix6::from_diagonal(&values) * eig.eigenvectors.transpose();
-        Prior { target_from_source: self.means[i], information: 0.5 * (information + information.transpose()) }
+        Prior { target_from_source: self.means[i], information: floored_inverse(&self.covariance_block(i, i)) }
     }
 }
 
@@ -269,13 +274,8 @@ pub fn cps_prior(
     full.fixed_view_mut::<4, 4>(0, 0).copy_from(covariance);
     full[(4, 4)] = tilt_sigma_rad * tilt_sigma_rad;
     full[(5, 5)] = tilt_sigma_rad * tilt_sigma_rad;
-    let cov = jac * full * jac.transpose();
-    let cov = 0.5 * (cov + cov.transpose());
-    let eig = cov.symmetric_eigen();
-    let floor = 1e-12;
-    let inv_values = eig.eigenvalues.map(|v| 1.0 / v.max(floor));
-    let information = eig.eigenvectors * Matrix6::from_diagonal(&inv_values) * eig.eigenvectors.transpose();
-    Ok(Prior { target_from_source: *world_from_scanner, information: 0.5 * (information + information.transpose()) })
+    let information = floored_inverse(&(jac * full * jac.transpose()));
+    Ok(Prior { target_from_source: *world_from_scanner, information })
 }
 
 /// ∂ξ/∂(x, y, z, θ, pitch, roll) of `world_from_scanner` (see [`cps_prior`]).

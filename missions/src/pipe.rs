@@ -83,6 +83,12 @@ fn kind_name(kind: AnomalyKind) -> &'static str {
     }
 }
 
+/// An anomaly in a few words: kind, depth and clock position around `pipe`.
+pub fn label(pipe: &Pipe, anomaly: &Anomaly) -> String {
+    let clock = clock_text(clock_hour(pipe, &anomaly.centroid));
+    format!("{} {:.0} mm at {clock}", kind_name(anomaly.kind), 1e3 * anomaly.depth_m)
+}
+
 /// Distribution of the deviations, metres: count, mean, RMS, extremes,
 /// 1st and 99th percentiles and how many exceed the threshold.
 fn deviation_stats(deviations: &[f32], threshold_m: f64) -> Value {
@@ -161,6 +167,7 @@ pub fn write_summary(out: &mut dyn std::io::Write, pipe: &Value) -> std::io::Res
         return writeln!(out, "pipe: no fit: {error}");
     }
     let number = |v: &Value| v.as_f64().unwrap_or(f64::NAN);
+    let count = pipe["anomalies"].as_array().map_or(0, Vec::len);
     writeln!(
         out,
         "pipe: radius {:.4} m (nominal {:.4} m), axis {:.3}° from the nominal, RMS {:.1} mm over {} points; {} anomal{} beyond {:.0} mm",
@@ -169,8 +176,8 @@ pub fn write_summary(out: &mut dyn std::io::Write, pipe: &Value) -> std::io::Res
         number(&pipe["axis_tilt_deg"]),
         1e3 * number(&pipe["rmse_m"]),
         pipe["inliers"],
-        pipe["anomalies"].as_array().map_or(0, Vec::len),
-        if pipe["anomalies"].as_array().map_or(0, Vec::len) == 1 { "y" } else { "ies" },
+        count,
+        if count == 1 { "y" } else { "ies" },
         1e3 * number(&pipe["threshold_m"]),
     )?;
     let Some(list) = pipe["anomalies"].as_array().filter(|l| !l.is_empty()) else { return Ok(()) };

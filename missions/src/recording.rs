@@ -768,15 +768,7 @@ impl Recorder {
             .iter()
             .map(|a| (p32(&a.bounds.0), p32(&Point3::from(a.bounds.1 - a.bounds.0))))
             .unzip();
-        let labels: Vec<String> = inspection
-            .anomalies
-            .iter()
-            .map(|a| {
-                let kind = if a.kind == fusion::pipe::AnomalyKind::Intrusion { "intrusion" } else { "bulge" };
-                let clock = crate::pipe::clock_text(crate::pipe::clock_hour(pipe, &a.centroid));
-                format!("{kind} {:.0} mm at {clock}", 1e3 * a.depth_m)
-            })
-            .collect();
+        let labels: Vec<String> = inspection.anomalies.iter().map(|a| crate::pipe::label(pipe, a)).collect();
         rr(rec.log(
             "world/pipe/anomalies",
             &rerun::Boxes3D::from_mins_and_sizes(mins, sizes).with_labels(labels).with_colors([red()]),
