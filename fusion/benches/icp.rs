@@ -40,8 +40,10 @@ fn icp(c: &mut Criterion) {
 
 /// The choice of k-d tree: build the reduced target and answer one
 /// nearest-neighbour query per reduced source point (at the odometry guess),
-/// single-threaded, with kiddo's `ImmutableKdTree`, `kd-tree` and `rstar`.
-/// The others' answers are checked against kiddo's.
+/// single-threaded, with kiddo's `ImmutableKdTree` (its default layout:
+/// arena leaves of 32 points), kiddo with flat leaves of 16 (the layout
+/// `fusion::icp` uses), `kd-tree` and `rstar`. The others' answers are
+/// checked against kiddo's.
 fn kd_trees(c: &mut Criterion) {
     use kiddo::{ImmutableKdTree, SquaredEuclidean};
     let (target, source) = (scan(0), scan(1));
@@ -50,12 +52,16 @@ fn kd_trees(c: &mut Criterion) {
     let tgt: Vec<[f32; 3]> = reduced_points(&target, 0.1).expect("r").iter().map(|p| [p.x, p.y, p.z]).collect();
     let queries: Vec<[f32; 3]> =
         reduced_points(&source, 0.1).expect("r").iter().map(|p| (init * p).coords.into()).collect();
+    type Flat16 = kiddo::KdTree<f32, u32, kiddo::Eytzinger, kiddo::FlatVec<f32, u32, 3, 16>, 3, 16>;
     let immutable = ImmutableKdTree::<f32, 3>::new_from_slice(&tgt).expect("tree");
+    let flat = Flat16::new_from_slice(&tgt).expect("tree");
+    let flat_nn = |q: &[f32; 3]| flat.query(q).nearest_one::<SquaredEuclidean<f32>>().execute().distance;
     let kdt = kd_tree::KdTree::build_by_ordered_float(tgt.clone());
     let rtree = rstar::RTree::bulk_load(tgt.clone());
     let kiddo_nn = |q: &[f32; 3]| immutable.query(q).nearest_one::<SquaredEuclidean<f32>>().execute().distance;
     let truth: Vec<f32> = queries.iter().map(kiddo_nn).collect();
     let agree = |d: &[f32]| d.iter().zip(&truth).all(|(a, b)| (a - b).abs() <= 1e-6 * b.max(1.0));
+    assert!(agree(&queries.iter().map(flat_nn).collect::<Vec<_>>()));
     assert!(agree(&queries.iter().map(|q| kdt.nearest(q).expect("nn").squared_distance).collect::<Vec<_>>()));
     let d2 = |a: &[f32; 3], b: &[f32; 3]| (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2);
     assert!(agree(&queries.iter().map(|q| d2(q, rtree.nearest_neighbor(*q).expect("nn"))).collect::<Vec<_>>()));
@@ -64,10 +70,12 @@ fn kd_trees(c: &mut Criterion) {
     g.bench_function("build kiddo ImmutableKdTree", |b| {
         b.iter(|| ImmutableKdTree::<f32, 3>::new_from_slice(black_box(&tgt)))
     });
+    g.bench_function("build kiddo flat leaves of 16", |b| b.iter(|| Flat16::new_from_slice(black_box(&tgt))));
     g.bench_function("build kd-tree", |b| b.iter(|| kd_tree::KdTree::build_by_ordered_float(black_box(tgt.clone()))));
     g.bench_function("build rstar", |b| b.iter(|| rstar::RTree::bulk_load(black_box(tgt.clone()))));
     let sum = |f: &dyn Fn(&[f32; 3]) -> f32| queries.iter().map(f).sum::<f32>();
     g.bench_function("query kiddo ImmutableKdTree", |b| b.iter(|| sum(&kiddo_nn)));
+    g.bench_function("query kiddo flat leaves of 16", |b| b.iter(|| sum(&flat_nn)));
     let one = std::num::NonZero::<usize>::MIN;
     g.bench_function("query kiddo within 1 m", |b| {
         b.iter(|| {

