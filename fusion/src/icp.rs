@@ -1,14 +1,17 @@
 //! ICP (seed 000 §4): point-to-point with Horn's closed-form rotation and
 //! point-to-plane with normals from the k nearest neighbours, nearest
-//! neighbours through a `kiddo` k-d tree built once per target, a maximum
-//! correspondence distance and a coarse-to-fine schedule.
+//! neighbours through a `kiddo` k-d tree built once per target (and, from
+//! the second iteration, mostly through each target point's
+//! `Neighbourhood` instead), a maximum correspondence distance and a
+//! coarse-to-fine schedule.
 //!
 //! **Covariance convention.** [`IcpResult::information`] is the 6×6 inverse
 //! covariance of the error ξ = (ω, v) — rotation first, then translation — in
 //! the **target** frame with **left** perturbation:
 //! `target_from_source_true = exp(ξ) · target_from_source`, so a source
-//! point p maps to `T̂p + ω × T̂p + v`. It is `Jᵀ J / σ̂²` at the solution,
-//! with σ̂² the residual variance per scalar residual.
+//! point p maps to `T̂p + ω × T̂p + v`. It is `Jᵀ J / σ̂²` at the last
+//! linearisation point (within the tolerances of the solution when
+//! converged), with σ̂² the residual variance per scalar residual.
 
 use kiddo::SquaredEuclidean;
 use nalgebra::{
@@ -96,7 +99,7 @@ impl Default for IcpConfig {
 /// queries about a third faster (BENCHMARKS.md, "the k-d tree choice").
 type KdTree = kiddo::KdTree<f32, u32, kiddo::Eytzinger, kiddo::FlatVec<f32, u32, 3, 16>, 3, 16>;
 
-/// How many nearest other target points a [`Neighbourhood`] keeps.
+/// How many nearest other target points a `Neighbourhood` keeps.
 const CERTIFICATE_NEIGHBOURS: usize = 10;
 
 /// The nearest other points of a target point q and r², r being the
@@ -138,7 +141,7 @@ impl Neighbourhood {
 }
 
 /// A target cloud prepared for ICP: its k-d tree, (for point-to-plane)
-/// unit normals, and each point's [`Neighbourhood`], filled in as ICP
+/// unit normals, and each point's `Neighbourhood`, filled in as ICP
 /// first needs it (or with the normals, from the same query).
 #[derive(Debug)]
 pub struct Target {
@@ -271,7 +274,7 @@ impl Target {
     }
 
     /// The nearest point to `q` when `q` lies within the reach of `hint`'s
-    /// [`Neighbourhood`], else `None`.
+    /// `Neighbourhood`, else `None`.
     fn certified_nearest(&self, q: &[f32; 3], hint: u32) -> Option<(usize, f32)> {
         let h = self.points.get(hint as usize)?;
         let hood = self.neighbourhood(hint as usize);
