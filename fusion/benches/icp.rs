@@ -52,7 +52,7 @@ fn kd_trees(c: &mut Criterion) {
     let tgt: Vec<[f32; 3]> = reduced_points(&target, 0.1).expect("r").iter().map(|p| [p.x, p.y, p.z]).collect();
     let queries: Vec<[f32; 3]> =
         reduced_points(&source, 0.1).expect("r").iter().map(|p| (init * p).coords.into()).collect();
-    type Flat16 = kiddo::KdTree<f32, u32, kiddo::Eytzinger, kiddo::FlatVec<f32, u32, 3, 16>, 3, 16>;
+    type Flat16 = fusion::icp::KdTree;
     let immutable = ImmutableKdTree::<f32, 3>::new_from_slice(&tgt).expect("tree");
     let flat = Flat16::new_from_slice(&tgt).expect("tree");
     let flat_nn = |q: &[f32; 3]| flat.query(q).nearest_one::<SquaredEuclidean<f32>>().execute().distance;

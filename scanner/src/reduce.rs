@@ -21,11 +21,11 @@ pub fn reduced_points(points: &[Point3<f32>], cell_m: f64) -> Result<Vec<Point3<
             expected: "> 0".into(),
         });
     }
-    // Every coordinate finite and at most 1e15 cells from the origin (so
-    // cell indices are exact in f64).
     if points.is_empty() {
         return Ok(Vec::new());
     }
+    // Every coordinate finite and at most 1e15 cells from the origin (so
+    // cell indices are exact in f64).
     let limit = 1e15 * cell_m;
     let bad = |p: &Point3<f32>| !p.coords.iter().all(|c| f64::from(c.abs()) < limit);
     if points.par_iter().any(bad) {
