@@ -51,6 +51,13 @@ pub struct IcpConfig {
     /// Keep the estimate after every iteration in [`IcpResult::trace`]
     /// (for viewing the registration). Default false.
     pub trace: bool,
+    /// Leave out a pair whose target normal faces away from the source
+    /// scanner (the source frame's origin): the source cannot have seen
+    /// that side of the surface, so the pair joins two faces of a thin
+    /// object (a door reveal, a pilaster), which pulls a moving scanner
+    /// back towards where it came from. Needs a target with oriented
+    /// normals ([`Target::orient_normals_towards`]). Default false.
+    pub reject_back_faces: bool,
 }
 
 /// A robust kernel, applied by iteratively reweighted least squares: each
@@ -89,6 +96,7 @@ impl Default for IcpConfig {
             normal_neighbours: 10,
             kernel: Kernel::None,
             trace: false,
+            reject_back_faces: false,
         }
     }
 }
@@ -150,6 +158,8 @@ pub struct Target {
     normals: Vec<Vector3<f64>>,
     tree: KdTree,
     neighbourhoods: Vec<OnceLock<Neighbourhood>>,
+    /// The normals point to the side the target's scanner saw.
+    oriented: bool,
 }
 
 impl Target {
@@ -165,7 +175,7 @@ impl Target {
         }
         let tree = KdTree::new_from_slice(&points)
             .map_err(|e| FusionError::Degenerate { what: format!("k-d tree: {e:?}") })?;
-        let mut t = Self { points, normals: Vec::new(), tree, neighbourhoods: Vec::new() };
+        let mut t = Self { points, normals: Vec::new(), tree, neighbourhoods: Vec::new(), oriented: false };
         if normal_neighbours > 0 {
             (t.normals, t.neighbourhoods) = t.estimate_normals(normal_neighbours.max(3));
         } else {
@@ -188,6 +198,32 @@ impl Target {
         let mut t = Self::new(points, 0)?;
         t.normals = normals;
         Ok(t)
+    }
+
+    /// [`with_normals`](Self::with_normals) for normals already oriented
+    /// towards the scanners that saw their points (e.g. scans' oriented
+    /// normals moved into one frame with their scans).
+    pub fn with_oriented_normals(points: &[Point3<f32>], normals: Vec<Vector3<f64>>) -> Result<Self> {
+        let mut t = Self::with_normals(points, normals)?;
+        t.oriented = !t.normals.is_empty();
+        Ok(t)
+    }
+
+    /// Turns every normal towards `viewpoint` (the scanner that took the
+    /// points, in their frame): nᵀ(viewpoint − q) ≥ 0. Does nothing
+    /// without normals.
+    pub fn orient_normals_towards(&mut self, viewpoint: &Point3<f64>) {
+        for (n, q) in self.normals.iter_mut().zip(&self.points) {
+            if n.dot(&(viewpoint.coords - point(q))) < 0.0 {
+                *n = -*n;
+            }
+        }
+        self.oriented = !self.normals.is_empty();
+    }
+
+    /// True when the normals are oriented towards the scanner.
+    pub fn has_oriented_normals(&self) -> bool {
+        self.oriented
     }
 
     /// The points, in the order of [`normals`](Self::normals).
@@ -494,6 +530,15 @@ fn align_impl(
     prior: Option<&Prior>,
 ) -> Result<IcpResult> {
     check(config)?;
+    if config.reject_back_faces && !target.oriented {
+        return Err(FusionError::OutOfRange {
+            what: "target normals".into(),
+            value: 0.0,
+            expected:
+                "normals oriented towards the target's scanner (Target::orient_normals_towards) to reject back faces"
+                    .into(),
+        });
+    }
     if config.method == Method::PointToPlane && target.normals.is_empty() {
         return Err(FusionError::OutOfRange {
             what: "target normals".into(),
@@ -601,6 +646,8 @@ fn accumulate(
 ) -> Sums {
     let r: Matrix3<f64> = estimate.rotation.to_rotation_matrix().into_inner();
     let t = estimate.translation.vector;
+    // The source scanner in the target frame.
+    let back_faces = config.reject_back_faces.then_some(t);
     source
         .par_chunks(4096)
         .zip(partners.par_chunks_mut(4096))
@@ -614,6 +661,11 @@ fn accumulate(
                     continue;
                 }
                 let q = point(&target.points[i]);
+                if let Some(eye) = back_faces
+                    && target.normals[i].dot(&(eye - q)) < 0.0
+                {
+                    continue;
+                }
                 s.n += 1;
                 match config.method {
                     Method::PointToPlane => {
@@ -796,6 +848,58 @@ mod tests {
             }
             assert!(near_certified >= expected, "{near_certified} of 3000 near hints certified");
         }
+    }
+
+    /// Points every `step` metres on the rectangle `corner + a·u + b·v`,
+    /// a, b ∈ [0, 1].
+    fn grid(corner: [f64; 3], u: [f64; 3], v: [f64; 3], step: f64) -> Vec<Vector3<f64>> {
+        let (c, u, v) = (Vector3::from(corner), Vector3::from(u), Vector3::from(v));
+        let (nu, nv) = ((u.norm() / step) as usize, (v.norm() / step) as usize);
+        (0..=nu)
+            .flat_map(|i| (0..=nv).map(move |j| c + u * (i as f64 / nu as f64) + v * (j as f64 / nv as f64)))
+            .collect()
+    }
+
+    /// A plate 0.1 m thick between two scanners: the target (scanner at
+    /// x = −3) sees its face x = 0, the source (scanner at x = +3, its
+    /// frame's origin) its back x = 0.1; both see a floor, a side wall and
+    /// an end wall at x = 5. Pairing the back with the face pulls the
+    /// source 0.1 m towards the target's scanner, weighted by how many
+    /// pairs that is; rejecting back faces leaves only surfaces both saw,
+    /// and the known pose comes out exactly.
+    #[test]
+    fn back_faces_are_rejected() {
+        let common: Vec<Vector3<f64>> = [
+            grid([-3.0, -2.0, -1.0], [8.0, 0.0, 0.0], [0.0, 4.0, 0.0], 0.1), // floor
+            grid([-3.0, -2.0, -1.0], [8.0, 0.0, 0.0], [0.0, 0.0, 3.0], 0.1), // side wall
+            grid([5.0, -2.0, -1.0], [0.0, 4.0, 0.0], [0.0, 0.0, 3.0], 0.1),  // end wall
+        ]
+        .concat();
+        let face = grid([0.0, -0.5, -0.5], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], 0.05);
+        let back: Vec<Vector3<f64>> = face.iter().map(|p| p + Vector3::new(0.1, 0.0, 0.0)).collect();
+        let cast = |v: &[Vector3<f64>]| -> Vec<Point3<f32>> { v.iter().map(|p| Point3::from(p.cast())).collect() };
+        let mut target = Target::new(&cast(&[common.clone(), face].concat()), 10).expect("target");
+        let eye = Vector3::new(3.0, 0.0, 0.0);
+        let truth = Isometry3::translation(eye.x, eye.y, eye.z);
+        let source: Vec<Vector3<f64>> = [common, back].concat().iter().map(|p| p - eye).collect();
+        let source = cast(&source);
+        let config = IcpConfig { max_correspondence_m: 0.5, ..IcpConfig::default() };
+        let rejecting = IcpConfig { reject_back_faces: true, ..config };
+
+        let e = align(&source, &target, &truth, &rejecting).expect_err("normals not oriented yet");
+        assert!(e.to_string().contains("oriented towards"), "{e}");
+        target.orient_normals_towards(&Point3::new(-3.0, 0.0, 0.0));
+        for (n, q) in target.normals().iter().zip(target.points()) {
+            assert!(n.dot(&(Vector3::new(-3.0, 0.0, 0.0) - q.coords.cast())) >= 0.0);
+        }
+        let start = Isometry3::translation(0.05, -0.03, 0.02) * truth;
+        let plain = align(&source, &target, &start, &config).expect("plain");
+        let clean = align(&source, &target, &start, &rejecting).expect("rejecting");
+        let along = |r: &IcpResult| (r.target_from_source.translation.vector - eye).x;
+        assert!(along(&plain) < -0.01, "the back pulls the source back: {} m", along(&plain));
+        assert!((clean.target_from_source.translation.vector - eye).norm() < 1e-4, "{}", clean.target_from_source);
+        assert!(clean.target_from_source.rotation.angle_to(&truth.rotation) < 1e-5);
+        assert_eq!(clean.inliers, source.len() - 21 * 21, "every back point left out, nothing else");
     }
 
     /// Horn recovers an exact rotation from noiseless pairs.

@@ -81,21 +81,24 @@ fn traces_follow_every_icp_run() {
 }
 
 /// Seed 000 Fig. 5's scenario: 20 scans down the corridor with an 8 m
-/// scanner and a poor odometry. Every strategy beats dead reckoning by a
-/// wide margin and incremental matching drifts (its error grows along the
-/// corridor). Which of the three ends best varies with the seed in this
-/// scene (see the README), so that is reported, not asserted.
+/// scanner and a poor odometry (1.09 m off at the end on this seed). Every
+/// strategy brings every scan within centimetres (about 20× better than
+/// dead reckoning on average) and keeps headings within 0.3°, and
+/// incremental matching's error grows along the corridor. Which strategy
+/// ends best varies with the seed at this level (see the README), so that
+/// is reported, not asserted.
 #[test]
 fn corridor_twenty_scans() {
     let c = corridor::corridor(20, 180, 7);
     let odometry = corridor::errors(&c.odometry, &c.truth);
+    assert!(odometry[19].0 > 1.0, "the odometry must be poor for the test to mean anything: {odometry:?}");
     for strategy in [Strategy::Pairwise, Strategy::Incremental, Strategy::Simultaneous] {
         let r = register_views(&c.scans, &c.odometry, &config(strategy), &mut |_, _| {}).expect("views");
         let e = corridor::errors(&r.world_from_scan, &c.truth);
-        assert!(mean(&e) < 0.5 * mean(&odometry), "{strategy:?}: mean {} vs odometry {}", mean(&e), mean(&odometry));
-        assert!(e.iter().all(|x| x.1 < 0.3), "{strategy:?}: headings within 0.3°: {e:?}");
+        assert!(mean(&e) < 0.1 * mean(&odometry), "{strategy:?}: mean {} vs odometry {}", mean(&e), mean(&odometry));
+        assert!(e.iter().all(|x| x.0 < 0.1 && x.1 < 0.3), "{strategy:?}: within 0.1 m and 0.3°: {e:?}");
         if strategy == Strategy::Incremental {
-            assert!(e[19].0 > 3.0 * e[4].0, "incremental drifts: scan 5 {} m, scan 20 {} m", e[4].0, e[19].0);
+            assert!(e[19].0 > 1.5 * e[4].0, "incremental drifts: scan 5 {} m, scan 20 {} m", e[4].0, e[19].0);
         }
         if strategy == Strategy::Simultaneous {
             assert!(r.settled);

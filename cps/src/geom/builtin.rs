@@ -5,8 +5,10 @@
 //! - `building` — the outer walls (12 m high) of a 45 × 25 m building with an
 //!   entrance recess and a corner notch, on open ground with two lamp posts
 //!   (the seed's outdoor experiment);
-//! - `corridor` — an office corridor 40 × 2 × 3 m along x (y −1…1) with doors
-//!   into seven side rooms and a cabinet (seed 000's GMD Robobench);
+//! - `corridor` — an office corridor 40 × 2 × 3 m along x (y −1…1) with
+//!   0.15 m walls, doors into seven side rooms, and pilasters, radiators, a
+//!   cabinet, a shelf, a bench and fire extinguishers along the walls (seed
+//!   000's GMD Robobench);
 //! - `sewer` — a straight pipe of radius 0.5 m, 20 m along x with its axis at
 //!   (y = 0, z = 0.5), a dent in the crown at x = 12 m and a brick on the
 //!   invert at x = 8 m (seed 000 §5).
@@ -114,6 +116,24 @@ fn corridor(b: &mut SceneBuilder) -> Result<()> {
         &[5.0, 15.0, 25.0, 35.0].map(|x| door(0, x)),
     )?;
     b.wall("north wall", &path(&[(0.0, 1.0), (40.0, 1.0)]), false, 0.0, 3.0, &[10.0, 20.0, 30.0].map(|x| door(0, x)))?;
+    // The walls are 0.15 m thick: each door has its two reveals and a soffit.
+    for (side, doors) in [(-1.0, &[5.0, 15.0, 25.0, 35.0][..]), (1.0, &[10.0, 20.0, 30.0][..])] {
+        let (y0, y1) = (side, side * 1.15);
+        b.wall(
+            if side < 0.0 { "south wall, room side" } else { "north wall, room side" },
+            &path(&[(0.0, y1), (40.0, y1)]),
+            false,
+            0.0,
+            3.0,
+            &doors.iter().map(|&x| door(0, x)).collect::<Vec<_>>(),
+        )?;
+        for &x in doors {
+            for xr in [x, x + 0.9] {
+                b.polygon("door reveal", &[p3(xr, y0, 0.0), p3(xr, y1, 0.0), p3(xr, y1, 2.1), p3(xr, y0, 2.1)])?;
+            }
+            b.polygon("door soffit", &[p3(x, y0, 2.1), p3(x + 0.9, y0, 2.1), p3(x + 0.9, y1, 2.1), p3(x, y1, 2.1)])?;
+        }
+    }
     b.wall("west end", &path(&[(0.0, -1.0), (0.0, 1.0)]), false, 0.0, 3.0, &[])?;
     b.wall("east end", &path(&[(40.0, -1.0), (40.0, 1.0)]), false, 0.0, 3.0, &[])?;
     for (k, x0) in [2.0, 12.0, 22.0, 32.0].into_iter().enumerate() {
@@ -141,6 +161,22 @@ fn corridor(b: &mut SceneBuilder) -> Result<()> {
         b.cuboid(&format!("north desk {}", k + 1), p3(x1 - 1.5 - k as f64, 4.2, 0.4), size(1.6, 0.8, 0.8), 0.0)?;
     }
     b.cuboid("cabinet", p3(12.5, -0.8, 0.9), size(1.0, 0.4, 1.8), 0.0)?;
+    // What an office corridor has along its walls (south side, then north).
+    for (k, x) in [8.0, 22.0, 37.5].into_iter().enumerate() {
+        b.cuboid(&format!("south pilaster {}", k + 1), p3(x, -0.925, 1.5), size(0.3, 0.15, 3.0), 0.0)?;
+    }
+    for (k, x) in [4.0, 16.5, 36.0].into_iter().enumerate() {
+        b.cuboid(&format!("north pilaster {}", k + 1), p3(x, 0.925, 1.5), size(0.3, 0.15, 3.0), 0.0)?;
+    }
+    for (k, (x, y)) in [(2.5, -0.95), (18.5, -0.95), (32.0, -0.95), (13.5, 0.95), (27.0, 0.95)].into_iter().enumerate()
+    {
+        b.cuboid(&format!("radiator {}", k + 1), p3(x, y, 0.45), size(1.0, 0.1, 0.6), 0.0)?;
+    }
+    b.cuboid("bench", p3(28.5, -0.8, 0.225), size(1.5, 0.4, 0.45), 0.0)?;
+    b.cuboid("shelf", p3(24.0, 0.825, 1.0), size(0.9, 0.35, 2.0), 0.0)?;
+    for (k, x) in [7.2, 33.5].into_iter().enumerate() {
+        b.cylinder(&format!("fire extinguisher {}", k + 1), p3(x, 0.9, 0.3), p3(x, 0.9, 0.9), 0.08)?;
+    }
     let slab = |z: f64| [(0.0, -5.0), (40.0, -5.0), (40.0, 5.0), (0.0, 5.0)].map(|(x, y)| p3(x, y, z));
     b.polygon("floor", &slab(0.0))?;
     b.polygon("ceiling", &slab(3.0))
