@@ -886,9 +886,11 @@ mod tests {
         let config = IcpConfig { max_correspondence_m: 0.5, ..IcpConfig::default() };
         let rejecting = IcpConfig { reject_back_faces: true, ..config };
 
+        assert!(!target.has_oriented_normals());
         let e = align(&source, &target, &truth, &rejecting).expect_err("normals not oriented yet");
         assert!(e.to_string().contains("oriented towards"), "{e}");
         target.orient_normals_towards(&Point3::new(-3.0, 0.0, 0.0));
+        assert!(target.has_oriented_normals());
         for (n, q) in target.normals().iter().zip(target.points()) {
             assert!(n.dot(&(Vector3::new(-3.0, 0.0, 0.0) - q.coords.cast())) >= 0.0);
         }

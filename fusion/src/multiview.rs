@@ -380,7 +380,7 @@ fn prepare<S: AsRef<[Point3<f32>]> + Sync>(scans: &[S], config: &MultiviewConfig
             let model = scanner::reduced_points(points, config.target_voxel_m).map_err(|e| in_scan(i, e.into()))?;
             let mut local = Target::new(&model, k).map_err(|e| in_scan(i, e))?;
             // Each scan's scanner is at (about) its frame's origin.
-            local.orient_normals_towards(&nalgebra::Point3::origin());
+            local.orient_normals_towards(&Point3::origin());
             Ok(Prepared { source, local })
         })
         .collect()
