@@ -52,12 +52,16 @@ pub struct IcpConfig {
     /// (for viewing the registration). Default false.
     pub trace: bool,
     /// Leave out a pair whose target normal faces away from the source
-    /// scanner (the source frame's origin): the source cannot have seen
-    /// that side of the surface, so the pair joins two faces of a thin
-    /// object (a door reveal, a pilaster), which pulls a moving scanner
-    /// back towards where it came from. Needs a target with oriented
-    /// normals ([`Target::orient_normals_towards`]). Default false.
+    /// scanner ([`source_viewpoint`](Self::source_viewpoint)): the source
+    /// cannot have seen that side of the surface, so the pair joins two
+    /// faces of a thin object (a door reveal, a pilaster), which pulls a
+    /// moving scanner back towards where it came from. Needs a target with
+    /// oriented normals ([`Target::orient_normals_towards`]). Default false.
     pub reject_back_faces: bool,
+    /// Where the source's scanner stands in the source frame, for
+    /// `reject_back_faces` (a scan kept in a robot's body frame has its
+    /// scanner at the head's lever arm). Default the origin.
+    pub source_viewpoint: Point3<f64>,
 }
 
 /// A robust kernel, applied by iteratively reweighted least squares: each
@@ -97,6 +101,7 @@ impl Default for IcpConfig {
             kernel: Kernel::None,
             trace: false,
             reject_back_faces: false,
+            source_viewpoint: Point3::origin(),
         }
     }
 }
@@ -647,7 +652,7 @@ fn accumulate(
     let r: Matrix3<f64> = estimate.rotation.to_rotation_matrix().into_inner();
     let t = estimate.translation.vector;
     // The source scanner in the target frame.
-    let back_faces = config.reject_back_faces.then_some(t);
+    let back_faces = config.reject_back_faces.then(|| r * config.source_viewpoint.coords + t);
     source
         .par_chunks(4096)
         .zip(partners.par_chunks_mut(4096))
@@ -902,6 +907,22 @@ mod tests {
         assert!((clean.target_from_source.translation.vector - eye).norm() < 1e-4, "{}", clean.target_from_source);
         assert!(clean.target_from_source.rotation.angle_to(&truth.rotation) < 1e-5);
         assert_eq!(clean.inliers, source.len() - 21 * 21, "every back point left out, nothing else");
+
+        // The same source in a frame whose origin is in front of the plate
+        // (x = −1), its scanner still at x = 3: only with the scanner's
+        // place given are the back points left out.
+        let origin = Vector3::new(-1.0, 0.0, 0.0);
+        let moved: Vec<Point3<f32>> =
+            source.iter().map(|p| Point3::from((p.coords.cast() + eye - origin).cast())).collect();
+        let truth = Isometry3::translation(origin.x, origin.y, origin.z);
+        let start = Isometry3::translation(0.05, -0.03, 0.02) * truth;
+        let unplaced = align(&moved, &target, &start, &rejecting).expect("scanner taken at the origin");
+        let placed = IcpConfig { source_viewpoint: Point3::from(eye - origin), ..rejecting };
+        let placed = align(&moved, &target, &start, &placed).expect("scanner placed");
+        let along = |r: &IcpResult| (r.target_from_source.translation.vector - origin).x;
+        assert!(along(&unplaced) < -0.01, "a wrong viewpoint keeps the back: {} m", along(&unplaced));
+        assert!((placed.target_from_source.translation.vector - origin).norm() < 1e-4, "{}", placed.target_from_source);
+        assert_eq!(placed.inliers, clean.inliers);
     }
 
     /// Horn recovers an exact rotation from noiseless pairs.

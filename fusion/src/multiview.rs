@@ -22,7 +22,7 @@
 //!
 //! Each scan is prepared once: reduced points (the data set D) and a
 //! target with normals estimated in the scan's own frame and turned towards
-//! its scanner (so that a match can leave out surfaces the other scanner
+//! its scanner ([`IcpConfig::source_viewpoint`]) (so that a match can leave out surfaces the other scanner
 //! saw from behind, [`IcpConfig::reject_back_faces`]); a model set
 //! M is the neighbours' targets moved into the world with their current
 //! poses (normals rotated along), so only its k-d tree is built per match.
@@ -54,7 +54,8 @@ pub struct MultiviewConfig {
     pub strategy: Strategy,
     /// Every match's ICP settings. Default point-to-plane, 0.5 m, 50
     /// iterations, Huber 2 cm, back faces rejected (each scan's normals
-    /// are turned towards its frame's origin, where its scanner stands).
+    /// are turned towards its scanner, `icp.source_viewpoint` — the same
+    /// place in every scan's frame; default the origin).
     pub icp: IcpConfig,
     /// Reduced-points cell of the data set D, metres. Default 0.1 (0.2 m
     /// cells straddle the edges of door reveals and pilasters, and their
@@ -379,8 +380,8 @@ fn prepare<S: AsRef<[Point3<f32>]> + Sync>(scans: &[S], config: &MultiviewConfig
             let source = scanner::reduced_points(points, config.source_voxel_m).map_err(|e| in_scan(i, e.into()))?;
             let model = scanner::reduced_points(points, config.target_voxel_m).map_err(|e| in_scan(i, e.into()))?;
             let mut local = Target::new(&model, k).map_err(|e| in_scan(i, e))?;
-            // Each scan's scanner is at (about) its frame's origin.
-            local.orient_normals_towards(&Point3::origin());
+            // Every scan of a rig has its scanner at the same place in its frame.
+            local.orient_normals_towards(&config.icp.source_viewpoint);
             Ok(Prepared { source, local })
         })
         .collect()

@@ -12,8 +12,11 @@ fn mean(e: &[(f64, f64)]) -> f64 {
     e.iter().map(|x| x.0).sum::<f64>() / e.len() as f64
 }
 
+/// The defaults, the scanner where the simulated rig has it.
 fn config(strategy: Strategy) -> MultiviewConfig {
-    MultiviewConfig { strategy, ..MultiviewConfig::default() }
+    let defaults = MultiviewConfig::default();
+    let icp = fusion::icp::IcpConfig { source_viewpoint: corridor::SCANNER_IN_BODY, ..defaults.icp };
+    MultiviewConfig { strategy, icp, ..defaults }
 }
 
 /// In the hall every strategy removes the dead-reckoning error to a few

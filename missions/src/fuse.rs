@@ -99,13 +99,17 @@ pub struct Fused {
 /// The tilt sensor's standard deviation the simulator uses (0.01°).
 pub const TILT_SIGMA_RAD: f64 = 0.01 * std::f64::consts::PI / 180.0;
 
-fn multiview_config(plan: &FusionPlan, strategy: Strategy) -> MultiviewConfig {
+/// The ICP settings of `plan` for scans in the body frame whose scanner
+/// stands at `scanner_in_body`: back faces rejected.
+fn multiview_config(plan: &FusionPlan, strategy: Strategy, scanner_in_body: Point3<f64>) -> MultiviewConfig {
     MultiviewConfig {
         strategy,
         icp: IcpConfig {
             max_correspondence_m: plan.max_correspondence_m,
             max_iterations: plan.max_iterations,
             kernel: if plan.huber_m > 0.0 { Kernel::Huber { width_m: plan.huber_m } } else { Kernel::None },
+            reject_back_faces: true,
+            source_viewpoint: scanner_in_body,
             ..IcpConfig::default()
         },
         source_voxel_m: plan.voxel_m,
@@ -115,13 +119,15 @@ fn multiview_config(plan: &FusionPlan, strategy: Strategy) -> MultiviewConfig {
     }
 }
 
-/// Fuses `views` by `mode` with the settings of `plan`; `progress(done,
+/// Fuses `views` by `mode` with the settings of `plan`, the scanner at
+/// `scanner_in_body` in the body frame the scans are in; `progress(done,
 /// total)` is called as scans are matched. With `trace`, every ICP run is
 /// kept iteration by iteration ([`Fused::traces`]).
 pub fn fuse(
     views: &[ScanView],
     mode: FusionMode,
     plan: &FusionPlan,
+    scanner_in_body: Point3<f64>,
     trace: bool,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Fused> {
@@ -141,7 +147,7 @@ pub fn fuse(
             let mut guesses: Vec<Isometry3<f64>> = views.iter().map(ScanView::odometry_guess).collect();
             let shift = views[0].direct() * guesses[0].inverse();
             guesses.iter_mut().for_each(|g| *g = shift * *g);
-            let mut config = traced(multiview_config(plan, Strategy::Simultaneous));
+            let mut config = traced(multiview_config(plan, Strategy::Simultaneous, scanner_in_body));
             let coarse = fusion::multiview::register_views(&scans, &guesses, &config, progress)
                 .context("ICP fusion (simultaneous matching, coarse pass)")?;
             config.overlap_m = Some(plan.max_correspondence_m);
@@ -157,7 +163,7 @@ pub fn fuse(
             let r = fusion::multiview::register_with_priors(
                 &scans,
                 &prior,
-                &traced(multiview_config(plan, Strategy::Pairwise)),
+                &traced(multiview_config(plan, Strategy::Pairwise, scanner_in_body)),
                 plan.max_partners,
                 plan.icp_variance_factor,
                 &[plan.max_correspondence_m, plan.fine_correspondence_m],
@@ -338,7 +344,7 @@ pub fn fuse_run(dir: &Path, mode: Option<FusionMode>, json_out: bool, out: &mut 
         bail!("{}: the journal has no scans to fuse", dir.display());
     }
     let mode = mode.unwrap_or(mission.fusion.mode);
-    let fused = fuse(&views, mode, &mission.fusion, false, &mut |_, _| {})?;
+    let fused = fuse(&views, mode, &mission.fusion, mission.scan.scanner_in_body(), false, &mut |_, _| {})?;
     let target = dir.join("fusion").join(mode.name());
     std::fs::create_dir_all(&target).with_context(|| format!("creating {}", target.display()))?;
     let cloud = PointCloud::from_points(merged(&views, &fused));

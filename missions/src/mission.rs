@@ -169,6 +169,12 @@ impl ScanPlan {
         )
     }
 
+    /// Where the scanner stands in the body frame (the head's mount; the
+    /// 2D scanner turns about it).
+    pub fn scanner_in_body(&self) -> nalgebra::Point3<f64> {
+        nalgebra::Point3::from(self.body_from_head_m)
+    }
+
     /// Whether the scanner scans at station `k`.
     pub fn scans_at(&self, k: usize) -> bool {
         match &self.stations {

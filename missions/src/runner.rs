@@ -614,7 +614,8 @@ impl Run<'_> {
         bar.set_prefix("fusion");
         let fused = timed(&mut self.timings.fusion_s, || {
             let trace = self.log_icp_iterations && self.steps.rec.enabled();
-            crate::fuse::fuse(views, mode, &self.mission.fusion, trace, &mut |done, total| {
+            let scanner = self.mission.scan.scanner_in_body();
+            crate::fuse::fuse(views, mode, &self.mission.fusion, scanner, trace, &mut |done, total| {
                 bar.set_length(total as u64);
                 bar.set_position(done as u64);
             })

@@ -18,6 +18,10 @@ pub struct Corridor {
     pub truth: Vec<Isometry3<f64>>,
 }
 
+/// Where the scanner stands in the body frame the scans are in: the
+/// head's mount, 0.4 m above the body's origin.
+pub const SCANNER_IN_BODY: Point3<f64> = Point3::new(0.0, 0.0, 0.4);
+
 /// 3 % scale error, 0.5 mrad/m heading drift, 1 mrad/√m heading noise,
 /// 0.2° terrain tilt: over a metre of dead-reckoning error after 34 m,
 /// mostly along the corridor (the true path must stay inside it).
@@ -48,7 +52,7 @@ fn drive_and_scan(scene: &str, y: f64, n: usize, mode: LmsRangeMode, slices: usi
     let world = SimWorld::new(builtin(scene).expect("scene"), ParentPose::new(1.0, y, z, 0.0), vec![]);
     let start = PlanarPose { x_m: 1.0, y_m: y, heading_rad: 0.0 };
     let mut drive = SimDrive::new(world.clone(), Robot::Parent, start, odometry_error(), seed).expect("drive");
-    let body_from_head = Isometry3::from_parts(Translation3::new(0.0, 0.0, 0.4), UnitQuaternion::identity());
+    let body_from_head = Isometry3::from_parts(Translation3::from(SCANNER_IN_BODY.coords), UnitQuaternion::identity());
     let config = LmsConfig { resolution: LmsResolution::One, mode, sigma_range_m: 0.005 };
     let mut lms = SimLms::new(world.clone(), config, HeadKind::RotatingTable, body_from_head, seed);
     let mut head = SimHead::new(world.clone(), HeadKind::RotatingTable);
