@@ -11,8 +11,7 @@ mod corridor;
 
 use std::time::Instant;
 
-use fusion::icp::IcpConfig;
-use fusion::multiview::{MultiviewConfig, Strategy, register_views};
+use fusion::multiview::{Strategy, register_views};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let seed = std::env::args().nth(1).map_or(Ok(7), |s| s.parse())?;
@@ -39,9 +38,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         ("incremental", Strategy::Incremental),
         ("simultaneous", Strategy::Simultaneous),
     ] {
-        let defaults = MultiviewConfig::default();
-        let icp = IcpConfig { source_viewpoint: corridor::SCANNER_IN_BODY, ..defaults.icp };
-        let config = MultiviewConfig { strategy, icp, ..defaults };
+        let config = corridor::multiview_config(strategy);
         let t = Instant::now();
         let r = register_views(&c.scans, &c.odometry, &config, &mut |_, _| {})?;
         let secs = t.elapsed().as_secs_f64();

@@ -22,8 +22,9 @@
 //!
 //! Each scan is prepared once: reduced points (the data set D) and a
 //! target with normals estimated in the scan's own frame and turned towards
-//! its scanner ([`IcpConfig::source_viewpoint`]) (so that a match can leave out surfaces the other scanner
-//! saw from behind, [`IcpConfig::reject_back_faces`]); a model set
+//! its scanner at [`IcpConfig::source_viewpoint`] (so that a match can
+//! leave out surfaces the other scanner saw from behind,
+//! [`IcpConfig::reject_back_faces`]); a model set
 //! M is the neighbours' targets moved into the world with their current
 //! poses (normals rotated along), so only its k-d tree is built per match.
 

@@ -12,11 +12,8 @@ fn mean(e: &[(f64, f64)]) -> f64 {
     e.iter().map(|x| x.0).sum::<f64>() / e.len() as f64
 }
 
-/// The defaults, the scanner where the simulated rig has it.
 fn config(strategy: Strategy) -> MultiviewConfig {
-    let defaults = MultiviewConfig::default();
-    let icp = fusion::icp::IcpConfig { source_viewpoint: corridor::SCANNER_IN_BODY, ..defaults.icp };
-    MultiviewConfig { strategy, icp, ..defaults }
+    corridor::multiview_config(strategy)
 }
 
 /// In the hall every strategy removes the dead-reckoning error to a few

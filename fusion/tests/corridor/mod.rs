@@ -22,6 +22,14 @@ pub struct Corridor {
 /// head's mount, 0.4 m above the body's origin.
 pub const SCANNER_IN_BODY: Point3<f64> = Point3::new(0.0, 0.0, 0.4);
 
+/// The multi-view defaults with `strategy`, the scanner where the rig
+/// has it.
+pub fn multiview_config(strategy: fusion::multiview::Strategy) -> fusion::multiview::MultiviewConfig {
+    let defaults = fusion::multiview::MultiviewConfig::default();
+    let icp = fusion::icp::IcpConfig { source_viewpoint: SCANNER_IN_BODY, ..defaults.icp };
+    fusion::multiview::MultiviewConfig { strategy, icp, ..defaults }
+}
+
 /// 3 % scale error, 0.5 mrad/m heading drift, 1 mrad/√m heading noise,
 /// 0.2° terrain tilt: over a metre of dead-reckoning error after 34 m,
 /// mostly along the corridor (the true path must stay inside it).
