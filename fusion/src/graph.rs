@@ -25,10 +25,10 @@
 
 use faer::linalg::solvers::DenseSolveCore;
 use faer::{Mat, Side, prelude::*};
-use nalgebra::{Isometry3, Matrix3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
+use nalgebra::{Isometry3, Matrix3, Matrix6, UnitQuaternion, Vector3, Vector6};
 
 use crate::error::{FusionError, Result};
-use crate::icp::Prior;
+use crate::se3::{Prior, adjoint, exp, left_difference};
 
 /// A relative pose between two scans, e.g. an ICP match.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -218,31 +218,6 @@ impl JointPrior {
 enum Priors<'a> {
     Each(&'a [Option<Prior>]),
     Joint(&'a JointPrior),
-}
-
-/// ξ = (ω, v) with `a ≈ exp(ξ) · b` to first order.
-pub fn left_difference(a: &Isometry3<f64>, b: &Isometry3<f64>) -> Vector6<f64> {
-    let d = a * b.inverse();
-    let w = d.rotation.scaled_axis();
-    Vector6::new(w.x, w.y, w.z, d.translation.x, d.translation.y, d.translation.z)
-}
-
-/// exp of ξ = (ω, v) as an isometry (rotation exp(ω), translation v).
-pub fn exp(xi: &Vector6<f64>) -> Isometry3<f64> {
-    Isometry3::from_parts(
-        Translation3::new(xi[3], xi[4], xi[5]),
-        UnitQuaternion::from_scaled_axis(Vector3::new(xi[0], xi[1], xi[2])),
-    )
-}
-
-/// The adjoint of `t` in the (ω, v) order: exp(Ad·ξ) = t·exp(ξ)·t⁻¹.
-pub fn adjoint(t: &Isometry3<f64>) -> Matrix6<f64> {
-    let r = *t.rotation.to_rotation_matrix().matrix();
-    let mut a = Matrix6::zeros();
-    a.fixed_view_mut::<3, 3>(0, 0).copy_from(&r);
-    a.fixed_view_mut::<3, 3>(3, 3).copy_from(&r);
-    a.fixed_view_mut::<3, 3>(3, 0).copy_from(&(crate::icp::skew(&t.translation.vector) * r));
-    a
 }
 
 /// The prior on a scanner's `world_from_scanner` that a CPS pose gives:
@@ -463,6 +438,7 @@ fn normal_equations(poses: &[Isometry3<f64>], priors: Priors<'_>, edges: &[Edge]
 
 #[cfg(test)]
 mod tests {
+    use nalgebra::Translation3;
     use nalgebra::Point3;
 
     use super::*;

@@ -9,6 +9,8 @@
 //!   scans ([`multiview::register_views`]);
 //! - [`graph`]: scan poses adjusted to absolute priors (the CPS poses) and
 //!   relative ICP matches together ([`graph::optimize`], [`graph::cps_prior`]);
+//! - [`se3`]: the shared pose convention (ξ = (ω, v), left perturbation)
+//!   and a Gaussian pose prior ([`se3::Prior`]);
 //! - [`pipe`]: tube fitting into scanned pipes and the deviation map
 //!   ([`pipe::fit_pipe`], [`pipe::anomalies`]).
 #![warn(missing_docs)]
@@ -19,5 +21,6 @@ pub mod graph;
 pub mod icp;
 pub mod multiview;
 pub mod pipe;
+pub mod se3;
 
 pub use error::{FusionError, Result};

@@ -349,8 +349,8 @@ pub const GATE_CHI2: f64 = 22.458;
 fn gate(r: &IcpResult, prior: &JointPrior, j: usize, c: usize, factor: f64) -> Result<()> {
     let inv_j = prior.mean(j).inverse();
     let predicted = inv_j * prior.mean(c);
-    let e = crate::graph::left_difference(&r.target_from_source, &predicted);
-    let ad = crate::graph::adjoint(&inv_j);
+    let e = crate::se3::left_difference(&r.target_from_source, &predicted);
+    let ad = crate::se3::adjoint(&inv_j);
     let match_cov = r.covariance().map(|c| c * factor).unwrap_or_else(|| Matrix6::from_diagonal_element(f64::INFINITY));
     let relative = prior.covariance_block(j, j) + prior.covariance_block(c, c)
         - prior.covariance_block(j, c)

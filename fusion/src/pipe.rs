@@ -27,7 +27,7 @@ use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nalgebra::{Matrix3, Point3, Translation3, UnitQuaternion, Vector3};
 
 use crate::error::{FusionError, Result};
-use crate::icp::horn_rotation;
+use crate::icp::solve::horn_rotation;
 
 /// A finite tube: axis from `a` to `b`, radius `radius_m`.
 #[derive(Debug, Clone, Copy, PartialEq)]

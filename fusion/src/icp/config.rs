@@ -1,0 +1,89 @@
+//! ICP's settings: the error metric, the robust kernel and the flat
+//! configuration struct with its documented defaults.
+
+use nalgebra::Point3;
+
+/// The error metric.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Method {
+    /// Point-to-point, closed form (Horn's unit quaternion).
+    PointToPoint,
+    /// Point-to-plane, Gauss–Newton on the target's normals.
+    PointToPlane,
+}
+
+/// ICP settings (one flat struct, documented defaults).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct IcpConfig {
+    /// Error metric. Default point-to-plane.
+    pub method: Method,
+    /// Pairs farther apart than this are ignored, metres. Default 1.0.
+    pub max_correspondence_m: f64,
+    /// Iteration cap. Default 50.
+    pub max_iterations: usize,
+    /// Converged when an update moves less than this, metres. Default 1e-5.
+    pub translation_tolerance_m: f64,
+    /// Converged when an update turns less than this, radians. Default 1e-5.
+    pub rotation_tolerance_rad: f64,
+    /// Neighbours for normal estimation. Default 10.
+    pub normal_neighbours: usize,
+    /// Robust kernel on the residuals. Default none (least squares).
+    pub kernel: Kernel,
+    /// Keep the estimate after every iteration in [`IcpResult::trace`]
+    /// (for viewing the registration). Default false.
+    pub trace: bool,
+    /// Leave out a pair whose target normal faces away from the source
+    /// scanner ([`source_viewpoint`](Self::source_viewpoint)): the source
+    /// cannot have seen that side of the surface, so the pair joins two
+    /// faces of a thin object (a door reveal, a pilaster), which pulls a
+    /// moving scanner back towards where it came from. Needs a target with
+    /// oriented normals ([`Target::orient_normals_towards`]). Default false.
+    pub reject_back_faces: bool,
+    /// Where the source's scanner stands in the source frame, for
+    /// `reject_back_faces` (a scan kept in a robot's body frame has its
+    /// scanner at the head's lever arm). Default the origin.
+    pub source_viewpoint: Point3<f64>,
+}
+
+/// A robust kernel, applied by iteratively reweighted least squares: each
+/// pair's weight is recomputed from its residual every iteration.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Kernel {
+    /// Plain least squares (weight 1).
+    None,
+    /// Huber: weight 1 up to `width_m`, `width_m / |r|` beyond.
+    Huber {
+        /// The kernel width, metres.
+        width_m: f64,
+    },
+}
+
+impl Kernel {
+    /// The IRLS weight of a residual (metres).
+    pub(crate) fn weight(self, residual: f64) -> f64 {
+        match self {
+            Kernel::None => 1.0,
+            Kernel::Huber { width_m } => {
+                let a = residual.abs();
+                if a <= width_m { 1.0 } else { width_m / a }
+            }
+        }
+    }
+}
+
+impl Default for IcpConfig {
+    fn default() -> Self {
+        Self {
+            method: Method::PointToPlane,
+            max_correspondence_m: 1.0,
+            max_iterations: 50,
+            translation_tolerance_m: 1e-5,
+            rotation_tolerance_rad: 1e-5,
+            normal_neighbours: 10,
+            kernel: Kernel::None,
+            trace: false,
+            reject_back_faces: false,
+            source_viewpoint: Point3::origin(),
+        }
+    }
+}

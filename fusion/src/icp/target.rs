@@ -1,0 +1,370 @@
+//! A target cloud prepared for ICP: the k-d tree, PCA normals (optionally
+//! oriented towards the scanner) and each point's neighbourhood
+//! certificate, which answers most nearest-neighbour queries without the
+//! tree.
+
+use std::sync::OnceLock;
+
+use kiddo::SquaredEuclidean;
+use nalgebra::{Isometry3, Matrix3, Point3, SymmetricEigen, Vector3};
+use rayon::prelude::*;
+
+use crate::error::{FusionError, Result};
+
+/// The k-d tree of a target: kiddo's Eytzinger-ordered stems with flat
+/// per-axis leaf arrays of at most 16 points. Against kiddo's default
+/// `ImmutableKdTree` (arena leaves of 32) it answers ICP's nearest-neighbour
+/// queries about a third faster (BENCHMARKS.md, "the k-d tree choice";
+/// public so the benchmark measures this very layout).
+pub type KdTree = kiddo::KdTree<f32, u32, kiddo::Eytzinger, kiddo::FlatVec<f32, u32, 3, 16>, 3, 16>;
+
+/// How many nearest other target points a `Neighbourhood` keeps.
+const CERTIFICATE_NEIGHBOURS: usize = 10;
+
+/// The nearest other points of a target point q and r², r being the
+/// distance to the farthest of them: every other target point is at least
+/// r from q. So a query p with |p − q| ≤ r/2 has its nearest neighbour
+/// among q and these points (any other point k has
+/// |p − q_k| ≥ |q_k − q| − |p − q| ≥ r − r/2 ≥ |p − q|).
+///
+/// ICP's correspondences move little from one iteration to the next: a
+/// source point is checked against its last partner's neighbourhood first
+/// and goes to the k-d tree only when that certificate fails — on the 3DTK
+/// pair for about 30 % of the points — with exactly the tree's answer
+/// either way.
+#[derive(Debug, Clone, Copy)]
+struct Neighbourhood {
+    points: [u32; CERTIFICATE_NEIGHBOURS],
+    len: u8,
+    /// (r/2)²: the certificate holds for |p − q|² ≤ this.
+    reach_sq: f32,
+}
+
+impl Neighbourhood {
+    /// From a k-nearest query around point `j` (sorted by distance,
+    /// normally with `j` itself first), `all` when it returned every point.
+    fn new(j: usize, found: impl Iterator<Item = (u32, f32)>, all: bool) -> Self {
+        let mut n = Self { points: [0; CERTIFICATE_NEIGHBOURS], len: 0, reach_sq: 0.0 };
+        let mut farthest = 0.0f32;
+        for (k, d2) in found.filter(|&(k, _)| k as usize != j).take(CERTIFICATE_NEIGHBOURS) {
+            n.points[usize::from(n.len)] = k;
+            n.len += 1;
+            farthest = farthest.max(d2);
+        }
+        // Every point left out is at least as far as the farthest kept one
+        // (the query is sorted), unless nothing was left out at all.
+        let kept_all = all && usize::from(n.len) < CERTIFICATE_NEIGHBOURS;
+        n.reach_sq = if kept_all { f32::INFINITY } else { farthest / 4.0 };
+        n
+    }
+}
+
+/// A target cloud prepared for ICP: its k-d tree, (for point-to-plane)
+/// unit normals, and each point's `Neighbourhood`, filled in as ICP
+/// first needs it (or with the normals, from the same query).
+#[derive(Debug)]
+pub struct Target {
+    pub(crate) points: Vec<[f32; 3]>,
+    pub(crate) normals: Vec<Vector3<f64>>,
+    tree: KdTree,
+    neighbourhoods: Vec<OnceLock<Neighbourhood>>,
+    /// The normals point to the side the target's scanner saw.
+    pub(crate) oriented: bool,
+}
+
+impl Target {
+    /// Builds the tree and, when `normal_neighbours > 0`, PCA normals.
+    pub fn new(points: &[Point3<f32>], normal_neighbours: usize) -> Result<Self> {
+        let points: Vec<[f32; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
+        if points.len() < 6 {
+            return Err(FusionError::OutOfRange {
+                what: "target point count".into(),
+                value: points.len() as f64,
+                expected: "≥ 6".into(),
+            });
+        }
+        let tree = KdTree::new_from_slice(&points)
+            .map_err(|e| FusionError::Degenerate { what: format!("k-d tree: {e:?}") })?;
+        let mut t = Self { points, normals: Vec::new(), tree, neighbourhoods: Vec::new(), oriented: false };
+        if normal_neighbours > 0 {
+            (t.normals, t.neighbourhoods) = t.estimate_normals(normal_neighbours.max(3));
+        } else {
+            t.neighbourhoods = std::iter::repeat_with(OnceLock::new).take(t.points.len()).collect();
+        }
+        Ok(t)
+    }
+
+    /// A target from points and their unit normals (estimated elsewhere, e.g.
+    /// once per scan in its own frame and then moved with the scan); no
+    /// normals (an empty vector) make a point-to-point target.
+    pub fn with_normals(points: &[Point3<f32>], normals: Vec<Vector3<f64>>) -> Result<Self> {
+        if !normals.is_empty() && normals.len() != points.len() {
+            return Err(FusionError::OutOfRange {
+                what: "normal count".into(),
+                value: normals.len() as f64,
+                expected: format!("one per point ({})", points.len()),
+            });
+        }
+        let mut t = Self::new(points, 0)?;
+        t.normals = normals;
+        Ok(t)
+    }
+
+    /// [`with_normals`](Self::with_normals) for normals already oriented
+    /// towards the scanners that saw their points (e.g. scans' oriented
+    /// normals moved into one frame with their scans).
+    pub fn with_oriented_normals(points: &[Point3<f32>], normals: Vec<Vector3<f64>>) -> Result<Self> {
+        let mut t = Self::with_normals(points, normals)?;
+        t.oriented = !t.normals.is_empty();
+        Ok(t)
+    }
+
+    /// Turns every normal towards `viewpoint` (the scanner that took the
+    /// points, in their frame): nᵀ(viewpoint − q) ≥ 0. Does nothing
+    /// without normals.
+    pub fn orient_normals_towards(&mut self, viewpoint: &Point3<f64>) {
+        for (n, q) in self.normals.iter_mut().zip(&self.points) {
+            if n.dot(&(viewpoint.coords - point(q))) < 0.0 {
+                *n = -*n;
+            }
+        }
+        self.oriented = !self.normals.is_empty();
+    }
+
+    /// True when the normals are oriented towards the scanner.
+    pub fn has_oriented_normals(&self) -> bool {
+        self.oriented
+    }
+
+    /// The points, in the order of [`normals`](Self::normals).
+    pub fn points(&self) -> impl ExactSizeIterator<Item = Point3<f32>> + '_ {
+        self.points.iter().map(|p| Point3::new(p[0], p[1], p[2]))
+    }
+
+    /// How many `source` points, mapped by `target_from_source`, have a
+    /// target point within `max_distance_m` (the correspondences ICP would
+    /// use there).
+    pub fn correspondences(
+        &self,
+        source: &[Point3<f32>],
+        target_from_source: &Isometry3<f64>,
+        max_distance_m: f64,
+    ) -> usize {
+        let max_sq = max_distance_m * max_distance_m;
+        let m: Isometry3<f32> = target_from_source.cast();
+        source
+            .par_iter()
+            .filter(|p| {
+                let q = m * *p;
+                self.nearest(&[q.x, q.y, q.z]).1 <= max_sq
+            })
+            .count()
+    }
+
+    /// Number of points.
+    pub fn len(&self) -> usize {
+        self.points.len()
+    }
+
+    /// True when empty (never, by construction).
+    pub fn is_empty(&self) -> bool {
+        self.points.is_empty()
+    }
+
+    /// Normals (empty when not estimated).
+    pub fn normals(&self) -> &[Vector3<f64>] {
+        &self.normals
+    }
+
+    /// PCA normals from the `k` nearest points, and each point's
+    /// neighbourhood from the same query.
+    fn estimate_normals(&self, k: usize) -> (Vec<Vector3<f64>>, Vec<OnceLock<Neighbourhood>>) {
+        let n = self.points.len();
+        let k = std::num::NonZero::new(k.min(n)).unwrap_or(std::num::NonZero::<usize>::MIN);
+        self.points
+            .par_iter()
+            .enumerate()
+            .map(|(j, p)| {
+                let nn = self.tree.query(p).nearest_n::<SquaredEuclidean<f32>>(k).execute();
+                let mean =
+                    nn.iter().fold(Vector3::zeros(), |s, r| s + point(&self.points[r.item as usize])) / nn.len() as f64;
+                let cov = nn.iter().fold(Matrix3::zeros(), |s, r| {
+                    let d = point(&self.points[r.item as usize]) - mean;
+                    s + d * d.transpose()
+                });
+                let hood = Neighbourhood::new(j, nn.iter().map(|r| (r.item, r.distance)), nn.len() == n);
+                (smallest_eigenvector(&cov), OnceLock::from(hood))
+            })
+            .unzip()
+    }
+
+    /// Point `j`'s neighbourhood, queried the first time it is needed.
+    fn neighbourhood(&self, j: usize) -> &Neighbourhood {
+        self.neighbourhoods[j].get_or_init(|| {
+            let k = (CERTIFICATE_NEIGHBOURS + 1).min(self.points.len());
+            let k = std::num::NonZero::new(k).unwrap_or(std::num::NonZero::<usize>::MIN);
+            let nn = self.tree.query(&self.points[j]).nearest_n::<SquaredEuclidean<f32>>(k).execute();
+            Neighbourhood::new(j, nn.iter().map(|r| (r.item, r.distance)), nn.len() == self.points.len())
+        })
+    }
+
+    fn nearest(&self, q: &[f32; 3]) -> (usize, f64) {
+        let r = self.tree.query(q).nearest_one::<SquaredEuclidean<f32>>().execute();
+        (r.item as usize, f64::from(r.distance))
+    }
+
+    /// The nearest point to `q` (index, squared distance), as
+    /// [`nearest`](Self::nearest) finds it, trying the neighbourhood of
+    /// `hint` (a point near `q`, or `u32::MAX` for none) first.
+    pub(crate) fn nearest_from(&self, q: &[f32; 3], hint: u32) -> (usize, f64) {
+        self.certified_nearest(q, hint).map_or_else(|| self.nearest(q), |(i, d2)| (i, f64::from(d2)))
+    }
+
+    /// The nearest point to `q` when `q` lies within the reach of `hint`'s
+    /// `Neighbourhood`, else `None`.
+    fn certified_nearest(&self, q: &[f32; 3], hint: u32) -> Option<(usize, f32)> {
+        let h = self.points.get(hint as usize)?;
+        let hood = self.neighbourhood(hint as usize);
+        let d2 = squared_distance(q, h);
+        if d2 > hood.reach_sq {
+            return None;
+        }
+        let mut best = (hint as usize, d2);
+        for &k in &hood.points[..usize::from(hood.len)] {
+            let dk = squared_distance(q, &self.points[k as usize]);
+            if dk < best.1 {
+                best = (k as usize, dk);
+            }
+        }
+        Some(best)
+    }
+}
+
+fn squared_distance(a: &[f32; 3], b: &[f32; 3]) -> f32 {
+    (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)
+}
+
+/// The unit eigenvector of the smallest eigenvalue of a symmetric 3×3
+/// matrix: the eigenvalue in closed form (trigonometric solution of the
+/// characteristic cubic), the vector as the longest cross product of two
+/// rows of A − λI. Falls back to the iterative solver when that vector is
+/// ill-defined (a repeated smallest eigenvalue).
+fn smallest_eigenvector(a: &Matrix3<f64>) -> Vector3<f64> {
+    let iterative = || {
+        let eig = SymmetricEigen::new(*a);
+        eig.eigenvectors.column(eig.eigenvalues.imin()).into_owned()
+    };
+    let p1 = a[(0, 1)].powi(2) + a[(0, 2)].powi(2) + a[(1, 2)].powi(2);
+    let q = a.trace() / 3.0;
+    let p2 = (a[(0, 0)] - q).powi(2) + (a[(1, 1)] - q).powi(2) + (a[(2, 2)] - q).powi(2) + 2.0 * p1;
+    let p = (p2 / 6.0).sqrt();
+    if p.is_nan() || p <= 0.0 {
+        return iterative();
+    }
+    let b = (a - Matrix3::identity() * q) / p;
+    let phi = (b.determinant() / 2.0).clamp(-1.0, 1.0).acos() / 3.0;
+    let lambda = q + 2.0 * p * (phi + 2.0 * std::f64::consts::FRAC_PI_3).cos();
+    let m = a - Matrix3::identity() * lambda;
+    let (r0, r1, r2) = (m.row(0).transpose(), m.row(1).transpose(), m.row(2).transpose());
+    let best = [r0.cross(&r1), r0.cross(&r2), r1.cross(&r2)]
+        .into_iter()
+        .max_by(|x, y| x.norm_squared().total_cmp(&y.norm_squared()))
+        .unwrap_or_default();
+    // |rᵢ × rⱼ| ~ p² when the other two eigenvalues are apart from λ.
+    if best.norm_squared() > 1e-12 * p2 * p2 { best.normalize() } else { iterative() }
+}
+
+/// A stored point in f64.
+pub(crate) fn point(p: &[f32; 3]) -> Vector3<f64> {
+    Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]))
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::UnitQuaternion;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    use super::*;
+
+    /// on random covariances, from isotropic to nearly planar and linear.
+    #[test]
+    fn smallest_eigenvector_matches_symmetric_eigen() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        for k in 0..2000 {
+            let r = UnitQuaternion::from_euler_angles(
+                rng.random_range(-3.0..3.0),
+                rng.random_range(-1.5..1.5),
+                rng.random_range(-3.0..3.0),
+            )
+            .to_rotation_matrix()
+            .into_inner();
+            let thin = [1.0, 1e-2, 1e-4, 1e-6][k % 4];
+            let d = Matrix3::from_diagonal(&Vector3::new(
+                rng.random_range(0.5..1.0),
+                rng.random_range(0.1..0.4),
+                thin * rng.random_range(0.0..0.05),
+            ));
+            let a = r * d * r.transpose() * 1e-2;
+            let eig = SymmetricEigen::new(a);
+            let reference = eig.eigenvectors.column(eig.eigenvalues.imin()).into_owned();
+            let v = smallest_eigenvector(&a);
+            assert!((v.norm() - 1.0).abs() < 1e-12);
+            assert!(v.dot(&reference).abs() > 1.0 - 1e-9, "case {k}: {v} vs {reference}");
+        }
+        // Repeated eigenvalues go through the fallback and still give a unit eigenvector.
+        let v = smallest_eigenvector(&Matrix3::from_diagonal(&Vector3::new(2.0, 1.0, 1.0)));
+        assert!((v.x.abs() < 1e-12) && (v.norm() - 1.0).abs() < 1e-12);
+    }
+
+    /// The neighbourhood certificate gives exactly the k-d tree's nearest
+    /// distance whenever it applies, and applies to most queries near a
+    /// surface when the hint is a nearby point; hints far off, out of range
+    /// or missing fall back to the tree. Both with neighbourhoods from the
+    /// normals' query and queried lazily, and for a cloud smaller than a
+    /// neighbourhood.
+    #[test]
+    fn certified_nearest_matches_the_tree() {
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        // Two walls and a floor, 5 cm apart, with 1 cm noise.
+        let mut cloud = Vec::new();
+        for i in 0..40 {
+            for j in 0..40 {
+                let (a, b) = (i as f32 * 0.05, j as f32 * 0.05);
+                let mut e = || rng.random_range(-0.01f32..0.01);
+                cloud.push(Point3::new(a, b, e()));
+                cloud.push(Point3::new(a, e(), b));
+                cloud.push(Point3::new(e(), a, b));
+            }
+        }
+        // (points, normal neighbours, near hints that must certify of 3000):
+        // 7 points with lazy neighbourhoods hold the whole cloud in each.
+        for (points, normals, expected) in
+            [(&cloud[..], 10, 1500), (&cloud[..], 0, 1500), (&cloud[..7], 0, 3000), (&cloud[..7], 5, 1000)]
+        {
+            let target = Target::new(points, normals).expect("target");
+            let mut near_certified = 0;
+            for _ in 0..3000 {
+                let p = points[rng.random_range(0..points.len())];
+                let q = [
+                    p.x + rng.random_range(-0.03..0.03),
+                    p.y + rng.random_range(-0.03..0.03),
+                    p.z + rng.random_range(-0.03..0.03),
+                ];
+                let (_, truth) = target.nearest(&q);
+                // A hint near q: the tree's answer for a point 1.4 cm off.
+                let near = target.nearest(&[q[0] + 0.01, q[1] - 0.01, q[2]]).0 as u32;
+                let hints = [near, rng.random_range(0..points.len() as u32), u32::MAX, points.len() as u32];
+                for (h, hint) in hints.into_iter().enumerate() {
+                    if let Some((i, d2)) = target.certified_nearest(&q, hint) {
+                        near_certified += usize::from(h == 0);
+                        assert!((f64::from(d2) - truth).abs() <= 1e-6 * truth.max(1e-6), "{d2} vs {truth}");
+                        assert_eq!(f64::from(squared_distance(&q, &target.points[i])), f64::from(d2));
+                    }
+                    assert!((target.nearest_from(&q, hint).1 - truth).abs() <= 1e-6 * truth.max(1e-6));
+                }
+            }
+            assert!(near_certified >= expected, "{near_certified} of 3000 near hints certified");
+        }
+    }
+}
