@@ -39,4 +39,4 @@ pub use instrument::{DistanceErrorModel, Instrument, RAD_PER_ARCSEC};
 pub use observation::{ParentPose, Reading, observe, wrap_angle};
 pub use placement::{Placement, place};
 pub use state::TeamState;
-pub use stats::{CHI2_2D_95_SQRT, ErrorEllipse, drift_percent, sigma_xy2};
+pub use stats::{CHI2_2D_95_SQRT, CHI2_3D_95_SQRT, ErrorEllipse, W_CRITICAL, drift_percent, sigma_xy2};
