@@ -228,7 +228,7 @@ pub fn chi2_quantile(p: f64, dof: f64) -> f64 {
         let k = 0.5 * dof;
         let ln_pdf = (k - 1.0) * x.ln() - 0.5 * x - k * std::f64::consts::LN_2 - ln_gamma(k);
         let mut next = x - f / ln_pdf.exp();
-        if !(next > lo && next < hi) || !next.is_finite() {
+        if !(next > lo && next < hi && next.is_finite()) {
             next = if hi.is_finite() { 0.5 * (lo + hi) } else { 2.0 * x.max(1e-3) };
         }
         if (next - x).abs() <= 1e-13 * x.max(1e-300) {

@@ -438,8 +438,8 @@ fn normal_equations(poses: &[Isometry3<f64>], priors: Priors<'_>, edges: &[Edge]
 
 #[cfg(test)]
 mod tests {
-    use nalgebra::Translation3;
     use nalgebra::Point3;
+    use nalgebra::Translation3;
 
     use super::*;
 

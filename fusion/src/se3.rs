@@ -45,4 +45,3 @@ pub fn adjoint(t: &Isometry3<f64>) -> Matrix6<f64> {
     a.fixed_view_mut::<3, 3>(3, 0).copy_from(&(skew(&t.translation.vector) * r));
     a
 }
-

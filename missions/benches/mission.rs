@@ -6,8 +6,9 @@ use std::path::Path;
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use missions::Mission;
-use missions::diagnostics::Source;
-use missions::runner::{RunOptions, run};
+use missions::mission::diagnostics::Source;
+use missions::planning::Planned;
+use missions::run::runner::{RunOptions, run};
 
 fn hall(rerun: bool) -> Mission {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/hall.toml");
@@ -25,10 +26,11 @@ fn bench(c: &mut Criterion) {
     group.sample_size(10);
     for (name, rerun) in [("without mission.rrd", false), ("with mission.rrd", true)] {
         let mission = hall(rerun);
+        let planned = Planned::new(&mission).expect("plan");
         group.bench_function(name, |b| {
             b.iter_batched(
                 || tempfile::tempdir().expect("tempdir"),
-                |dir| run(&mission, dir.path(), &options).expect("run"),
+                |dir| run(&mission, &planned, dir.path(), &options).expect("run"),
                 BatchSize::PerIteration,
             )
         });

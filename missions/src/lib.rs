@@ -1,29 +1,28 @@
-//! Mission files, their validation and the `cps-survey` command line.
+//! Mission files, the runner and the `cps-survey` command line.
 //!
-//! A mission file (TOML) is read with spans kept ([`reader`]) and validated
-//! into a typed, unit-converted [`Mission`]; every problem becomes a
-//! [`Diagnostic`] with file:line:column. The CLI ([`cli`]) dispatches the
-//! subcommands; [`predict`] renders covariance predictions; [`runner`] runs
-//! a mission on the simulator ([`backend`]) with a [`journal`] and a Rerun
-//! [`recording`].
+//! The rooms, in the order data flows through them:
+//! - [`mission`]: a mission file (TOML, spans kept) → a validated,
+//!   unit-converted [`Mission`]; every problem is a [`Diagnostic`] with
+//!   file:line:column;
+//! - [`planning`]: the mission → its plan ([`planning::Planned`]: scene,
+//!   dance, steps, prediction), built once per command; its constraints,
+//!   its analysis and search, and the optimized mission file;
+//! - [`run`]: running a mission ([`run::runner`]) on the simulator or serial
+//!   ports ([`run::backend`]) with a typed journal ([`run::journal`]) that a
+//!   killed run resumes from ([`run::resume`]), the fusion of the scans
+//!   ([`run::fuse`]), the pipe inspection, the one output stage
+//!   ([`run::outputs`]) and the reports ([`run::report`]);
+//! - [`view`]: what the user sees — terminal tables, JSON documents, plots
+//!   and the Rerun recording;
+//! - [`commands`]: one file per subcommand, [`cli`] the command line.
 #![warn(missing_docs)]
 
-pub mod backend;
 pub mod cli;
-pub mod diagnostics;
-pub mod emulate;
-pub mod fuse;
-pub mod journal;
+pub mod commands;
 pub mod mission;
-pub mod montecarlo;
-pub mod pipe;
-pub mod plan;
-pub mod plot;
-pub mod predict;
-pub mod reader;
-pub mod recording;
-pub mod register;
-pub mod runner;
+pub mod planning;
+pub mod run;
+pub mod view;
 
-pub use diagnostics::{Diagnostic, Diagnostics};
+pub use mission::diagnostics::{Diagnostic, Diagnostics};
 pub use mission::{Mission, MissionError};

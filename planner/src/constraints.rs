@@ -7,7 +7,7 @@ use nalgebra::{Point3, Vector3};
 
 use cps::geom::{Ray, Scene};
 
-use crate::dance::{Action, Dance, Robot};
+use crate::dance::{Action, Dance, Robot, Step};
 
 /// The limits a plan is checked against.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -197,13 +197,17 @@ impl Violation {
 /// violations in schedule order. Each move reports at most one clearance and
 /// one tracking violation per sight line (the first sample that breaks it).
 pub fn check(dance: &Dance, scene: Option<&Scene>, limits: &Limits, scan_at: impl Fn(usize) -> bool) -> Vec<Violation> {
-    let steps = dance.steps(scan_at);
+    check_steps(dance, &dance.steps(scan_at), scene, limits)
+}
+
+/// [`check`] of the schedule's `steps` ([`Dance::steps`]) already built.
+pub fn check_steps(dance: &Dance, steps: &[Step], scene: Option<&Scene>, limits: &Limits) -> Vec<Violation> {
     let mut out = Vec::new();
     let n = dance.n_children();
     // Where every child stands before each step (None: not yet placed).
     let mut children: Vec<Option<Point3<f64>>> = vec![None; n];
     let mut previous_scan: Option<usize> = None;
-    for step in &steps {
+    for step in steps {
         let v = |robot, station, check, value, limit| Violation {
             step: step.index,
             cycle: step.cycle,

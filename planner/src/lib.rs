@@ -16,7 +16,7 @@ pub mod predict;
 pub mod route;
 pub mod search;
 
-pub use constraints::{Check, Limits, Violation, check};
+pub use constraints::{Check, Limits, Violation, check, check_steps};
 pub use dance::{
     Action, Dance, DanceCycle, Formation, FormationKind, Robot, STRATEGIES, Step, Strategy, leapfrog, run_dance,
     schedule, solo,

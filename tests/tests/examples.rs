@@ -26,7 +26,7 @@ fn fuse_json(dir: &std::path::Path, mode: &str) -> Value {
 fn on_scene(scene: &str, cloud: &std::path::Path, tolerance_m: f64) -> f64 {
     let scene = cps::geom::builtin(scene).expect("scene");
     let cloud = scanner::io::read(cloud).expect("cloud");
-    missions::runner::on_surface_fraction(&scene, &cloud.points, tolerance_m)
+    missions::run::runner::on_surface_fraction(&scene, &cloud.points, tolerance_m)
 }
 
 /// The hall with every fusion mode: in this structured hall ICP alone is
@@ -195,7 +195,7 @@ fn scan_stations_pitching_head_and_scene_file() {
     let lab = cps::geom::parse_scene_toml(&std::fs::read_to_string(dir.path().join("lab.toml")).expect("lab"))
         .expect("lab scene");
     let cloud = scanner::io::read(&out.join("cloud.ply")).expect("cloud");
-    let on = missions::runner::on_surface_fraction(&lab, &cloud.points, 0.05);
+    let on = missions::run::runner::on_surface_fraction(&lab, &cloud.points, 0.05);
     assert!(on > 0.97, "{:.1} % on the lab scene", 100.0 * on);
     // The cabinet is in the scans: points lie on its faces.
     let cabinet =

@@ -64,7 +64,7 @@ fn hall_runs_end_to_end() {
     // reading in order, each scan file written before it is referenced.
     let journal = std::fs::read_to_string(out.join("journal.jsonl")).expect("journal");
     let events: Vec<Value> = journal.lines().map(|l| serde_json::from_str(l).expect("a JSON line")).collect();
-    assert!(events.iter().all(|e| e["v"] == 1));
+    assert!(events.iter().all(|e| e["v"] == 2), "journal schema version 2");
     assert_eq!(events[0]["event"], "start");
     assert_eq!(events.last().expect("end")["event"], "end");
     let count = |kind: &str| events.iter().filter(|e| e["event"] == kind).count();
@@ -82,13 +82,18 @@ fn hall_runs_end_to_end() {
     let cloud = scanner::io::read(&out.join("cloud.ply")).expect("cloud.ply");
     assert!(cloud.len() > 200_000, "{} points", cloud.len());
     let scene = cps::geom::builtin("hall").expect("hall");
-    let on = missions::runner::on_surface_fraction(&scene, &cloud.points, 0.05);
+    let on = missions::run::runner::on_surface_fraction(&scene, &cloud.points, 0.05);
     assert!(on > 0.99, "{:.2} % of the points within 5 cm of a surface", 100.0 * on);
 
-    // A finished run is never overwritten.
+    // A finished run is never overwritten, and says it is finished.
     let again = tests::run_mission(&example("hall.toml"), &out);
     assert_eq!(again.code, 2);
-    assert!(again.stderr.contains("already holds a run"), "{}", again.stderr);
+    assert!(again.stderr.contains("holds a finished run"), "{}", again.stderr);
+    let mut resume = vec!["run".into(), example("hall.toml").into_os_string(), "--out".into()];
+    resume.extend([out.clone().into_os_string(), "--resume".into(), "--quiet".into()]);
+    let resumed = tests::cps_survey(resume);
+    assert_eq!(resumed.code, 2);
+    assert!(resumed.stderr.contains("is finished"), "{}", resumed.stderr);
 }
 
 #[test]

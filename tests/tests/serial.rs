@@ -6,7 +6,8 @@
 use std::path::Path;
 
 use missions::Mission;
-use missions::emulate::{EmulatorFault, backend_toml, start};
+use missions::commands::emulate::{EmulatorFault, backend_toml, start};
+use missions::planning::Planned;
 use serde_json::Value;
 use tests::{cps_survey, example, run_mission, temp_mission};
 
@@ -40,7 +41,7 @@ fn a_mission_over_serial_ports_matches_the_simulator() {
     let m = Mission::load(&sim_mission.path).expect("valid");
     let dir = tempfile::tempdir().expect("tempdir");
     let truth_log = dir.path().join("truth.jsonl");
-    let team = start(&m, Some(&truth_log), &[]).expect("the team on ptys");
+    let team = start(&m, &Planned::new(&m).expect("plan"), Some(&truth_log), &[]).expect("the team on ptys");
     let serial_text = format!("{}\n{}", hall("serial", ""), backend_toml(&m, &team));
     let serial_mission = temp_mission(&serial_text);
 
@@ -79,7 +80,7 @@ fn a_mission_over_serial_ports_matches_the_simulator() {
     // The scans came over the LMS protocol: the fused cloud lies on the hall.
     let cloud = scanner::io::read(&dir.path().join("serial/cloud.ply")).expect("cloud");
     let scene = cps::geom::builtin("hall").expect("hall");
-    let on = missions::runner::on_surface_fraction(&scene, &cloud.points, 0.05);
+    let on = missions::run::runner::on_surface_fraction(&scene, &cloud.points, 0.05);
     assert!(cloud.len() > 20_000 && on > 0.99, "{} points, {:.2} % on surfaces", cloud.len(), 100.0 * on);
 }
 
@@ -88,7 +89,7 @@ fn a_silent_total_station_stops_the_mission_with_every_reading_kept() {
     let m = Mission::load(&temp_mission(&hall("sim", "")).path).expect("valid");
     // GeoCOM: 3 RPCs to connect, 4 per measurement: 5 measurements, then silence.
     let fault: EmulatorFault = "total-station:stop-after=23".parse().expect("fault");
-    let team = start(&m, None, &[fault]).expect("the team on ptys");
+    let team = start(&m, &Planned::new(&m).expect("plan"), None, &[fault]).expect("the team on ptys");
     let quick = "max_retries = 1\nretry_delay_s = 0.01";
     let text = format!("{}\n{}total_station_timeout_s = 0.2\n", hall("serial", quick), backend_toml(&m, &team));
     let mission = temp_mission(&text);

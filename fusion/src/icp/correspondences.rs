@@ -148,5 +148,4 @@ mod tests {
         }
         assert!((sums.normal_matrix(Method::PointToPoint) - explicit).amax() < 1e-9);
     }
-
 }

@@ -21,6 +21,9 @@ pub use drive::{OdometryError, Robot, SimDrive};
 pub use lms::{LmsConfig, LmsRangeMode, LmsResolution, SimLms};
 pub use total_station::SimTotalStation;
 
+/// The simulated tilt sensor's standard deviation in roll and pitch, 0.01°.
+pub const TILT_SIGMA_RAD: f64 = 0.01 * std::f64::consts::PI / 180.0;
+
 use crate::devices::{HeadKind, ScanHead, Tilt, TiltSensor};
 use crate::error::{Result, ScannerError};
 
@@ -46,9 +49,10 @@ pub struct SimWorld {
 
 impl SimWorld {
     /// A world with the team standing at the given true positions, level.
-    pub fn new(scene: Scene, parent: ParentPose, children: Vec<Point3<f64>>) -> Self {
+    /// The scene may be shared (`Arc<Scene>`) with whoever built it.
+    pub fn new(scene: impl Into<Arc<Scene>>, parent: ParentPose, children: Vec<Point3<f64>>) -> Self {
         let truth = Truth { parent, tilt: Tilt::default(), children, head_angle_rad: 0.0 };
-        Self { scene: Arc::new(scene), truth: Arc::new(Mutex::new(truth)) }
+        Self { scene: scene.into(), truth: Arc::new(Mutex::new(truth)) }
     }
 
     /// The scene.

@@ -18,7 +18,6 @@ use scanner::sim::{
 use scanner::{
     Drive, Odometry, PlanarPose, Scan, ScannerError, Target, Tilt, TiltSensor, TotalStation, TsMeasurement, scan_3d,
 };
-use serde_json::{Value, json};
 
 use scanner::serial::Port;
 use scanner::serial::geocom::{GeoCom, GeoComConfig};
@@ -27,6 +26,7 @@ use scanner::serial::robot::{RobotLink, SerialDrive, SerialHead};
 use scanner::serial::sick::{Lms, LmsSettings};
 
 use crate::mission::{Mission, SerialPorts};
+use crate::run::journal::{Checkpoint, DriveState, NoiseState, TruthRecord};
 
 /// A device of the team, as named in faults and retry messages.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -133,10 +133,9 @@ impl SimTeam {
     /// 0, the children at their first formation points.
     pub fn new(mission: &Mission, dance: &Dance, faults: Vec<Fault>) -> Result<Self> {
         let seed = mission.backend.seed;
-        let scene = mission.scene()?;
         let start = dance.station_pose(0);
         let first = dance.cycles.first().map(|c| c.children.clone()).unwrap_or_default();
-        let world = SimWorld::new(scene, start, first.clone());
+        let world = SimWorld::new(mission.scene().clone(), start, first.clone());
         let odometry = mission.backend.odometry;
         let parent = SimDrive::new(world.clone(), Robot::Parent, PlanarPose::from(&start), odometry, seed)?;
         let children = first
@@ -152,7 +151,7 @@ impl SimTeam {
             LmsConfig { resolution: mission.scan.resolution, mode: LmsRangeMode::Mm32, sigma_range_m: 0.005 };
         Ok(Self {
             total_station: mission.total_station.clone().map(|i| SimTotalStation::new(world.clone(), i, seed)),
-            tilt: SimTilt::new(world.clone(), 0.01f64.to_radians(), seed),
+            tilt: SimTilt::new(world.clone(), scanner::sim::TILT_SIGMA_RAD, seed),
             lms: SimLms::new(world.clone(), lms_config, mission.scan.head, body_from_head, seed),
             head: SimHead::new(world.clone(), mission.scan.head),
             world,
@@ -271,70 +270,57 @@ impl SimTeam {
         scan_3d(&mut self.head, &mut self.lms, slices, &self.body_from_head, progress)
     }
 
-    /// The whole simulated state as JSON: the truth, each drive's believed
-    /// and true pose, and every device's noise position.
-    pub fn checkpoint(&self) -> Value {
+    /// The whole simulated state: the truth, each drive's believed and true
+    /// pose, and every device's noise position.
+    pub fn checkpoint(&self) -> Checkpoint {
         let pose = |q: PlanarPose| [q.x_m, q.y_m, q.heading_rad];
-        let drives: Vec<Value> = std::iter::once(&self.parent)
+        let drives = std::iter::once(&self.parent)
             .chain(&self.children)
-            .map(|d| {
-                json!({"believed": pose(d.believed_pose()), "true": pose(d.true_pose()),
-                "noise": words(d.noise_position())})
+            .map(|d| DriveState {
+                believed: pose(d.believed_pose()),
+                truth: Some(pose(d.true_pose())),
+                noise: Some(d.noise_position().to_string()),
             })
             .collect();
-        json!({
-            "truth": truth_json(&self.world.truth()),
-            "drives": drives,
-            "noise": {
-                "total_station": self.total_station.as_ref().map(|t| words(t.noise_position())),
-                "tilt": words(self.tilt.noise_position()),
-                "scanner": words(self.lms.noise_position()),
-            },
-        })
+        Checkpoint {
+            drives,
+            noise: Some(NoiseState {
+                total_station: self.total_station.as_ref().map(|t| t.noise_position().to_string()),
+                tilt: self.tilt.noise_position().to_string(),
+                scanner: self.lms.noise_position().to_string(),
+            }),
+            truth: Some(truth_record(&self.world.truth())),
+        }
     }
 
     /// Puts the world and every device back into a [`SimTeam::checkpoint`].
-    pub fn restore(&mut self, c: &Value) -> Result<()> {
-        let f = |v: &Value, what: &str| v.as_f64().with_context(|| format!("checkpoint {what}: expected a number"));
-        let arr = |v: &Value, n: usize, what: &str| -> Result<Vec<f64>> {
-            let a = v
-                .as_array()
-                .filter(|a| a.len() == n)
-                .with_context(|| format!("checkpoint {what}: expected {n} numbers"))?;
-            a.iter().map(|x| f(x, what)).collect()
-        };
-        let t = &c["truth"];
-        let p = arr(&t["parent"], 4, "truth.parent")?;
-        let tilt = arr(&t["tilt"], 2, "truth.tilt")?;
-        let children = t["children"]
-            .as_array()
-            .filter(|a| a.len() == self.children.len())
-            .context("checkpoint truth.children: one position per child expected")?
-            .iter()
-            .map(|x| arr(x, 3, "truth.children").map(|v| Point3::new(v[0], v[1], v[2])))
-            .collect::<Result<Vec<_>>>()?;
+    pub fn restore(&mut self, c: &Checkpoint) -> Result<()> {
+        let t = c.truth.as_ref().context("checkpoint without the simulator's truth")?;
+        if t.children.len() != self.children.len() {
+            bail!("checkpoint truth.children: {} positions for {} children", t.children.len(), self.children.len());
+        }
+        let p = t.parent;
         self.world.set_truth(Truth {
             parent: ParentPose::new(p[0], p[1], p[2], p[3]),
-            tilt: Tilt { roll_rad: tilt[0], pitch_rad: tilt[1] },
-            children,
-            head_angle_rad: f(&t["head_rad"], "truth.head_rad")?,
+            tilt: Tilt { roll_rad: t.tilt[0], pitch_rad: t.tilt[1] },
+            children: t.children.iter().map(|x| Point3::new(x[0], x[1], x[2])).collect(),
+            head_angle_rad: t.head_rad,
         });
-        let drives = c["drives"]
-            .as_array()
-            .filter(|a| a.len() == 1 + self.children.len())
-            .context("checkpoint drives: one per robot expected")?;
-        for (d, saved) in std::iter::once(&mut self.parent).chain(&mut self.children).zip(drives) {
-            let pose =
-                |v: &Value, what| arr(v, 3, what).map(|q| PlanarPose { x_m: q[0], y_m: q[1], heading_rad: q[2] });
-            d.restore(pose(&saved["believed"], "drives.believed")?, pose(&saved["true"], "drives.true")?);
-            d.set_noise_position(from_words(&saved["noise"])?);
+        if c.drives.len() != 1 + self.children.len() {
+            bail!("checkpoint drives: {} states for {} robots", c.drives.len(), 1 + self.children.len());
         }
-        let n = &c["noise"];
+        let pose = |q: [f64; 3]| PlanarPose { x_m: q[0], y_m: q[1], heading_rad: q[2] };
+        for (d, saved) in std::iter::once(&mut self.parent).chain(&mut self.children).zip(&c.drives) {
+            let truth = saved.truth.context("checkpoint drives: a drive without its true pose")?;
+            d.restore(pose(saved.believed), pose(truth));
+            d.set_noise_position(noise_position(saved.noise.as_deref(), "drives.noise")?);
+        }
+        let n = c.noise.as_ref().context("checkpoint without the noise streams")?;
         if let Some(ts) = &mut self.total_station {
-            ts.set_noise_position(from_words(&n["total_station"])?);
+            ts.set_noise_position(noise_position(n.total_station.as_deref(), "noise.total_station")?);
         }
-        self.tilt.set_noise_position(from_words(&n["tilt"])?);
-        self.lms.set_noise_position(from_words(&n["scanner"])?);
+        self.tilt.set_noise_position(noise_position(Some(&n.tilt), "noise.tilt")?);
+        self.lms.set_noise_position(noise_position(Some(&n.scanner), "noise.scanner")?);
         Ok(())
     }
 }
@@ -444,12 +430,16 @@ impl Team {
     /// The team's state for the journal: the simulator's whole state, or on
     /// serial ports the parent's odometry (`drives[0].believed`, as in the
     /// simulator's checkpoint).
-    pub fn checkpoint(&self) -> Value {
+    pub fn checkpoint(&self) -> Checkpoint {
         match self {
             Team::Sim(t) => t.checkpoint(),
             Team::Serial(t) => {
                 let b = t.parent_believed;
-                json!({"drives": [{"believed": [b.x_m, b.y_m, b.heading_rad]}]})
+                Checkpoint {
+                    drives: vec![DriveState { believed: [b.x_m, b.y_m, b.heading_rad], truth: None, noise: None }],
+                    noise: None,
+                    truth: None,
+                }
             }
         }
     }
@@ -457,12 +447,12 @@ impl Team {
     /// Puts the team back into a checkpoint: the simulator, or on serial
     /// ports the parent's odometry (the robots are where the replayed
     /// journal left them).
-    pub fn restore(&mut self, c: &Value) -> Result<()> {
+    pub fn restore(&mut self, c: &Checkpoint) -> Result<()> {
         match self {
             Team::Sim(t) => t.restore(c),
             Team::Serial(t) => {
-                t.parent_believed = parent_believed_in(c)
-                    .with_context(|| format!("checkpoint {c}: expected drives[0].believed = [x, y, heading]"))?;
+                t.parent_believed =
+                    c.parent_believed().context("checkpoint: expected drives[0].believed = [x, y, heading]")?;
                 Ok(())
             }
         }
@@ -472,7 +462,7 @@ impl Team {
 /// The real instruments on their serial ports.
 #[derive(Debug)]
 pub struct SerialTeam {
-    scene: cps::geom::Scene,
+    scene: std::sync::Arc<cps::geom::Scene>,
     total_station: Option<GeoCom>,
     tilt: NmeaTilt,
     lms: Lms,
@@ -527,7 +517,7 @@ impl SerialTeam {
         }
         let start = PlanarPose::from(&dance.station_pose(0));
         let mut team = Self {
-            scene: mission.scene()?,
+            scene: mission.scene().clone(),
             total_station,
             tilt,
             lms,
@@ -565,36 +555,23 @@ impl SerialTeam {
     }
 }
 
-/// The team's truth as JSON (`parent` [x, y, z, heading], `tilt` [roll,
-/// pitch], `children` [[x, y, z]…], `head_rad`): in checkpoints and the
-/// emulator's truth log.
-pub fn truth_json(t: &Truth) -> Value {
+/// The team's truth as journaled (`parent` [x, y, z, heading], `tilt`
+/// [roll, pitch], `children` [[x, y, z]…], `head_rad`): in checkpoints and
+/// the emulator's truth log.
+pub fn truth_record(t: &Truth) -> TruthRecord {
     let p = &t.parent;
-    json!({
-        "parent": [p.position.x, p.position.y, p.position.z, p.heading_rad],
-        "tilt": [t.tilt.roll_rad, t.tilt.pitch_rad],
-        "children": t.children.iter().map(|c| [c.x, c.y, c.z]).collect::<Vec<_>>(),
-        "head_rad": t.head_angle_rad,
-    })
+    TruthRecord {
+        parent: [p.position.x, p.position.y, p.position.z, p.heading_rad],
+        tilt: [t.tilt.roll_rad, t.tilt.pitch_rad],
+        children: t.children.iter().map(|c| [c.x, c.y, c.z]).collect(),
+        head_rad: t.head_angle_rad,
+    }
 }
 
-/// The parent's odometry in a checkpoint (`drives[0].believed`), on either
-/// backend.
-pub fn parent_believed_in(checkpoint: &Value) -> Option<PlanarPose> {
-    let b = checkpoint["drives"][0]["believed"].as_array().filter(|a| a.len() == 3)?;
-    Some(PlanarPose { x_m: b[0].as_f64()?, y_m: b[1].as_f64()?, heading_rad: b[2].as_f64()? })
-}
-
-/// A noise position as a JSON string (a u128 does not fit a JSON number
-/// every reader accepts).
-fn words(n: u128) -> Value {
-    json!(n.to_string())
-}
-
-fn from_words(v: &Value) -> Result<u128> {
-    v.as_str()
-        .and_then(|s| s.parse().ok())
-        .with_context(|| format!("checkpoint noise position {v}: expected a decimal string"))
+/// A noise position from its decimal string.
+fn noise_position(v: Option<&str>, what: &str) -> Result<u128> {
+    v.and_then(|s| s.parse().ok())
+        .with_context(|| format!("checkpoint {what} = {v:?}: expected a decimal noise position"))
 }
 
 #[cfg(test)]

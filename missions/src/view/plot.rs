@@ -17,6 +17,9 @@ use planner::{Dance, Prediction, Step, Violation};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
+use super::shapes::{ellipse_scale, ellipse_scale_name};
+use crate::planning::Planned;
+
 /// One plan to plot: its schedule, its prediction and its violations.
 #[derive(Debug, Clone, Copy)]
 pub struct PlotPlan<'a> {
@@ -30,6 +33,29 @@ pub struct PlotPlan<'a> {
     pub steps: &'a [Step],
     /// Constraints it breaks.
     pub violations: &'a [Violation],
+}
+
+impl<'a> PlotPlan<'a> {
+    /// A mission's plan as planned, with the violations to mark.
+    pub fn of(label: &'a str, planned: &'a Planned, violations: &'a [Violation]) -> Self {
+        Self { label, dance: &planned.dance, prediction: &planned.prediction, steps: &planned.steps, violations }
+    }
+}
+
+/// How to get a bitmap from the SVG, for error messages.
+pub const SVG_HINT: &str =
+    " (the plot is SVG, which needs no fonts installed; convert it with e.g. `rsvg-convert -o plot.png plot.svg`)";
+
+/// The line a command prints after writing a plot.
+pub fn plotted(out: &mut dyn std::io::Write, file: &Path, s: &PlotSummary) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "plotted {}: {} parent 95 % ellipses drawn ×{}, {} scene outline segments",
+        file.display(),
+        s.ellipses,
+        s.ellipse_scale,
+        s.scene_segments
+    )
 }
 
 /// What the plot shows, for the caller's report.
@@ -55,14 +81,6 @@ fn draw<T, E: std::error::Error + Send + Sync + 'static>(r: Result<T, E>) -> Res
 /// Writes the plot. The top view shows the last plan of `plans` (the
 /// chosen one) with the violations of every plan; the curves show them all.
 pub fn write_svg(path: &Path, title: &str, plans: &[PlotPlan], scene: Option<&Scene>) -> Result<PlotSummary> {
-    match path.extension().and_then(|e| e.to_str()) {
-        Some(e) if e.eq_ignore_ascii_case("svg") => {}
-        _ => bail!(
-            "--plot {}: expected a file ending in .svg (the plot is SVG, which needs no fonts installed; \
-             convert it with e.g. `rsvg-convert -o plot.png plot.svg`)",
-            path.display()
-        ),
-    }
     let Some(chosen) = plans.last() else { bail!("nothing to plot") };
     let (lo, hi) = extent(chosen.dance, scene);
     let (dx, dy) = ((hi.x - lo.x).max(1.0), (hi.y - lo.y).max(1.0));
@@ -142,18 +160,6 @@ fn extent(dance: &Dance, scene: Option<&Scene>) -> (Point2<f64>, Point2<f64>) {
     (lo - nalgebra::Vector2::repeat(pad), hi + nalgebra::Vector2::repeat(pad))
 }
 
-/// The exaggeration for ellipses whose largest 95 % semi-major axis is
-/// `largest_m`: a 1-2-5 number that draws it at most `room_m` long.
-pub fn ellipse_scale(largest_m: f64, room_m: f64) -> f64 {
-    if largest_m <= 0.0 || largest_m.is_nan() || room_m <= 0.0 {
-        return 1.0;
-    }
-    let raw = room_m / largest_m;
-    let decade = 10f64.powf(raw.log10().floor());
-    let step = [5.0, 2.0, 1.0].into_iter().find(|m| m * decade <= raw).unwrap_or(1.0);
-    (step * decade).max(f64::MIN_POSITIVE)
-}
-
 /// The outline of an ellipse, `n` points, centred on `c`.
 pub fn ellipse_outline(c: Point2<f64>, e: &ErrorEllipse, n: usize) -> Vec<Point2<f64>> {
     let (s, co) = e.orientation_rad.sin_cos();
@@ -169,7 +175,7 @@ pub fn ellipse_outline(c: Point2<f64>, e: &ErrorEllipse, n: usize) -> Vec<Point2
 /// Where the scene crosses the horizontal plane at `z`: one segment per
 /// facet that crosses it (cylinders and spheres as the recording's facets).
 pub fn scene_slice(scene: &Scene, z: f64) -> Vec<[Point2<f64>; 2]> {
-    let (vertices, triangles) = crate::recording::scene_mesh(scene);
+    let (vertices, triangles) = super::shapes::scene_mesh(scene);
     let v = |i: u32| {
         let p = vertices[i as usize];
         Point3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]))
@@ -298,28 +304,10 @@ fn top_view(
     Ok(PlotSummary { ellipse_scale: scale, ellipses: ellipses.len(), scene_segments })
 }
 
-/// "1000", "20", "0.5".
-pub fn ellipse_scale_name(k: f64) -> String {
-    if k >= 1.0 { format!("{k:.0}") } else { format!("{k}") }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use nalgebra::Matrix2;
-
-    #[test]
-    fn the_scale_is_a_1_2_5_number_that_fits_the_room() {
-        assert_eq!(ellipse_scale(0.004, 1.8), 200.0);
-        assert_eq!(ellipse_scale(0.04, 1.8), 20.0);
-        assert_eq!(ellipse_scale(0.02, 10.0), 500.0);
-        assert_eq!(ellipse_scale(3.0, 1.0), 0.2);
-        assert_eq!(ellipse_scale(0.0, 1.0), 1.0);
-        for largest in [1e-4, 3.3e-3, 0.07, 2.0] {
-            let k = ellipse_scale(largest, 2.0);
-            assert!(k * largest <= 2.0 && k * largest > 2.0 / 2.5 - 1e-12, "{largest}: ×{k}");
-        }
-    }
 
     #[test]
     fn the_outline_lies_on_the_covariance_ellipse() {

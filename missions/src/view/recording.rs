@@ -1,8 +1,8 @@
 //! `mission.rrd`: the run as a Rerun recording a surveyor reads at a glance.
 //!
 //! Timelines `step` (one tick per journal step) and `sim_time` (nominal
-//! seconds: drives at [`DRIVE_SPEED_M_PER_S`], [`MEASURE_S`] per total-station
-//! measurement, [`TILT_S`] per tilt reading, the LMS's own slice rate per
+//! seconds: drives at [`crate::run::runner::DRIVE_SPEED_M_PER_S`], [`crate::run::runner::MEASURE_S`] per total-station
+//! measurement, [`crate::run::runner::TILT_S`] per tilt reading, the LMS's own slice rate per
 //! scan). Entities:
 //!
 //! | path | archetype | when |
@@ -45,24 +45,19 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use cps::geom::{Primitive, Scene};
-use cps::{ParentPose, TeamState};
-use nalgebra::{Matrix3, Matrix4, Point3, SymmetricEigen, UnitQuaternion, Vector3};
+use cps::geom::Scene;
+use cps::{CHI2_3D_95_SQRT, ParentPose, TeamState};
+use nalgebra::{Matrix3, Matrix4, Point3, SymmetricEigen, UnitQuaternion};
 use planner::{Action, Dance, Robot, Step, StepEstimate, Violation};
 use rerun::{RecordingStream, RecordingStreamBuilder};
 
-/// Nominal drive speed for `sim_time`, m/s.
-pub const DRIVE_SPEED_M_PER_S: f64 = 0.3;
-/// Nominal duration of a total-station measurement (ATR lock, distance), s.
-pub const MEASURE_S: f64 = 4.0;
-/// Nominal duration of a tilt reading, s.
-pub const TILT_S: f64 = 1.0;
-/// √χ²₃(0.95): the 95 % ellipsoid's half axes are this many σ.
-pub const CHI3_95_SCALE: f64 = 2.795_483_482_915_108;
+use super::shapes::{ellipse_scale, ellipse_scale_name, scene_mesh};
+use crate::mission::Mission;
+use crate::planning::Planned;
+use crate::run::inspection::{Inspection, label};
+
 /// Voxel for the display copy of each scan, metres.
 pub const DISPLAY_VOXEL_M: f64 = 0.05;
-/// Baarda's critical value for α₀ = 0.1 % (two-sided).
-pub const W_CRITICAL: f64 = 3.29;
 
 /// The plan to log under `world/plan/` ([`Recorder::plan`]).
 #[derive(Debug, Clone, Copy)]
@@ -103,7 +98,7 @@ impl PlanLog<'_> {
         let mut gaps: Vec<f64> =
             self.dance.stations.windows(2).map(|w| (w[1].position - w[0].position).norm()).collect();
         gaps.sort_by(f64::total_cmp);
-        crate::plot::ellipse_scale(largest, 0.5 * gaps.get(gaps.len() / 2).copied().unwrap_or(1.0))
+        ellipse_scale(largest, 0.5 * gaps.get(gaps.len() / 2).copied().unwrap_or(1.0))
     }
 }
 
@@ -163,6 +158,11 @@ fn blueprint(layout: Layout) -> rerun::blueprint::Blueprint {
     .with_blueprint_panel(BlueprintPanel::new().with_state(PanelState::Collapsed))
     .with_selection_panel(SelectionPanel::new().with_state(PanelState::Collapsed))
     .with_time_panel(TimePanel::new().with_state(PanelState::Collapsed).with_timeline(timeline))
+}
+
+/// Whether this build can record: it can (the `recording` feature).
+pub fn available() -> Result<()> {
+    Ok(())
 }
 
 /// Where the recording goes besides `mission.rrd`.
@@ -232,7 +232,7 @@ pub fn ellipsoid_95(cov: &Matrix3<f64>) -> ([f32; 3], rerun::Quaternion) {
         v.column_mut(2).neg_mut();
     }
     let q = UnitQuaternion::from_matrix(&v).coords;
-    let h = eig.eigenvalues.map(|l| (CHI3_95_SCALE * l.max(0.0).sqrt()) as f32);
+    let h = eig.eigenvalues.map(|l| (CHI2_3D_95_SQRT * l.max(0.0).sqrt()) as f32);
     ([h.x, h.y, h.z], rerun::Quaternion::from_xyzw([q.x as f32, q.y as f32, q.z as f32, q.w as f32]))
 }
 
@@ -242,7 +242,7 @@ pub fn w_colour(w: Option<f64>) -> rerun::Color {
     match w.map(f64::abs) {
         None => rerun::Color::from_rgb(150, 150, 150),
         Some(w) if w < 2.0 => rerun::Color::from_rgb(40, 200, 80),
-        Some(w) if w <= W_CRITICAL => rerun::Color::from_rgb(240, 170, 30),
+        Some(w) if w <= cps::W_CRITICAL => rerun::Color::from_rgb(240, 170, 30),
         Some(_) => rerun::Color::from_rgb(230, 40, 40),
     }
 }
@@ -281,53 +281,6 @@ fn log_scan(rec: &RecordingStream, path: String, points: &[Point3<f32>]) -> Resu
         path,
         &rerun::Points3D::new(thin.iter().map(|p| [p.x, p.y, p.z])).with_colors(colours).with_radii([0.015_f32]),
     ))
-}
-
-/// The scene's surfaces as one triangle mesh (cylinders with 32 facets,
-/// spheres as 16 × 32 facets).
-pub fn scene_mesh(scene: &Scene) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
-    let mut vertices: Vec<[f32; 3]> = Vec::new();
-    let mut triangles = Vec::new();
-    let mut quad = |vs: &mut Vec<[f32; 3]>, a: Point3<f64>, b: Point3<f64>, c: Point3<f64>, d: Point3<f64>| {
-        let k = vs.len() as u32;
-        vs.extend([p32(&a), p32(&b), p32(&c), p32(&d)]);
-        triangles.push([k, k + 1, k + 2]);
-        triangles.push([k, k + 2, k + 3]);
-    };
-    for (primitive, _) in scene.bvh().primitives() {
-        match primitive {
-            Primitive::Triangle([a, b, c]) => quad(&mut vertices, *a, *b, *c, *c),
-            Primitive::Cylinder { a, b, radius_m } => {
-                let axis = b - a;
-                let u = axis.cross(&if axis.x.abs() < 0.9 * axis.norm() { Vector3::x() } else { Vector3::y() });
-                let u = u.normalize() * *radius_m;
-                let v = axis.normalize().cross(&u);
-                let n = 32;
-                let ring = |k: usize| {
-                    let t = std::f64::consts::TAU * k as f64 / n as f64;
-                    u * t.cos() + v * t.sin()
-                };
-                for k in 0..n {
-                    let (r0, r1) = (ring(k), ring(k + 1));
-                    quad(&mut vertices, a + r0, a + r1, b + r1, b + r0);
-                }
-            }
-            Primitive::Sphere { center, radius_m } => {
-                let (nu, nv) = (32, 16);
-                let at = |i: usize, j: usize| {
-                    let (phi, theta) =
-                        (std::f64::consts::TAU * i as f64 / nu as f64, std::f64::consts::PI * j as f64 / nv as f64);
-                    center + *radius_m * Vector3::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos())
-                };
-                for i in 0..nu {
-                    for j in 0..nv {
-                        quad(&mut vertices, at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1));
-                    }
-                }
-            }
-        }
-    }
-    (vertices, triangles)
 }
 
 impl Recorder {
@@ -442,9 +395,25 @@ impl Recorder {
         Ok(())
     }
 
-    /// The plan under `world/<root>/` on the `plan_step` timeline (the
+    /// A mission's plan under `world/<root>/` (`plan` as written,
+    /// `plan_optimized`) on the `plan_step` timeline: its steps, every
+    /// robot's predicted estimate and each violation described (the
     /// runner's `step` and `sim_time` are left as they were).
-    pub fn plan(&mut self, plan: &PlanLog) -> Result<()> {
+    pub fn plan(&mut self, mission: &Mission, planned: &Planned, root: &str, violations: &[Violation]) -> Result<()> {
+        let described: Vec<(Violation, String)> =
+            violations.iter().map(|v| (v.clone(), v.describe(&|r| mission.robot_name(r)))).collect();
+        let names = mission.robot_labels();
+        self.log_plan(&PlanLog {
+            root,
+            dance: &planned.dance,
+            steps: &planned.steps,
+            estimates: &planned.estimates,
+            violations: &described,
+            names: &names,
+        })
+    }
+
+    fn log_plan(&mut self, plan: &PlanLog) -> Result<()> {
         let Some(rec) = &self.rec else { return Ok(()) };
         rec.reset_time();
         let dance = plan.dance;
@@ -468,7 +437,7 @@ impl Recorder {
             &rerun::Points3D::new(stations).with_colors(colours).with_radii([0.06_f32]),
         ))?;
         let scale = plan.ellipsoid_scale();
-        let scale_name = crate::plot::ellipse_scale_name(scale);
+        let scale_name = ellipse_scale_name(scale);
         let broken = |step: usize| plan.violations.iter().any(|(v, _)| v.step == step);
         let colour = |step: usize| if broken(step) { red() } else { green() };
         let line = |a: &Point3<f64>, b: &Point3<f64>, step: usize| {
@@ -746,12 +715,7 @@ impl Recorder {
     /// The pipe inspection: the cloud coloured by deviation (at most
     /// [`PIPE_DISPLAY_POINTS`], evenly picked), the fitted axis and a
     /// labelled box around each anomaly.
-    pub fn pipe(
-        &mut self,
-        cloud: &[Point3<f32>],
-        inspection: &crate::pipe::Inspection,
-        threshold_m: f64,
-    ) -> Result<()> {
+    pub fn pipe(&mut self, cloud: &[Point3<f32>], inspection: &Inspection, threshold_m: f64) -> Result<()> {
         let Some(rec) = &self.rec else { return Ok(()) };
         let every = cloud.len().div_ceil(PIPE_DISPLAY_POINTS).max(1);
         let shown = cloud.iter().zip(&inspection.deviations).step_by(every);
@@ -768,7 +732,7 @@ impl Recorder {
             .iter()
             .map(|a| (p32(&a.bounds.0), p32(&Point3::from(a.bounds.1 - a.bounds.0))))
             .unzip();
-        let labels: Vec<String> = inspection.anomalies.iter().map(|a| crate::pipe::label(pipe, a)).collect();
+        let labels: Vec<String> = inspection.anomalies.iter().map(|a| label(pipe, a)).collect();
         rr(rec.log(
             "world/pipe/anomalies",
             &rerun::Boxes3D::from_mins_and_sizes(mins, sizes).with_labels(labels).with_colors([red()]),
@@ -776,9 +740,24 @@ impl Recorder {
     }
 
     /// A mission event in the text log.
-    pub fn event(&mut self, level: &'static str, text: impl Into<String>) -> Result<()> {
+    fn event(&mut self, level: &'static str, text: String) -> Result<()> {
         let Some(rec) = &self.rec else { return Ok(()) };
-        rr(rec.log("log", &rerun::TextLog::new(text.into()).with_level(level)))
+        rr(rec.log("log", &rerun::TextLog::new(text).with_level(level)))
+    }
+
+    /// An event of the mission, in the log.
+    pub fn info(&mut self, text: impl Into<String>) -> Result<()> {
+        self.event(rerun::TextLogLevel::INFO, text.into())
+    }
+
+    /// A warning (a retry, a blunder suspect), in the log.
+    pub fn warn(&mut self, text: impl Into<String>) -> Result<()> {
+        self.event(rerun::TextLogLevel::WARN, text.into())
+    }
+
+    /// An error that stops the mission, in the log.
+    pub fn error(&mut self, text: impl Into<String>) -> Result<()> {
+        self.event(rerun::TextLogLevel::ERROR, text.into())
     }
 
     /// A parent station's figures for the `metrics/` series: σxy, predicted
@@ -837,9 +816,24 @@ impl Recorder {
     }
 }
 
+/// Writes a plan recording (`plan`/`predict --rrd FILE`): the scene and
+/// each plan — its root (`plan`, `plan_optimized`), the plan and its
+/// violations — on the `plan_step` timeline.
+pub fn write_plan_rrd(mission: &Mission, path: &Path, plans: &[(&str, &Planned, &[Violation])]) -> Result<()> {
+    let mut rec = Recorder::new(&mission.name, Some(path), &Viewer::None, mission.robot_labels())?;
+    rec.layout(Layout::Plan)?;
+    let scene = plans.first().and_then(|(_, p, _)| p.checked_scene());
+    rec.world(scene)?;
+    for (root, planned, violations) in plans {
+        rec.plan(mission, planned, root, violations)?;
+    }
+    rec.finish()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::Vector3;
 
     /// The 95 % ellipsoid's axes are √(χ²₃ · eigenvalue) along the
     /// eigenvectors: a covariance rotated by 30° about z gives back the
@@ -852,7 +846,7 @@ mod tests {
         let (half, q) = ellipsoid_95(&cov);
         let q =
             UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q.0[3], q.0[0], q.0[1], q.0[2]).cast::<f64>());
-        let mut expected = [0.02, 0.01, 0.003].map(|s| s * CHI3_95_SCALE);
+        let mut expected = [0.02, 0.01, 0.003].map(|s| s * CHI2_3D_95_SQRT);
         expected.sort_by(f64::total_cmp);
         let mut got = half.map(f64::from);
         got.sort_by(f64::total_cmp);
@@ -865,23 +859,9 @@ mod tests {
         for (k, h) in half.iter().enumerate() {
             let x = q * (Vector3::ith(k, 1.0) * f64::from(*h));
             let m = (x.transpose() * inv * x)[(0, 0)];
-            assert!((m - CHI3_95_SCALE.powi(2)).abs() < 1e-4 * m, "axis {k}: {m}");
+            assert!((m - CHI2_3D_95_SQRT.powi(2)).abs() < 1e-4 * m, "axis {k}: {m}");
         }
         assert_eq!(w_colour(None), rerun::Color::from_rgb(150, 150, 150));
         assert_ne!(w_colour(Some(-4.0)), w_colour(Some(1.0)));
-    }
-
-    #[test]
-    fn the_scene_mesh_covers_every_primitive() {
-        let scene = cps::geom::builtin("sewer").expect("sewer");
-        let (v, t) = scene_mesh(&scene);
-        assert!(!t.is_empty());
-        assert!(t.iter().flatten().all(|&i| (i as usize) < v.len()));
-        // Every vertex lies on the scene's surfaces (facets of a cylinder
-        // have their vertices on it).
-        for p in v.iter().step_by(7) {
-            let d = scene.bvh().distance(&Point3::new(p[0], p[1], p[2]).cast()).0;
-            assert!(d < 1e-4, "{p:?} is {d} m off the scene");
-        }
     }
 }

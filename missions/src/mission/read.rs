@@ -1,379 +1,25 @@
-//! The mission file: raw TOML → validated, unit-converted [`Mission`].
-//!
-//! Keys carry their unit in their name; every problem in a file is reported
-//! at once, each with file:line:column (see the README's mission reference).
+//! Reading a mission file: TOML with spans → a validated [`Mission`], one
+//! function per table, every problem collected (file:line:column) before
+//! anything is refused.
 
 use std::ops::Range;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use cps::{DistanceErrorModel, Instrument, RAD_PER_ARCSEC};
 use nalgebra::{Matrix4, Point3, Vector3, Vector4};
-use toml::de::DeTable;
+use toml::Spanned;
+use toml::de::{DeTable, DeValue};
 
-use crate::diagnostics::{Diagnostic, Diagnostics, Source};
-use crate::reader::{At, Reader, Table};
+use super::diagnostics::{Diagnostic, Diagnostics, Source};
+use super::reader::{At, Reader, Table};
+use super::{
+    Acceptance, Backend, FUSION_MODES, FusionMode, FusionPlan, Mission, MissionError, OUTPUT_FORMATS, Output, PipePlan,
+    Plan, ScanPlan, Search, SerialPorts, Spans,
+};
 
-/// The dance to plan and predict.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Plan {
-    /// Parent waypoints, world frame, metres.
-    pub route_m: Vec<Point3<f64>>,
-    /// Distance between parent stations along the route, metres.
-    pub stride_m: f64,
-    /// Child offsets (forward, left, up) in the parent frame, team order, metres.
-    pub formation_m: Vec<Vector3<f64>>,
-    /// The generated formation (`formation = { kind = ... }`) the offsets
-    /// come from, with its `up_m`; `None` when `formation_m` lists them.
-    pub formation: Option<(planner::FormationKind, f64)>,
-    /// Covariance of the start pose (x, y, z, θ), m² and rad²; zero when known.
-    pub start_covariance: Matrix4<f64>,
-    /// How the team advances (`strategy`, `hops`).
-    pub strategy: planner::Strategy,
-    /// The moving robot must stay in sight (`track`, default false).
-    pub track: bool,
-    /// Steepest move, radians (`max_slope_deg`; `None`: unchecked).
-    pub max_slope_rad: Option<f64>,
-    /// Radius of every robot's footprint, metres (`[team] footprint_radius_m`,
-    /// default 0.3).
-    pub footprint_radius_m: f64,
-    /// What `plan --optimize` may change (`[plan.search]`).
-    pub search: Search,
-}
-
-/// The space `cps-survey plan --optimize` searches (`[plan.search]`).
-#[derive(Debug, Clone, PartialEq)]
-pub struct Search {
-    /// Strategies to try (`strategies`, default both).
-    pub strategies: Vec<String>,
-    /// Largest `hops` tried for parent hops (`max_hops`, default 4).
-    pub max_hops: usize,
-    /// Strides to try, metres (`strides_m`; default the written stride
-    /// × 0.5, 0.75, 1, 1.25, 1.5 and 2).
-    pub strides_m: Vec<f64>,
-    /// Longest sight line a formation may need, metres
-    /// (`max_sight_line_m`; default the total station's `max_range_m`,
-    /// at most 200 m).
-    pub max_sight_line_m: f64,
-}
-
-/// Pass/fail tolerances.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Acceptance {
-    /// Largest acceptable final √(σx² + σy²), metres.
-    pub max_final_sigma_xy_m: Option<f64>,
-    /// Largest acceptable horizontal error of any station against the
-    /// simulator's truth, metres (sim backend only).
-    pub max_station_error_m: Option<f64>,
-}
-
-/// Where the devices come from (`[backend]`).
-#[derive(Debug, Clone, PartialEq)]
-pub struct Backend {
-    /// The simulator's scene: a built-in name (`scene`, default `"hall"`),
-    /// or the path of `scene_file` as written.
-    pub scene: String,
-    /// `scene_file`: the file's resolved path and text (checked to parse).
-    pub scene_file: Option<(PathBuf, String)>,
-    /// Whether the file has a `[backend]` table: the plan is then checked
-    /// against its scene (line of sight, tracking, clearance, scan range);
-    /// without one it is planned in open space.
-    pub given: bool,
-    /// Seed of every simulated device (`seed`, default 1).
-    pub seed: u64,
-    /// Attempts after the first when a device command fails
-    /// (`max_retries`, default 2).
-    pub max_retries: u32,
-    /// Pause before each retry, seconds (`retry_delay_s`, default 0.5).
-    pub retry_delay_s: f64,
-    /// The simulated drives' odometry error (`odometry_*`, `terrain_tilt_sigma_deg`).
-    pub odometry: scanner::sim::OdometryError,
-    /// The instruments' ports with `kind = "serial"` (`[backend.serial]`);
-    /// `None` runs on the simulator.
-    pub serial: Option<SerialPorts>,
-}
-
-/// Where the real instruments are (`[backend.serial]`).
-#[derive(Debug, Clone, PartialEq)]
-pub struct SerialPorts {
-    /// The total station's port (`total_station`; required with children).
-    pub total_station: Option<String>,
-    /// Its baud rate (`total_station_baud`, default 9600).
-    pub total_station_baud: u32,
-    /// Deadline of one GeoCOM reply, seconds (`total_station_timeout_s`,
-    /// default 5; a distance measurement takes 1–3 s).
-    pub total_station_timeout_s: f64,
-    /// The tilt sensor's port (`tilt`).
-    pub tilt: String,
-    /// Its baud rate (`tilt_baud`, default 9600).
-    pub tilt_baud: u32,
-    /// Its sentence rate (`tilt_rate_hz`, default 10).
-    pub tilt_rate_hz: f64,
-    /// The LMS-2xx's port (`scanner`).
-    pub scanner: String,
-    /// The session baud rate the scanner is switched to (`scanner_baud`:
-    /// 9600, 19200, 38400 or 500000; default 38400).
-    pub scanner_baud: u32,
-    /// Continuous output instead of one request per slice
-    /// (`scanner_continuous`, default false).
-    pub scanner_continuous: bool,
-    /// The scan head's port (`head`).
-    pub head: String,
-    /// The drives' ports: the parent's first, then the children's in
-    /// `[team] children` order (`drives`).
-    pub drives: Vec<String>,
-    /// The drives' and the head's baud rate (`robot_baud`, default 115200).
-    pub robot_baud: u32,
-    /// Deadline of one drive move, seconds (`move_timeout_s`, default 120).
-    pub move_timeout_s: f64,
-}
-
-/// What the scanner does (`[scan]`).
-#[derive(Debug, Clone, PartialEq)]
-pub struct ScanPlan {
-    /// Scan at every n-th parent station, 0 = never (`every_n_stations`,
-    /// default 1; station 0 is the start).
-    pub every_n_stations: usize,
-    /// Scan exactly at these stations instead (`stations`, ascending,
-    /// distinct; exclusive with `every_n_stations`).
-    pub stations: Option<Vec<usize>>,
-    /// Table steps per 360° (`slices`, default 180).
-    pub slices: usize,
-    /// LMS angular resolution (`resolution_deg`: 1, 0.5 or 0.25; default 1).
-    pub resolution: scanner::sim::LmsResolution,
-    /// Scan head centre in the body frame (`body_from_head_m`, default
-    /// [0, 0, 0.4]), metres.
-    pub body_from_head_m: Vector3<f64>,
-    /// The head (`head`: `"rotating-table"`, default, or `"pitching"`).
-    pub head: scanner::HeadKind,
-}
-
-impl Default for ScanPlan {
-    fn default() -> Self {
-        Self {
-            every_n_stations: 1,
-            stations: None,
-            slices: 180,
-            resolution: scanner::sim::LmsResolution::One,
-            body_from_head_m: Vector3::new(0.0, 0.0, 0.4),
-            head: scanner::HeadKind::RotatingTable,
-        }
-    }
-}
-
-impl ScanPlan {
-    /// The scan head's mount on the body: `body_from_head_m`, no rotation.
-    pub fn body_from_head(&self) -> nalgebra::Isometry3<f64> {
-        nalgebra::Isometry3::from_parts(
-            nalgebra::Translation3::from(self.body_from_head_m),
-            nalgebra::UnitQuaternion::identity(),
-        )
-    }
-
-    /// Where the scanner stands in the body frame (the head's mount; the
-    /// 2D scanner turns about it).
-    pub fn scanner_in_body(&self) -> nalgebra::Point3<f64> {
-        nalgebra::Point3::from(self.body_from_head_m)
-    }
-
-    /// Whether the scanner scans at station `k`.
-    pub fn scans_at(&self, k: usize) -> bool {
-        match &self.stations {
-            Some(list) => list.binary_search(&k).is_ok(),
-            None => self.every_n_stations != 0 && k.is_multiple_of(self.every_n_stations),
-        }
-    }
-}
-
-/// How the scans become one cloud (`[fusion] mode`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum FusionMode {
-    /// Each scan with its CPS pose and tilt (seed 003's direct transformation).
-    Direct,
-    /// Scan matching alone: simultaneous matching (seed 000 §4.2) from the
-    /// odometry's pose guesses, the first scan fixed at its CPS pose.
-    Icp,
-    /// The CPS pose of each scan as a prior, ICP between overlapping scans,
-    /// adjusted together in a pose graph.
-    CpsIcp,
-}
-
-impl FusionMode {
-    /// The mode's name in mission files and on the command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            FusionMode::Direct => "direct",
-            FusionMode::Icp => "icp",
-            FusionMode::CpsIcp => "cps-icp",
-        }
-    }
-
-    /// The mode called `name`.
-    pub fn from_name(name: &str) -> Option<Self> {
-        [FusionMode::Direct, FusionMode::Icp, FusionMode::CpsIcp].into_iter().find(|m| m.name() == name)
-    }
-}
-
-/// Mode names `[fusion] mode` accepts.
-pub const FUSION_MODES: [&str; 3] = ["direct", "icp", "cps-icp"];
-
-/// Fusion settings (`[fusion]`).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct FusionPlan {
-    /// The mode (`mode`, default `"direct"`).
-    pub mode: FusionMode,
-    /// Reduced-points cell of the scans matched (`voxel_m`, default 0.2); the
-    /// model side uses half of it.
-    pub voxel_m: f64,
-    /// ICP correspondence distance of the first, coarse pass
-    /// (`max_correspondence_m`, default 0.5).
-    pub max_correspondence_m: f64,
-    /// … and of the second, fine pass from the first's result
-    /// (`fine_correspondence_m`, default 0.1; ≤ `max_correspondence_m`).
-    pub fine_correspondence_m: f64,
-    /// ICP iteration cap per match (`max_iterations`, default 50).
-    pub max_iterations: usize,
-    /// Huber kernel width (`huber_m`, default 0.02; 0 = plain least squares).
-    pub huber_m: f64,
-    /// Two scans overlap with more correspondences than this (`min_pairs`,
-    /// default 250, as in seed 000).
-    pub min_pairs: usize,
-    /// `cps-icp`: each scan is matched against at most this many earlier
-    /// scans (`max_partners`, default 4).
-    pub max_partners: usize,
-    /// `cps-icp`: ICP covariances are multiplied by this before the
-    /// adjustment (`icp_variance_factor`, default 1; raise it when the
-    /// scans' errors are correlated, e.g. by a miscalibrated scanner).
-    pub icp_variance_factor: f64,
-}
-
-impl Default for FusionPlan {
-    fn default() -> Self {
-        Self {
-            mode: FusionMode::Direct,
-            voxel_m: 0.2,
-            max_correspondence_m: 0.5,
-            fine_correspondence_m: 0.1,
-            max_iterations: 50,
-            huber_m: 0.02,
-            min_pairs: 250,
-            max_partners: 4,
-            icp_variance_factor: 1.0,
-        }
-    }
-}
-
-/// Output formats of the merged cloud (`[output] formats`).
-#[derive(Debug, Clone, PartialEq)]
-pub struct Output {
-    /// File extensions, e.g. `["ply", "las"]` (default `["ply"]`).
-    pub formats: Vec<String>,
-    /// Write `mission.rrd` for the Rerun viewer (`rerun`, default true).
-    pub rerun: bool,
-}
-
-/// Pipe inspection of the fused cloud (`[pipe]`, seed 000 §5): a tube is
-/// fitted from the nominal one and every point's deviation from it mapped.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PipePlan {
-    /// The nominal tube the fit starts from (`axis_from_m`, `axis_to_m`,
-    /// `radius_m`), world frame.
-    pub nominal: fusion::pipe::Pipe,
-    /// A point deviating more than this is anomalous (`threshold_m`,
-    /// default 0.02).
-    pub threshold_m: f64,
-    /// Anomalous points closer than this belong to one anomaly (`link_m`,
-    /// default 0.05).
-    pub link_m: f64,
-    /// Smaller groups are dropped as noise (`min_points`, default 20).
-    pub min_points: usize,
-}
-
-/// Cloud formats `[output] formats` accepts.
-pub const OUTPUT_FORMATS: [&str; 5] = ["ply", "las", "e57", "pcd", "xyz"];
-
-/// Where in the file each value came from, to point errors found later
-/// (e.g. by the planner) at the right line.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct Spans {
-    /// `[plan]` table.
-    pub plan: Range<usize>,
-    /// Each `route_m` waypoint.
-    pub route_m: Vec<Range<usize>>,
-    /// `stride_m`.
-    pub stride_m: Range<usize>,
-    /// Each `formation_m` offset (each the `formation` table when generated).
-    pub formation_m: Vec<Range<usize>>,
-    /// The value of `formation_m` or `formation`.
-    pub formation_value: Range<usize>,
-    /// The values of `strategy` and `hops`, where given.
-    pub strategy: Option<Range<usize>>,
-    /// The value of `hops`, where given.
-    pub hops: Option<Range<usize>>,
-    /// The value of `[backend] scene_file`, where given.
-    pub scene_file: Option<Range<usize>>,
-    /// `[scan] stations`, when given.
-    pub scan_stations: Option<Range<usize>>,
-}
-
-/// A validated mission.
-#[derive(Debug, Clone)]
-pub struct Mission {
-    /// The file it came from.
-    pub source: Source,
-    /// `mission.name`.
-    pub name: String,
-    /// Child names, team order.
-    pub children: Vec<String>,
-    /// The parent's total station; `None` for a robot alone (no children),
-    /// which positions itself by odometry.
-    pub total_station: Option<Instrument>,
-    /// The dance.
-    pub plan: Plan,
-    /// Tolerances.
-    pub acceptance: Acceptance,
-    /// The simulator's settings.
-    pub backend: Backend,
-    /// The scanner's settings.
-    pub scan: ScanPlan,
-    /// How the scans are fused.
-    pub fusion: FusionPlan,
-    /// The outputs.
-    pub output: Output,
-    /// The pipe inspection, when `[pipe]` is given.
-    pub pipe: Option<PipePlan>,
-    /// Spans for later diagnostics.
-    pub spans: Spans,
-}
-
-/// Failure to load a mission.
-#[derive(Debug, thiserror::Error)]
-#[non_exhaustive]
-pub enum MissionError {
-    /// The file could not be read.
-    #[error("cannot read mission file {file}")]
-    Io {
-        /// The path.
-        file: String,
-        /// The cause.
-        #[source]
-        source: std::io::Error,
-    },
-    /// The file has problems.
-    #[error("mission file {file}: {problems}")]
-    Invalid {
-        /// The path.
-        file: String,
-        /// Every problem found.
-        problems: Diagnostics,
-    },
-}
-
-impl MissionError {
-    /// The problems of `mission`'s file found after parsing (e.g. by the planner).
-    pub fn invalid(mission: &Mission, problems: Diagnostics) -> Self {
-        MissionError::Invalid { file: mission.source.file.display().to_string(), problems }
-    }
-}
+/// A raw TOML value with its span.
+type Raw<'i> = Spanned<DeValue<'i>>;
 
 impl Mission {
     /// Reads and validates a mission file.
@@ -385,7 +31,7 @@ impl Mission {
 
     /// Validates a mission from its text.
     pub fn parse(source: Source) -> Result<Self, MissionError> {
-        Self::parse_with_scene(source, None)
+        parse(source, None)
     }
 
     /// Reads and validates a mission file whose `scene_file`, if it has one,
@@ -393,90 +39,77 @@ impl Mission {
     pub fn load_with_scene(path: &Path, scene_file: &Path) -> Result<Self, MissionError> {
         let text = std::fs::read_to_string(path)
             .map_err(|source| MissionError::Io { file: path.display().to_string(), source })?;
-        Self::parse_with_scene(Source::new(path, text), Some(scene_file))
-    }
-
-    /// The built-in scene or the scene file's scene.
-    pub fn scene(&self) -> cps::Result<cps::geom::Scene> {
-        match &self.backend.scene_file {
-            Some((_, text)) => cps::geom::parse_scene_toml(text),
-            None => cps::geom::builtin(&self.backend.scene),
-        }
-    }
-
-    /// Validates a mission; `scene_file` overrides where its `scene_file` is read.
-    fn parse_with_scene(source: Source, scene_file: Option<&Path>) -> Result<Self, MissionError> {
-        let invalid = |source: &Source, problems: Vec<Diagnostic>| MissionError::Invalid {
-            file: source.file.display().to_string(),
-            problems: Diagnostics(problems),
-        };
-        let doc = match DeTable::parse(&source.text) {
-            Ok(doc) => doc,
-            Err(e) => {
-                let span = e.span().unwrap_or(0..0);
-                let message = format!("invalid TOML: {}", e.message());
-                let d = source.diagnostic(&span, "", message);
-                return Err(invalid(&source, vec![d]));
-            }
-        };
-        let mut r = Reader::new(&source);
-        let mut root = Table::root(&doc);
-        let parsed = read_mission(&mut r, &mut root, scene_file);
-        root.finish(&mut r);
-        match parsed {
-            Some(Parts {
-                name,
-                children,
-                total_station,
-                plan,
-                acceptance,
-                backend,
-                scan,
-                fusion,
-                output,
-                pipe,
-                spans,
-            }) if r.problems.is_empty() => Ok(Mission {
-                source,
-                name,
-                children,
-                total_station,
-                plan,
-                acceptance,
-                backend,
-                scan,
-                fusion,
-                output,
-                pipe,
-                spans,
-            }),
-            _ => Err(invalid(&source, r.problems)),
-        }
-    }
-
-    /// A diagnostic at `span` of this mission's file.
-    pub fn diagnostic(&self, span: &Range<usize>, field: &str, message: impl Into<String>) -> Diagnostic {
-        self.source.diagnostic(span, field, message)
+        parse(Source::new(path, text), Some(scene_file))
     }
 }
 
-struct Parts {
-    name: String,
-    children: Vec<String>,
-    total_station: Option<Instrument>,
-    plan: Plan,
-    acceptance: Acceptance,
-    backend: Backend,
-    scan: ScanPlan,
-    fusion: FusionPlan,
-    output: Output,
-    pipe: Option<PipePlan>,
-    spans: Spans,
+/// Validates a mission; `scene_file` overrides where its `scene_file` is read.
+fn parse(source: Source, scene_file: Option<&Path>) -> Result<Mission, MissionError> {
+    let invalid = |source: &Source, problems: Vec<Diagnostic>| MissionError::Invalid {
+        file: source.file.display().to_string(),
+        problems: Diagnostics(problems),
+    };
+    let doc = match DeTable::parse(&source.text) {
+        Ok(doc) => doc,
+        Err(e) => {
+            let span = e.span().unwrap_or(0..0);
+            let message = format!("invalid TOML: {}", e.message());
+            let d = source.diagnostic(&span, "", message);
+            return Err(invalid(&source, vec![d]));
+        }
+    };
+    let mut r = Reader::new(&source);
+    let mut root = Table::root(&doc);
+    let mission = read_mission(&mut r, &mut root, scene_file);
+    root.finish(&mut r);
+    match mission {
+        Some(mission) if r.problems.is_empty() => Ok(mission),
+        _ => Err(invalid(&source, r.problems)),
+    }
 }
 
-fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>, scene_override: Option<&Path>) -> Option<Parts> {
-    let mut mission = root.table(r, "mission");
-    let name = mission.required(r, "name", "a mission name (string)", |r, v, f| {
+/// The whole file, table by table.
+fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>, scene_override: Option<&Path>) -> Option<Mission> {
+    let name = read_name(r, root);
+    let team = read_team(r, root);
+    let n_children = team.as_ref().map(|(children, _)| children.len());
+    let solo = n_children == Some(0);
+    let total_station = read_instruments(r, root, solo);
+    let plan = read_plan_table(r, root, n_children);
+    let acceptance = read_acceptance(r, root);
+    let backend = read_backend(r, root, n_children, scene_override);
+    let scan = read_scan(r, root);
+    let fusion = read_fusion(r, root, solo);
+    let output = read_output(r, root);
+    let pipe = read_pipe_table(r, root);
+
+    let (children, footprint) = team?;
+    let (mut plan, mut spans) = plan?;
+    plan.footprint_radius_m = footprint.unwrap_or(plan.footprint_radius_m);
+    let (backend, scene_file_span) = backend?;
+    let (scan, scan_stations_span) = scan?;
+    spans.scene_file = scene_file_span;
+    spans.scan_stations = scan_stations_span;
+    Some(Mission {
+        source: r.source.clone(),
+        name: name?,
+        children,
+        total_station: total_station?,
+        plan,
+        acceptance: acceptance?,
+        backend,
+        scan,
+        fusion: fusion?,
+        output: output?,
+        pipe: pipe?,
+        spans,
+    })
+}
+
+/// `[mission]`.
+fn read_name(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<String> {
+    let mut t = root.table(r, "mission");
+    let name = t.required(r, "name", "a mission name (string)", |r, v, f| {
         let s = r.string(v, f)?;
         if s.get_ref().trim().is_empty() {
             r.problem(&s.span(), f, "expected a non-empty name");
@@ -484,15 +117,22 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>, scene_override: Op
         }
         Some(s.into_inner())
     });
-    mission.finish(r);
+    t.finish(r);
+    name
+}
 
-    let mut team = root.table(r, "team");
-    let children = team.required(r, "children", "the child robots' names, e.g. [\"c1\", \"c2\"]", read_children);
+/// `[team]`: the children's names and the footprint radius.
+fn read_team(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<(Vec<String>, Option<f64>)> {
+    let mut t = root.table(r, "team");
+    let children = t.required(r, "children", "the child robots' names, e.g. [\"c1\", \"c2\"]", read_children);
     let footprint =
-        team.optional(r, "footprint_radius_m", |r, v, f| r.number_in(v, f, 0.0, false, Some(10.0)).map(At::into_inner));
-    team.finish(r);
+        t.optional(r, "footprint_radius_m", |r, v, f| r.number_in(v, f, 0.0, false, Some(10.0)).map(At::into_inner));
+    t.finish(r);
+    Some((children?, footprint?))
+}
 
-    let solo = children.as_ref().is_some_and(Vec::is_empty);
+/// `[instruments]`: the total station (none for a robot alone).
+fn read_instruments(r: &mut Reader<'_>, root: &mut Table<'_, '_>, solo: bool) -> Option<Option<Instrument>> {
     let mut instruments = root.table(r, "instruments");
     let total_station = if solo {
         if let Some(v) = instruments.get("total_station") {
@@ -507,35 +147,58 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>, scene_override: Op
         total_station.map(Some)
     };
     instruments.finish(r);
+    total_station
+}
 
-    let mut plan_t = root.table(r, "plan");
-    let plan = read_plan(r, &mut plan_t, children.as_ref().map(Vec::len));
-    plan_t.finish(r);
+/// `[plan]` (with `[plan.search]`).
+fn read_plan_table(r: &mut Reader<'_>, root: &mut Table<'_, '_>, n_children: Option<usize>) -> Option<(Plan, Spans)> {
+    let mut t = root.table(r, "plan");
+    let plan = read_plan(r, &mut t, n_children);
+    t.finish(r);
+    plan
+}
 
-    let mut acc = root.table(r, "acceptance");
-    let positive = |r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, f: &str| {
-        r.number_in(v, f, 0.0, false, None).map(At::into_inner)
-    };
-    let max_xy = acc.optional(r, "max_final_sigma_xy_m", positive);
-    let max_err = acc.optional(r, "max_station_error_m", positive);
-    acc.finish(r);
+/// `[acceptance]`.
+fn read_acceptance(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Acceptance> {
+    let mut t = root.table(r, "acceptance");
+    let max_xy = t.optional(r, "max_final_sigma_xy_m", positive);
+    let max_err = t.optional(r, "max_station_error_m", positive);
+    t.finish(r);
+    Some(Acceptance { max_final_sigma_xy_m: max_xy?, max_station_error_m: max_err? })
+}
 
-    let backend_given = root.has("backend");
+/// `[backend]` (with `[backend.serial]`) and the span of its `scene_file`.
+fn read_backend(
+    r: &mut Reader<'_>,
+    root: &mut Table<'_, '_>,
+    n_children: Option<usize>,
+    scene_override: Option<&Path>,
+) -> Option<(Backend, Option<Range<usize>>)> {
+    let given = root.has("backend");
     let mut b = root.table(r, "backend");
     let kind = b.optional(r, "kind", |r, v, f| r.choice(v, f, &["sim", "serial"]));
     let serial_given = b.has("serial");
     let mut sp = b.table(r, "serial");
     let serial = if kind.as_ref().and_then(|k| k.as_ref()).is_some_and(|k| k.get_ref() == "serial") {
-        let ports = read_serial(r, &mut sp, children.as_ref().map(Vec::len));
+        let ports = read_serial(r, &mut sp, n_children);
         sp.finish(r);
-        Some(ports)
+        ports.map(Some)
     } else {
         if serial_given {
             r.problem(&sp.span(), "backend.serial", "[backend.serial] is used with kind = \"serial\" only");
         }
-        None
+        Some(None)
     };
-    let scene = b.optional(r, "scene", |r, v, f| r.choice(v, f, &cps::geom::BUILTIN_SCENES).map(At::into_inner));
+    let scene = b.optional(r, "scene", |r, v, f| {
+        let name = r.choice(v, f, &cps::geom::BUILTIN_SCENES)?;
+        match cps::geom::builtin(name.get_ref()) {
+            Ok(scene) => Some((name.into_inner(), scene)),
+            Err(e) => {
+                r.problem(&name.span(), f, e.to_string());
+                None
+            }
+        }
+    });
     let scene_file = b.optional(r, "scene_file", |r, v, f| {
         let name = r.string(v, f)?;
         let written = PathBuf::from(name.get_ref());
@@ -550,12 +213,16 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>, scene_override: Op
                 return None;
             }
         };
-        if let Err(e) = cps::geom::parse_scene_toml(&text) {
-            r.problem(&name.span(), f, format!("scene file {}: {e}", path.display()));
-            return None;
+        match cps::geom::parse_scene_toml(&text) {
+            Ok(scene) => {
+                let span = name.span();
+                Some((name.into_inner(), path, text, scene, span))
+            }
+            Err(e) => {
+                r.problem(&name.span(), f, format!("scene file {}: {e}", path.display()));
+                None
+            }
         }
-        let span = name.span();
-        Some((name.into_inner(), path, text, span))
     });
     if b.has("scene") && b.has("scene_file") {
         let span = b.get("scene_file").map_or(b.span(), |v| v.span());
@@ -563,20 +230,55 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>, scene_override: Op
     }
     let seed = b.optional(r, "seed", |r, v, f| r.integer_in(v, f, 0, 1 << 53));
     let retries = b.optional(r, "max_retries", |r, v, f| r.integer_in(v, f, 0, 100));
-    let delay =
-        b.optional(r, "retry_delay_s", |r, v, f| r.number_in(v, f, 0.0, true, Some(3600.0)).map(At::into_inner));
-    let within = |min: f64, max: f64| {
-        move |r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, f: &str| {
-            r.number_in(v, f, min, true, Some(max)).map(At::into_inner)
-        }
-    };
+    let delay = b.optional(r, "retry_delay_s", within(0.0, 3600.0));
     let odo_scale = b.optional(r, "odometry_scale_error_percent", within(-50.0, 50.0));
     let odo_sigma_d = b.optional(r, "odometry_sigma_distance_mm_per_sqrt_m", within(0.0, 1000.0));
     let odo_drift = b.optional(r, "odometry_heading_drift_mrad_per_m", within(-1000.0, 1000.0));
     let odo_sigma_h = b.optional(r, "odometry_sigma_heading_mrad_per_sqrt_m", within(0.0, 1000.0));
     let terrain = b.optional(r, "terrain_tilt_sigma_deg", within(0.0, 10.0));
+    let table_span = b.span();
     b.finish(r);
 
+    kind?;
+    let (scene, scene_file) = (scene?, scene_file?);
+    let d = scanner::sim::OdometryError::default();
+    let odometry = scanner::sim::OdometryError {
+        scale_error: odo_scale?.map_or(d.scale_error, |p| p / 100.0),
+        sigma_distance_m_per_sqrt_m: odo_sigma_d?.map_or(d.sigma_distance_m_per_sqrt_m, |v| v / 1e3),
+        heading_drift_rad_per_m: odo_drift?.map_or(d.heading_drift_rad_per_m, |v| v / 1e3),
+        sigma_heading_rad_per_sqrt_m: odo_sigma_h?.map_or(d.sigma_heading_rad_per_sqrt_m, |v| v / 1e3),
+        terrain_tilt_sigma_rad: terrain?.map_or(d.terrain_tilt_sigma_rad, f64::to_radians),
+    };
+    let (name, model, file, span) = match (scene_file, scene) {
+        (Some((written, path, text, model, span)), _) => (written, model, Some((path, text)), Some(span)),
+        (None, Some((name, model))) => (name, model, None, None),
+        (None, None) => {
+            let model = match cps::geom::builtin("hall") {
+                Ok(model) => model,
+                Err(e) => {
+                    r.problem(&table_span, "backend.scene", e.to_string());
+                    return None;
+                }
+            };
+            ("hall".to_string(), model, None, None)
+        }
+    };
+    let backend = Backend {
+        serial: serial?,
+        scene: name,
+        scene_model: Arc::new(model),
+        scene_file: file,
+        given,
+        seed: seed?.unwrap_or(1),
+        max_retries: retries?.map_or(2, |n| n as u32),
+        retry_delay_s: delay?.unwrap_or(0.5),
+        odometry,
+    };
+    Some((backend, span))
+}
+
+/// `[scan]` and the span of its `stations`.
+fn read_scan(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<(ScanPlan, Option<Range<usize>>)> {
     let mut sc = root.table(r, "scan");
     let every = sc.optional(r, "every_n_stations", |r, v, f| r.integer_in(v, f, 0, 1_000_000));
     let slices = sc.optional(r, "slices", |r, v, f| r.integer_in(v, f, 2, 100_000));
@@ -615,7 +317,22 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>, scene_override: Op
         r.problem(&span, "scan.stations", "give either stations or every_n_stations, not both");
     }
     sc.finish(r);
+    let d = ScanPlan::default();
+    let listed = listed?;
+    let span = listed.as_ref().map(|(_, span)| span.clone());
+    let scan = ScanPlan {
+        every_n_stations: every?.map_or(d.every_n_stations, |n| n as usize),
+        stations: listed.map(|(list, _)| list),
+        slices: slices?.map_or(d.slices, |n| n as usize),
+        resolution: resolution?.unwrap_or(d.resolution),
+        body_from_head_m: lever?.unwrap_or(d.body_from_head_m),
+        head: head?.unwrap_or(d.head),
+    };
+    Some((scan, span))
+}
 
+/// `[fusion]`.
+fn read_fusion(r: &mut Reader<'_>, root: &mut Table<'_, '_>, solo: bool) -> Option<FusionPlan> {
     let mut fu = root.table(r, "fusion");
     let mode = fu.optional(r, "mode", |r, v, f| {
         let m = r.choice(v, f, &FUSION_MODES)?;
@@ -626,11 +343,6 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>, scene_override: Op
         }
         Some(mode)
     });
-    let positive_at_most = |max: f64| {
-        move |r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, f: &str| {
-            r.number_in(v, f, 0.0, false, Some(max)).map(At::into_inner)
-        }
-    };
     let voxel = fu.optional(r, "voxel_m", positive_at_most(10.0));
     let max_corr = fu.optional(r, "max_correspondence_m", positive_at_most(100.0));
     let fine_corr = fu.optional(r, "fine_correspondence_m", |r, v, f| {
@@ -654,103 +366,74 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>, scene_override: Op
         None => Some(fd.fine_correspondence_m.min(coarse)),
     };
     fu.finish(r);
+    Some(FusionPlan {
+        mode: mode?.unwrap_or(fd.mode),
+        voxel_m: voxel?.unwrap_or(fd.voxel_m),
+        max_correspondence_m: coarse,
+        fine_correspondence_m: fine?,
+        max_iterations: icp_iterations?.map_or(fd.max_iterations, |n| n as usize),
+        huber_m: huber?.unwrap_or(fd.huber_m),
+        min_pairs: min_pairs?.map_or(fd.min_pairs, |n| n as usize),
+        max_partners: partners?.map_or(fd.max_partners, |n| n as usize),
+        icp_variance_factor: variance_factor?.unwrap_or(fd.icp_variance_factor),
+    })
+}
 
+/// `[output]`.
+fn read_output(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Output> {
     let mut o = root.table(r, "output");
     let formats = o
         .optional(r, "formats", |r, v, f| r.array(v, f, |r, e, f| r.choice(e, f, &OUTPUT_FORMATS).map(At::into_inner)));
     let rerun = o.optional(r, "rerun", |r, v, f| r.boolean(v, f));
     o.finish(r);
+    Some(Output { formats: formats?.unwrap_or_else(|| vec!["ply".into()]), rerun: rerun?.unwrap_or(true) })
+}
 
-    let pipe = if root.has("pipe") {
-        let mut t = root.table(r, "pipe");
-        let pipe = read_pipe(r, &mut t);
-        t.finish(r);
-        pipe.map(Some)
-    } else {
-        Some(None)
-    };
+/// `[pipe]`, when given.
+fn read_pipe_table(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Option<PipePlan>> {
+    if !root.has("pipe") {
+        return Some(None);
+    }
+    let mut t = root.table(r, "pipe");
+    let pipe = read_pipe(r, &mut t);
+    t.finish(r);
+    pipe.map(Some)
+}
 
-    let (mut plan, mut spans) = plan?;
-    plan.footprint_radius_m = footprint?.unwrap_or(plan.footprint_radius_m);
-    let listed = listed?;
-    spans.scan_stations = listed.as_ref().map(|(_, span)| span.clone());
-    let scene_file = scene_file?;
-    spans.scene_file = scene_file.as_ref().map(|(_, _, _, span)| span.clone());
-    let d = ScanPlan::default();
-    Some(Parts {
-        name: name?,
-        children: children?,
-        total_station: total_station?,
-        plan,
-        acceptance: Acceptance { max_final_sigma_xy_m: max_xy?, max_station_error_m: max_err? },
-        backend: {
-            kind?;
-            Backend {
-                serial: match serial {
-                    Some(p) => Some(p?),
-                    None => None,
-                },
-                scene: match (&scene_file, scene?) {
-                    (Some((written, _, _, _)), _) => written.clone(),
-                    (_, Some(name)) => name,
-                    _ => "hall".into(),
-                },
-                scene_file: scene_file.map(|(_, path, text, _)| (path, text)),
-                given: backend_given,
-                seed: seed?.unwrap_or(1),
-                max_retries: retries?.map_or(2, |n| n as u32),
-                retry_delay_s: delay?.unwrap_or(0.5),
-                odometry: {
-                    let d = scanner::sim::OdometryError::default();
-                    scanner::sim::OdometryError {
-                        scale_error: odo_scale?.map_or(d.scale_error, |p| p / 100.0),
-                        sigma_distance_m_per_sqrt_m: odo_sigma_d?.map_or(d.sigma_distance_m_per_sqrt_m, |v| v / 1e3),
-                        heading_drift_rad_per_m: odo_drift?.map_or(d.heading_drift_rad_per_m, |v| v / 1e3),
-                        sigma_heading_rad_per_sqrt_m: odo_sigma_h?.map_or(d.sigma_heading_rad_per_sqrt_m, |v| v / 1e3),
-                        terrain_tilt_sigma_rad: terrain?.map_or(d.terrain_tilt_sigma_rad, f64::to_radians),
-                    }
-                },
-            }
-        },
-        scan: ScanPlan {
-            every_n_stations: every?.map_or(d.every_n_stations, |n| n as usize),
-            stations: listed.map(|(list, _)| list),
-            slices: slices?.map_or(d.slices, |n| n as usize),
-            resolution: resolution?.unwrap_or(d.resolution),
-            body_from_head_m: lever?.unwrap_or(d.body_from_head_m),
-            head: head?.unwrap_or(d.head),
-        },
-        fusion: FusionPlan {
-            mode: mode?.unwrap_or(fd.mode),
-            voxel_m: voxel?.unwrap_or(fd.voxel_m),
-            max_correspondence_m: coarse,
-            fine_correspondence_m: fine?,
-            max_iterations: icp_iterations?.map_or(fd.max_iterations, |n| n as usize),
-            huber_m: huber?.unwrap_or(fd.huber_m),
-            min_pairs: min_pairs?.map_or(fd.min_pairs, |n| n as usize),
-            max_partners: partners?.map_or(fd.max_partners, |n| n as usize),
-            icp_variance_factor: variance_factor?.unwrap_or(fd.icp_variance_factor),
-        },
-        output: Output { formats: formats?.unwrap_or_else(|| vec!["ply".into()]), rerun: rerun?.unwrap_or(true) },
-        pipe: pipe?,
-        spans,
-    })
+/// A number > 0.
+fn positive(r: &mut Reader<'_>, v: &Raw<'_>, f: &str) -> Option<f64> {
+    r.number_in(v, f, 0.0, false, None).map(At::into_inner)
+}
+
+/// Any finite number.
+fn number(r: &mut Reader<'_>, v: &Raw<'_>, f: &str) -> Option<f64> {
+    r.number(v, f).map(At::into_inner)
+}
+
+/// A number ≥ 0.
+fn non_negative(r: &mut Reader<'_>, v: &Raw<'_>, f: &str) -> Option<f64> {
+    r.number_in(v, f, 0.0, true, None).map(At::into_inner)
+}
+
+/// A number in [min, max].
+fn within(min: f64, max: f64) -> impl Fn(&mut Reader<'_>, &Raw<'_>, &str) -> Option<f64> {
+    move |r, v, f| r.number_in(v, f, min, true, Some(max)).map(At::into_inner)
+}
+
+/// A number in (0, max].
+fn positive_at_most(max: f64) -> impl Fn(&mut Reader<'_>, &Raw<'_>, &str) -> Option<f64> {
+    move |r, v, f| r.number_in(v, f, 0.0, false, Some(max)).map(At::into_inner)
 }
 
 fn read_pipe(r: &mut Reader<'_>, t: &mut Table<'_, '_>) -> Option<PipePlan> {
-    let end = |r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, f: &str| {
+    let end = |r: &mut Reader<'_>, v: &Raw<'_>, f: &str| {
         r.point3(v, f).map(|p| (nalgebra::Point3::from(*p.get_ref()), p.span()))
     };
     let from = t.required(r, "axis_from_m", "one end of the nominal pipe axis, [x, y, z] in the world frame", end);
     let to = t.required(r, "axis_to_m", "the other end of the nominal pipe axis, [x, y, z]", end);
-    let radius = t.required(r, "radius_m", "the nominal inner radius (m)", |r, v, f| {
-        r.number_in(v, f, 0.0, false, Some(100.0)).map(At::into_inner)
-    });
-    let length = |r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, f: &str| {
-        r.number_in(v, f, 0.0, false, Some(10.0)).map(At::into_inner)
-    };
-    let threshold = t.optional(r, "threshold_m", length);
-    let link = t.optional(r, "link_m", length);
+    let radius = t.required(r, "radius_m", "the nominal inner radius (m)", positive_at_most(100.0));
+    let threshold = t.optional(r, "threshold_m", positive_at_most(10.0));
+    let link = t.optional(r, "link_m", positive_at_most(10.0));
     let min_points = t.optional(r, "min_points", |r, v, f| r.integer_in(v, f, 1, 100_000_000));
     let (from, to) = (from?, to?);
     if (to.0 - from.0).norm() < 1e-3 {
@@ -766,7 +449,7 @@ fn read_pipe(r: &mut Reader<'_>, t: &mut Table<'_, '_>) -> Option<PipePlan> {
     })
 }
 
-fn read_children(r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, field: &str) -> Option<Vec<String>> {
+fn read_children(r: &mut Reader<'_>, v: &Raw<'_>, field: &str) -> Option<Vec<String>> {
     let names = r.array(v, field, |r, e, f| r.string(e, f))?;
     if names.len() == 1 {
         let message = "the team has 1 child; a parent fix needs at least 2 (or none: a robot alone, by odometry)";
@@ -787,12 +470,7 @@ fn read_children(r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, f
 }
 
 fn read_total_station(r: &mut Reader<'_>, t: &mut Table<'_, '_>) -> Option<Instrument> {
-    let nonneg = |r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, f: &str| {
-        r.number_in(v, f, 0.0, true, None).map(At::into_inner)
-    };
-    let positive = |r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, f: &str| {
-        r.number_in(v, f, 0.0, false, None).map(At::into_inner)
-    };
+    let nonneg = non_negative;
     let sigma_distance_mm =
         t.required(r, "sigma_distance_mm", "the distance error's constant part in mm (> 0)", positive);
     let ppm = t.optional(r, "sigma_distance_ppm", nonneg);
@@ -855,7 +533,7 @@ fn read_plan(r: &mut Reader<'_>, t: &mut Table<'_, '_>, n_children: Option<usize
     let stride = t.required(r, "stride_m", "the distance between parent stations in metres (> 0)", |r, v, f| {
         r.number_in(v, f, 0.0, false, None).map(|x| (*x.get_ref(), x.span()))
     });
-    let read_formation = |r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, f: &str| {
+    let read_formation = |r: &mut Reader<'_>, v: &Raw<'_>, f: &str| {
         let offsets = r.array(v, f, |r, e, f| r.point3(e, f))?;
         if let Some(n) = n_children
             && offsets.len() != n
@@ -1009,11 +687,7 @@ fn read_formation_kind(r: &mut Reader<'_>, g: &mut Table<'_, '_>) -> Option<(pla
     let kind = g.required(r, "kind", "one of \"symmetric\", \"fan\", \"line\"", |r, v, f| {
         r.choice(v, f, &["symmetric", "fan", "line"]).map(At::into_inner)
     })?;
-    let num =
-        |r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, f: &str| r.number(v, f).map(At::into_inner);
-    let positive = |r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, f: &str| {
-        r.number_in(v, f, 0.0, false, None).map(At::into_inner)
-    };
+    let num = number;
     let up = g.optional(r, "up_m", num);
     let kind = match kind.as_str() {
         "symmetric" => {
@@ -1052,7 +726,7 @@ fn read_formation_kind(r: &mut Reader<'_>, g: &mut Table<'_, '_>) -> Option<(pla
 
 /// `[backend.serial]`: the instruments' ports and line settings.
 fn read_serial(r: &mut Reader<'_>, t: &mut Table<'_, '_>, children: Option<usize>) -> Option<SerialPorts> {
-    let port = |r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, f: &str| {
+    let port = |r: &mut Reader<'_>, v: &Raw<'_>, f: &str| {
         let p = r.string(v, f)?;
         if p.get_ref().trim().is_empty() {
             r.problem(&p.span(), f, "an empty port path; expected e.g. \"/dev/ttyUSB0\"");
@@ -1061,7 +735,7 @@ fn read_serial(r: &mut Reader<'_>, t: &mut Table<'_, '_>, children: Option<usize
         Some(p.into_inner())
     };
     let baud = |choices: &'static [u64]| {
-        move |r: &mut Reader<'_>, v: &toml::Spanned<toml::de::DeValue<'_>>, f: &str| {
+        move |r: &mut Reader<'_>, v: &Raw<'_>, f: &str| {
             let b = r.integer_in(v, f, 1, 4_000_000)?;
             if !choices.is_empty() && !choices.contains(&b) {
                 r.problem(&v.span(), f, format!("{b} Bd; expected one of {choices:?}"));

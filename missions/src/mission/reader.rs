@@ -6,7 +6,7 @@ use std::ops::Range;
 use toml::Spanned;
 use toml::de::{DeTable, DeValue};
 
-use crate::diagnostics::{Diagnostic, Source};
+use super::diagnostics::{Diagnostic, Source};
 
 /// A value with the byte span it came from.
 pub type At<T> = Spanned<T>;

@@ -82,7 +82,7 @@ struct Report {
 }
 
 /// Runs `register`: reads both scans, aligns and writes the report.
-pub fn register(args: &RegisterArgs, out: &mut dyn Write) -> anyhow::Result<()> {
+pub fn run(args: &RegisterArgs, out: &mut dyn Write) -> anyhow::Result<super::Outcome> {
     let stages = stages(args)?;
     let init = initial_guess(args)?;
     let config = IcpConfig {
@@ -115,7 +115,7 @@ pub fn register(args: &RegisterArgs, out: &mut dyn Write) -> anyhow::Result<()> 
     } else {
         write_text(out, &result, seconds)?;
     }
-    Ok(())
+    Ok(super::Outcome::Success)
 }
 
 fn stages(args: &RegisterArgs) -> anyhow::Result<Vec<Stage>> {

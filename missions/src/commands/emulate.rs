@@ -7,9 +7,10 @@
 //! serial drivers.
 
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::str::FromStr;
 use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
 use scanner::emulate::geocom::GeoComEmulator;
@@ -18,10 +19,75 @@ use scanner::emulate::robot::{Body, RobotEmulator};
 use scanner::emulate::sick::LmsEmulator;
 use scanner::emulate::{Emulator, Faults};
 use scanner::sim::SimWorld;
+use serde::Serialize;
 use serde_json::{Value, json};
 
-use crate::backend::SimTeam;
+use super::Outcome;
 use crate::mission::Mission;
+use crate::planning::Planned;
+use crate::run::backend::SimTeam;
+use crate::run::journal::TruthRecord;
+
+/// `emulate`'s arguments.
+#[derive(Debug, Clone, clap::Args)]
+pub struct EmulateArgs {
+    /// The mission file (TOML).
+    pub mission: PathBuf,
+    /// Print one JSON object with the ports instead of the TOML table.
+    #[arg(long)]
+    pub json: bool,
+    /// Append the simulated truth to this file (JSON lines: at the start
+    /// and after every drive move).
+    #[arg(long, value_name = "FILE")]
+    pub truth: Option<PathBuf>,
+    /// Inject a fault: ROLE:KIND=N, ROLE total-station, tilt, scanner, head,
+    /// parent or a child's name, KIND drop-every, duplicate-every,
+    /// corrupt-every, nak-every, delay-ms, stop-after or baud. Repeatable.
+    #[arg(long, value_name = "FAULT")]
+    pub fault: Vec<EmulatorFault>,
+    /// Stop after this many seconds (at most a year) instead of running
+    /// until stopped.
+    #[arg(long, value_name = "S", value_parser = parse_seconds)]
+    pub seconds: Option<Duration>,
+}
+
+/// The longest `--seconds`: a year.
+const MAX_SECONDS: f64 = 365.0 * 24.0 * 3600.0;
+
+fn parse_seconds(s: &str) -> Result<Duration, String> {
+    let x: f64 = s.trim().parse().map_err(|_| format!("\"{s}\" is not a number of seconds"))?;
+    if !(x.is_finite() && (0.0..=MAX_SECONDS).contains(&x)) {
+        return Err(format!("{s} s is out of range; expected 0 to {MAX_SECONDS} s (a year)"));
+    }
+    Ok(Duration::from_secs_f64(x))
+}
+
+/// Runs `emulate`: prints the ports, then serves until stopped (Ctrl-C) or
+/// for `--seconds`.
+pub fn run(args: &EmulateArgs, out: &mut dyn Write) -> Result<Outcome> {
+    let mission = Mission::load(&args.mission)?;
+    let planned = Planned::new(&mission)?;
+    let team = start(&mission, &planned, args.truth.as_deref(), &args.fault)?;
+    if args.json {
+        writeln!(out, "{}", ports_json(&mission, &team))?;
+    } else {
+        writeln!(
+            out,
+            "# cps-survey emulate {}: {} instruments on pseudo-terminals (seed {}); Ctrl-C stops.\n\
+             # Put this table in the mission with [backend] kind = \"serial\":",
+            args.mission.display(),
+            team.served.len(),
+            mission.backend.seed
+        )?;
+        write!(out, "{}", backend_toml(&mission, &team))?;
+    }
+    out.flush()?;
+    let until = args.seconds.map(|s| Instant::now() + s);
+    while until.is_none_or(|u| Instant::now() < u) {
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    Ok(Outcome::Success)
+}
 
 /// The emulators' line rates (the LMS powers on at 9600 and switches to
 /// the mission's `scanner_baud` when the driver asks).
@@ -100,19 +166,29 @@ impl EmulatedTeam {
     }
 }
 
-/// One JSON line of the truth log: the checkpoint's truth and who moved.
-fn truth_line(world: &SimWorld, robot: &str) -> Value {
-    let mut line = crate::backend::truth_json(&world.truth());
-    line["moved"] = json!(robot);
-    line
+/// One line of the truth log: the checkpoint's truth and who moved.
+#[derive(Serialize)]
+struct TruthLine<'a> {
+    #[serde(flatten)]
+    truth: TruthRecord,
+    moved: &'a str,
+}
+
+fn truth_line(world: &SimWorld, robot: &str) -> String {
+    let line = TruthLine { truth: crate::run::backend::truth_record(&world.truth()), moved: robot };
+    serde_json::to_string(&line).unwrap_or_default()
 }
 
 /// Starts the mission's team on pseudo-terminals; with `truth`, appends the
 /// simulated truth to that file (JSON lines) at the start and after every
 /// drive move, flushed.
-pub fn start(mission: &Mission, truth: Option<&Path>, faults: &[EmulatorFault]) -> Result<EmulatedTeam> {
-    let dance = crate::predict::dance(mission)?;
-    let parts = SimTeam::new(mission, &dance, Vec::new())?.into_parts();
+pub fn start(
+    mission: &Mission,
+    planned: &Planned,
+    truth: Option<&Path>,
+    faults: &[EmulatorFault],
+) -> Result<EmulatedTeam> {
+    let parts = SimTeam::new(mission, &planned.dance, Vec::new())?.into_parts();
     let world = parts.world.clone();
     let log: Option<Arc<Mutex<std::fs::File>>> = match truth {
         Some(path) => {

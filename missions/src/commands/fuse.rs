@@ -1,0 +1,66 @@
+//! `cps-survey fuse RUN_DIR`: re-fuses a run's scans from its journal by a
+//! `[fusion] mode` into `RUN_DIR/fusion/<mode>/` through the same output
+//! stage as `run` — the cloud in the mission's formats, with `[pipe]` the
+//! pipe inspection — and `fusion.json`.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+
+use super::Outcome;
+use crate::mission::FusionMode;
+use crate::run::report::{FusionReport, Timings};
+use crate::view::recording::Recorder;
+
+/// `fuse`'s arguments.
+#[derive(Debug, Clone, clap::Args)]
+pub struct FuseArgs {
+    /// The run directory (holds mission.toml, journal.jsonl and scans/).
+    pub run_dir: PathBuf,
+    /// direct, icp or cps-icp (default: the mission's [fusion] mode).
+    #[arg(long, value_parser = parse_mode)]
+    pub mode: Option<FusionMode>,
+    /// Print one JSON object instead of the table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+fn parse_mode(s: &str) -> Result<FusionMode, String> {
+    FusionMode::from_name(s).ok_or_else(|| {
+        format!("unknown fusion mode \"{s}\"; expected one of {}", crate::mission::FUSION_MODES.join(", "))
+    })
+}
+
+/// Runs `fuse`: exit 1 when a `[pipe]` fit of the re-fused cloud fails.
+pub fn run(args: &FuseArgs, out: &mut dyn Write) -> Result<Outcome> {
+    let dir = &args.run_dir;
+    let run = crate::run::resume::load(dir)?;
+    let (mission, views) = (&run.mission, &run.views);
+    if views.is_empty() {
+        bail!("{}: the journal has no scans to fuse", dir.display());
+    }
+    let mode = args.mode.unwrap_or(mission.fusion.mode);
+    let scanner = mission.scan.scanner_in_body();
+    let fused = crate::run::fuse::fuse(views, mode, &mission.fusion, scanner, false, &mut |_, _| {})?;
+    let target = dir.join("fusion").join(mode.name());
+    std::fs::create_dir_all(&target).with_context(|| format!("creating {}", target.display()))?;
+    let cloud = crate::run::fuse::merged(views, &fused);
+    let written =
+        crate::run::outputs::write(mission, &target, cloud, &mut Recorder::disabled(), &mut Timings::default())?;
+    let mut report = FusionReport::new(views, &fused);
+    report.seconds = Some(fused.seconds);
+    report.pipe = written.pipe.clone();
+    crate::run::report::write_json(&target.join("fusion.json"), &report)?;
+    if args.json {
+        serde_json::to_writer(&mut *out, &report)?;
+        writeln!(out)?;
+    } else {
+        crate::view::tables::fusion(out, views, &fused)?;
+        if let Some(pipe) = &report.pipe {
+            crate::view::tables::pipe_summary(out, pipe)?;
+        }
+        writeln!(out, "outputs in {}: {}, fusion.json", target.display(), written.files.join(", "))?;
+    }
+    Ok(Outcome::passed(written.complete()))
+}

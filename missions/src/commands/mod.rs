@@ -1,0 +1,46 @@
+//! One file per subcommand: its arguments (clap) and its `run`, which
+//! builds what the command needs once — the mission, its plan — and hands
+//! it to the rooms that do the work ([`crate::planning`], [`crate::run`])
+//! and show it ([`crate::view`]).
+
+pub mod emulate;
+pub mod fuse;
+pub mod montecarlo;
+pub mod plan;
+pub mod predict;
+pub mod register;
+pub mod run;
+pub mod validate;
+
+use std::path::Path;
+
+/// How a command that ran ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Outcome {
+    /// Everything passed (exit 0).
+    Success,
+    /// Ran, but failed the mission's acceptance tolerances (exit 1).
+    AcceptanceFailed,
+}
+
+impl Outcome {
+    /// Success when `passed`, else an acceptance failure.
+    pub fn passed(passed: bool) -> Self {
+        if passed { Outcome::Success } else { Outcome::AcceptanceFailed }
+    }
+}
+
+/// Checks, before anything is computed or printed, that an output file
+/// `path` given to `flag` ends in `.extension` and that its directory
+/// exists.
+pub fn check_output(flag: &str, path: &Path, extension: &str, hint: &str) -> anyhow::Result<()> {
+    match path.extension().and_then(|e| e.to_str()) {
+        Some(e) if e.eq_ignore_ascii_case(extension) => {}
+        _ => anyhow::bail!("{flag} {}: expected a file ending in .{extension}{hint}", path.display()),
+    }
+    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    if !dir.is_dir() {
+        anyhow::bail!("{flag} {}: the directory {} does not exist", path.display(), dir.display());
+    }
+    Ok(())
+}

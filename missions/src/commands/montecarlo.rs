@@ -1,0 +1,85 @@
+//! `cps-survey montecarlo`: seeded simulated executions of a mission's
+//! positioning (no scanning) against the prediction — per station the
+//! empirical and predicted horizontal variance, their ratio and the mean
+//! NEES with its 95 % χ² interval.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use planner::montecarlo::{CycleStatistics, monte_carlo, nees_interval};
+
+use super::Outcome;
+use crate::mission::Mission;
+use crate::planning::Planned;
+
+/// `montecarlo`'s arguments.
+#[derive(Debug, Clone, clap::Args)]
+pub struct MontecarloArgs {
+    /// The mission file (TOML).
+    pub mission: PathBuf,
+    /// Number of seeded trials (≥ 2).
+    #[arg(long, default_value_t = 1000)]
+    pub trials: usize,
+    /// Print one JSON object instead of the table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Runs `montecarlo`: exit 1 when the final NEES is outside its interval.
+pub fn run(args: &MontecarloArgs, out: &mut dyn Write) -> Result<Outcome> {
+    let mission = Mission::load(&args.mission)?;
+    let planned = Planned::new(&mission)?;
+    let mc = simulate(&mission, &planned, args.trials)?;
+    if args.json {
+        crate::view::json::montecarlo(out, &mission, &mc)?;
+    } else {
+        crate::view::tables::montecarlo(out, &mission, &mc)?;
+    }
+    Ok(Outcome::passed(mc.consistent()))
+}
+
+/// Degrees of freedom of the NEES (x, y, z, θ).
+const NEES_DIM: usize = 4;
+
+/// A Monte Carlo run of a mission's positioning.
+#[derive(Debug, Clone)]
+pub struct MonteCarlo {
+    /// Trials run.
+    pub trials: usize,
+    /// Seed of trial streams (the mission's `[backend] seed`).
+    pub seed: u64,
+    /// Per station after the start.
+    pub stations: Vec<CycleStatistics>,
+    /// 95 % interval of the mean NEES for this many trials.
+    pub nees_interval: (f64, f64),
+}
+
+impl MonteCarlo {
+    /// The final station's statistics.
+    pub fn last(&self) -> Option<&CycleStatistics> {
+        self.stations.last()
+    }
+
+    /// Whether the final station's mean NEES lies in its interval.
+    pub fn consistent(&self) -> bool {
+        self.last().is_some_and(|s| (self.nees_interval.0..=self.nees_interval.1).contains(&s.nees_mean))
+    }
+}
+
+/// Runs `trials` executions of `mission`'s dance.
+pub fn simulate(mission: &Mission, planned: &Planned, trials: usize) -> Result<MonteCarlo> {
+    if trials < 2 {
+        anyhow::bail!("--trials {trials}: expected at least 2 (an empirical covariance needs several trials)");
+    }
+    let seed = mission.backend.seed;
+    let Some(instrument) = &mission.total_station else {
+        anyhow::bail!(
+            "mission \"{}\" has no children: montecarlo simulates the CPS dance, and a robot alone has none",
+            mission.name
+        );
+    };
+    let stations = monte_carlo(&planned.dance, instrument, &mission.plan.start_covariance, trials, seed)
+        .with_context(|| format!("Monte Carlo of mission \"{}\"", mission.name))?;
+    Ok(MonteCarlo { trials, seed, stations, nees_interval: nees_interval(NEES_DIM, trials) })
+}

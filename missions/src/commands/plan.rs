@@ -1,0 +1,95 @@
+//! `cps-survey plan MISSION`: the mission's schedule checked step by step
+//! against the scene and the instruments, what its final error is made of,
+//! and with `--optimize` the best formation, stride and strategy.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::Result;
+
+use super::{Outcome, check_output};
+use crate::mission::Mission;
+use crate::planning::Planned;
+use crate::planning::analysis::{self, PlanReport};
+use crate::view::plot::PlotPlan;
+
+/// `plan`'s arguments.
+#[derive(Debug, Clone, clap::Args)]
+pub struct PlanArgs {
+    /// The mission file (TOML).
+    pub mission: PathBuf,
+    /// Search [plan.search] for the best plan that keeps every constraint.
+    #[arg(long)]
+    pub optimize: bool,
+    /// Write the chosen plan as a complete mission file.
+    #[arg(long, value_name = "FILE", requires = "optimize")]
+    pub out: Option<PathBuf>,
+    /// Print one JSON object instead of the text report.
+    #[arg(long)]
+    pub json: bool,
+    /// Also draw σ_xy and σ_θ versus distance (as written and optimized)
+    /// and a top view with the 95 % ellipses and violations (SVG).
+    #[arg(long, value_name = "FILE.svg")]
+    pub plot: Option<PathBuf>,
+    /// Also write the plan (and the optimized one) to a Rerun recording:
+    /// route, stations, moves and sight lines green or red, predicted
+    /// ellipsoids per step, violations.
+    #[arg(long, value_name = "FILE.rrd")]
+    pub rrd: Option<PathBuf>,
+}
+
+/// Runs `plan`: exit 1 when the plan (the chosen one with `--optimize`)
+/// breaks a constraint or misses `max_final_sigma_xy_m`.
+pub fn run(args: &PlanArgs, out: &mut dyn Write) -> Result<Outcome> {
+    if let Some(file) = &args.plot {
+        check_output("--plot", file, "svg", crate::view::plot::SVG_HINT)?;
+    }
+    if let Some(file) = &args.rrd {
+        check_output("--rrd", file, "rrd", "")?;
+        crate::view::recording::available()?;
+    }
+    if let Some(file) = &args.out {
+        check_output("--out", file, "toml", "")?;
+    }
+    let mission = Mission::load(&args.mission)?;
+    let written = Planned::as_written(&mission)?;
+    let report = analysis::analyse(&mission, written, args.optimize)?;
+    if args.json {
+        crate::view::json::plan(out, &mission, &report)?;
+    } else {
+        crate::view::tables::plan(out, &mission, &report)?;
+    }
+    if let Some(file) = &args.plot {
+        let summary = plot(&mission, &report, file)?;
+        if !args.json {
+            crate::view::plot::plotted(out, file, &summary)?;
+        }
+    }
+    if let Some(file) = &args.rrd {
+        let mut plans = vec![("plan", &report.written, report.violations.as_slice())];
+        if let Some(o) = &report.optimized {
+            plans.push(("plan_optimized", &o.planned, &[]));
+        }
+        crate::view::recording::write_plan_rrd(&mission, file, &plans)?;
+        if !args.json {
+            writeln!(out, "recorded the plan in {} (view it with `rerun {}`)", file.display(), file.display())?;
+        }
+    }
+    if let (Some(file), Some(o)) = (&args.out, &report.optimized) {
+        crate::planning::edit::write_mission(&mission, o, file)?;
+        if !args.json {
+            writeln!(out, "wrote {}", file.display())?;
+        }
+    }
+    Ok(Outcome::passed(analysis::accepted(&mission, &report)))
+}
+
+/// `--plot`: the plan as written, and the optimized one if any.
+fn plot(mission: &Mission, report: &PlanReport, path: &std::path::Path) -> Result<crate::view::plot::PlotSummary> {
+    let mut plans = vec![PlotPlan::of("as written", &report.written, &report.violations)];
+    if let Some(o) = &report.optimized {
+        plans.push(PlotPlan::of("optimized", &o.planned, &[]));
+    }
+    let title = format!("cps-survey plan — mission {}", mission.name);
+    crate::view::plot::write_svg(path, &title, &plans, report.written.checked_scene())
+}

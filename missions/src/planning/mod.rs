@@ -1,0 +1,182 @@
+//! The mission → plan step: the dance scheduled from `[plan]`, its steps
+//! with the scan stations, the scene it is checked against, and the
+//! predicted covariance of every robot at every step — built once per
+//! command ([`Planned`]) and passed down.
+//!
+//! [`constraints`] checks a plan against the scene and the instruments;
+//! [`analysis`] is what `plan` reports (what the error is made of, what-ifs,
+//! reliability, the search); [`edit`] writes an optimized plan back into
+//! the mission file.
+
+pub mod analysis;
+pub mod constraints;
+pub mod edit;
+
+use std::sync::Arc;
+
+use cps::Instrument;
+use cps::geom::Scene;
+use planner::{Dance, PlanError, Prediction, StepEstimate};
+
+use crate::mission::diagnostics::{Diagnostic, Diagnostics};
+use crate::mission::{Mission, MissionError};
+
+/// A mission's plan: everything the commands share, built once.
+#[derive(Debug, Clone)]
+pub struct Planned {
+    /// The scene the plan is checked against: the `[backend]`'s when the
+    /// file has that table, open space (`None`) otherwise.
+    pub scene: Option<Arc<Scene>>,
+    /// The schedule.
+    pub dance: Dance,
+    /// Its steps, with the mission's scan stations ([`Dance::steps`]).
+    pub steps: Vec<planner::Step>,
+    /// The predicted covariance after every cycle: the CPS dance, or for a
+    /// robot alone its dead reckoning.
+    pub prediction: Prediction,
+    /// Every robot's predicted estimate along the steps: each child after
+    /// its placement, the parent after each fix and at each scan station
+    /// ([`planner::step_estimates`]).
+    pub estimates: Vec<StepEstimate>,
+}
+
+impl Planned {
+    /// The mission's plan for `predict`, `run`, `montecarlo`, `validate`:
+    /// the schedule (route, stride, formation and scan-list errors point at
+    /// the mission file), every sight line within the instrument's range
+    /// (a violation points at the child's `formation_m` entry), and the
+    /// prediction.
+    pub fn new(mission: &Mission) -> Result<Self, MissionError> {
+        let invalid = |d| MissionError::invalid(mission, d);
+        let dance = schedule(mission).map_err(invalid)?;
+        if let Some(instrument) = &mission.total_station {
+            let violations = dance.range_violations(instrument);
+            if !violations.is_empty() {
+                return Err(invalid(plan_diagnostics(mission, violations)));
+            }
+        }
+        Self::predicted(mission, dance, mission.total_station.clone())
+    }
+
+    /// The plan as written, for `plan`: range violations are reported by
+    /// the constraint check, not refused, and the prediction lifts the
+    /// instrument's range limits (to compare a plan that breaks them).
+    pub fn as_written(mission: &Mission) -> Result<Self, MissionError> {
+        let dance = schedule(mission).map_err(|d| MissionError::invalid(mission, d))?;
+        let unlimited = mission.total_station.as_ref().map(|i| Instrument {
+            min_range_m: 0.0,
+            max_range_m: f64::INFINITY,
+            ..i.clone()
+        });
+        Self::predicted(mission, dance, unlimited)
+    }
+
+    /// Another schedule of the same mission (e.g. the optimized one),
+    /// predicted with the mission's instrument.
+    pub fn with_dance(mission: &Mission, dance: Dance) -> Result<Self, MissionError> {
+        Self::predicted(mission, dance, mission.total_station.clone())
+    }
+
+    fn predicted(mission: &Mission, dance: Dance, instrument: Option<Instrument>) -> Result<Self, MissionError> {
+        let start = &mission.plan.start_covariance;
+        let prediction = match &instrument {
+            Some(instrument) => planner::predict(&dance, instrument, start)
+                .map_err(|e| MissionError::invalid(mission, plan_diagnostics(mission, vec![e])))?,
+            None => {
+                let o = &mission.backend.odometry;
+                let noise = planner::OdometryNoise {
+                    sigma_distance_m_per_sqrt_m: o.sigma_distance_m_per_sqrt_m,
+                    sigma_heading_rad_per_sqrt_m: o.sigma_heading_rad_per_sqrt_m,
+                };
+                planner::predict_odometry(&dance, &noise, start)
+            }
+        };
+        let steps = dance.steps(|k| mission.scan.scans_at(k));
+        let estimates = planner::step_estimates(&dance, &prediction, &steps, start);
+        let scene = mission.backend.given.then(|| Arc::clone(mission.scene()));
+        Ok(Self { scene, dance, steps, prediction, estimates })
+    }
+
+    /// The number of parent stations.
+    pub fn stations(&self) -> usize {
+        self.dance.stations.len()
+    }
+
+    /// The scene checked against, if any.
+    pub fn checked_scene(&self) -> Option<&Scene> {
+        self.scene.as_deref()
+    }
+}
+
+/// The mission's schedule, unchecked against the instrument's range; route,
+/// stride, formation and scan-list errors point at the mission file.
+fn schedule(mission: &Mission) -> Result<Dance, Diagnostics> {
+    let plan = &mission.plan;
+    let stations = planner::stations(&plan.route_m, plan.stride_m).map_err(|e| plan_diagnostics(mission, vec![e]))?;
+    let dance = match &mission.total_station {
+        None => planner::solo(stations),
+        Some(_) => planner::schedule(stations, &plan.formation_m, plan.strategy)
+            .map_err(|e| plan_diagnostics(mission, vec![e]))?,
+    };
+    if let (Some(list), Some(span)) = (&mission.scan.stations, &mission.spans.scan_stations)
+        && let Some(k) = list.iter().find(|k| **k >= dance.stations.len())
+    {
+        let message = format!(
+            "station {k} does not exist; expected indices 0 to {} (the plan has {} stations)",
+            dance.stations.len() - 1,
+            dance.stations.len()
+        );
+        return Err(Diagnostics(vec![mission.diagnostic(span, "scan.stations", message)]));
+    }
+    Ok(dance)
+}
+
+/// Turns planner errors into diagnostics at the responsible field. Range
+/// violations are grouped per child and phase (first cycle and count).
+fn plan_diagnostics(mission: &Mission, errors: Vec<PlanError>) -> Diagnostics {
+    let spans = &mission.spans;
+    let mut out: Vec<Diagnostic> = Vec::new();
+    let mut seen: Vec<(usize, planner::Phase, usize)> = Vec::new();
+    for e in &errors {
+        if let PlanError::ChildOutOfRange { child, phase, .. } = e {
+            match seen.iter_mut().find(|(c, p, _)| c == child && p == phase) {
+                Some(entry) => entry.2 += 1,
+                None => seen.push((*child, *phase, 1)),
+            }
+        }
+    }
+    for e in errors {
+        let (span, field) = match &e {
+            PlanError::ChildOutOfRange { child, phase, .. } => {
+                let Some(entry) = seen.iter().position(|(c, p, _)| c == child && p == phase) else { continue };
+                let count = seen.remove(entry).2;
+                let span = spans.formation_m.get(*child).cloned().unwrap_or(spans.plan.clone());
+                let name = mission.children.get(*child).map_or(String::new(), |n| format!("child \"{n}\": "));
+                let more = if count > 1 { format!(" — and in {} more cycle(s)", count - 1) } else { String::new() };
+                out.push(mission.diagnostic(&span, &format!("plan.formation_m[{child}]"), format!("{name}{e}{more}")));
+                continue;
+            }
+            PlanError::ZeroLengthSegment { waypoint } => (
+                spans.route_m.get(*waypoint).cloned().unwrap_or(spans.plan.clone()),
+                format!("plan.route_m[{waypoint}]"),
+            ),
+            PlanError::BadStride { .. } => (spans.stride_m.clone(), "plan.stride_m".to_string()),
+            PlanError::BadHops { .. } => (spans.hops.clone().unwrap_or(spans.plan.clone()), "plan.hops".to_string()),
+            PlanError::FormationSize { .. } | PlanError::TooFewChildren { .. } => {
+                (spans.formation_m.first().cloned().unwrap_or(spans.plan.clone()), "plan.formation_m".to_string())
+            }
+            _ => (spans.plan.clone(), "plan".to_string()),
+        };
+        out.push(mission.diagnostic(&span, &field, e.to_string()));
+    }
+    Diagnostics(out)
+}
+
+/// Whether the prediction's last station meets `[acceptance]
+/// max_final_sigma_xy_m`.
+pub fn accepted(mission: &Mission, prediction: &Prediction) -> bool {
+    match (mission.acceptance.max_final_sigma_xy_m, prediction.last()) {
+        (Some(max), Some(last)) => last.sigma_xy2_m2().sqrt() <= max,
+        _ => true,
+    }
+}

@@ -1,0 +1,225 @@
+//! Fusion of a mission's scans by `[fusion] mode` — at the end of `run`, or
+//! afterwards from a run directory with `cps-survey fuse RUN_DIR --mode`.
+//!
+//! - `direct`: each scan with its CPS pose and measured tilt;
+//! - `icp`: scan matching alone — simultaneous matching (seed 000 §4.2)
+//!   from the odometry's guesses (where each drive believed it stopped, with
+//!   the measured tilt), the first scan held at its CPS pose;
+//! - `cps-icp`: the scans' CPS poses as a joint prior (every station's 4×4
+//!   covariance and the cross-covariances the leapfrog chain creates between
+//!   stations, and the tilt sensor's σ: [`fusion::graph::JointPrior::cps`])
+//!   and ICP between overlapping scans as relative measurements, adjusted
+//!   together ([`fusion::multiview::register_with_priors`]).
+//!
+//! A run's scans ([`ScanView`]) come from the runner as it goes, or from a
+//! run directory's journal ([`crate::run::resume::load_run`]).
+
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use cps::ParentPose;
+use fusion::icp::{IcpConfig, Kernel};
+use fusion::multiview::{MultiviewConfig, Strategy};
+use nalgebra::{Isometry3, Matrix4, Point3};
+use scanner::Tilt;
+
+use crate::mission::{FusionMode, FusionPlan};
+
+/// One scan of a run with everything fusion needs.
+#[derive(Debug, Clone)]
+pub struct ScanView {
+    /// The parent station it was taken at.
+    pub station: usize,
+    /// Its file, relative to the run directory.
+    pub file: String,
+    /// The points in the body frame.
+    pub body: Vec<Point3<f32>>,
+    /// The CPS pose of the station.
+    pub pose: ParentPose,
+    /// Its 4×4 covariance (x, y, z, θ).
+    pub covariance: Matrix4<f64>,
+    /// cov(this station, each earlier scan's station), 4×4 each, in scan
+    /// order, as the CPS chain correlates them (shorter or empty where
+    /// nothing is known: taken as zero).
+    pub cross_covariance: Vec<Matrix4<f64>>,
+    /// The measured tilt.
+    pub tilt: Tilt,
+    /// Where the parent's drive believed it stood (odometry).
+    pub odometry: ParentPose,
+    /// The simulator's true `world_from_body`, when known.
+    pub truth: Option<Isometry3<f64>>,
+}
+
+impl ScanView {
+    /// `world_from_body` of the direct transformation.
+    pub fn direct(&self) -> Isometry3<f64> {
+        self.tilt.world_from_body(&self.pose)
+    }
+
+    /// `world_from_body` from odometry and the measured tilt.
+    pub fn odometry_guess(&self) -> Isometry3<f64> {
+        self.tilt.world_from_body(&self.odometry)
+    }
+}
+
+/// One scan's fused pose.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FusedScan {
+    /// The parent station.
+    pub station: usize,
+    /// The fused `world_from_body`.
+    pub world_from_body: Isometry3<f64>,
+    /// RMS residual of the scan's last ICP match, metres (`None` for direct
+    /// fusion and for the scan that fixes the frame).
+    pub rmse_m: Option<f64>,
+}
+
+/// The fusion of a run's scans.
+#[derive(Debug, Clone)]
+pub struct Fused {
+    /// The mode.
+    pub mode: FusionMode,
+    /// Every scan, in order.
+    pub scans: Vec<FusedScan>,
+    /// ICP runs.
+    pub matches: usize,
+    /// Wall time, seconds.
+    pub seconds: f64,
+    /// Every ICP run iteration by iteration, when asked for (`trace`).
+    pub traces: Vec<fusion::multiview::IcpTrace>,
+}
+
+/// The tilt sensor's standard deviation the `cps-icp` fusion gives every
+/// measured tilt: the simulated sensor's, 0.01°.
+pub const TILT_SIGMA_RAD: f64 = scanner::sim::TILT_SIGMA_RAD;
+
+/// The ICP settings of `plan` for scans in the body frame whose scanner
+/// stands at `scanner_in_body`: back faces rejected.
+fn multiview_config(plan: &FusionPlan, strategy: Strategy, scanner_in_body: Point3<f64>) -> MultiviewConfig {
+    MultiviewConfig {
+        strategy,
+        icp: IcpConfig {
+            max_correspondence_m: plan.max_correspondence_m,
+            max_iterations: plan.max_iterations,
+            kernel: if plan.huber_m > 0.0 { Kernel::Huber { width_m: plan.huber_m } } else { Kernel::None },
+            reject_back_faces: true,
+            source_viewpoint: scanner_in_body,
+            ..IcpConfig::default()
+        },
+        source_voxel_m: plan.voxel_m,
+        target_voxel_m: plan.voxel_m / 2.0,
+        min_pairs: plan.min_pairs,
+        ..MultiviewConfig::default()
+    }
+}
+
+/// Fuses `views` by `mode` with the settings of `plan`, the scanner at
+/// `scanner_in_body` in the body frame the scans are in; `progress(done,
+/// total)` is called as scans are matched. With `trace`, every ICP run is
+/// kept iteration by iteration ([`Fused::traces`]).
+pub fn fuse(
+    views: &[ScanView],
+    mode: FusionMode,
+    plan: &FusionPlan,
+    scanner_in_body: Point3<f64>,
+    trace: bool,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<Fused> {
+    let started = Instant::now();
+    let scans: Vec<&[Point3<f32>]> = views.iter().map(|v| v.body.as_slice()).collect();
+    let mut traces = Vec::new();
+    let traced = |mut c: MultiviewConfig| {
+        c.icp.trace = trace;
+        c
+    };
+    let (poses, rmse, matches): (Vec<Isometry3<f64>>, Vec<Option<f64>>, usize) = match mode {
+        FusionMode::Direct => (views.iter().map(ScanView::direct).collect(), vec![None; views.len()], 0),
+        _ if views.is_empty() => (Vec::new(), Vec::new(), 0),
+        FusionMode::Icp => {
+            // The first scan holds the frame at its CPS pose; the rest start
+            // from odometry. A coarse pass, then a fine one from its result.
+            let mut guesses: Vec<Isometry3<f64>> = views.iter().map(ScanView::odometry_guess).collect();
+            let shift = views[0].direct() * guesses[0].inverse();
+            guesses.iter_mut().for_each(|g| *g = shift * *g);
+            let mut config = traced(multiview_config(plan, Strategy::Simultaneous, scanner_in_body));
+            let coarse = fusion::multiview::register_views(&scans, &guesses, &config, progress)
+                .context("ICP fusion (simultaneous matching, coarse pass)")?;
+            config.overlap_m = Some(plan.max_correspondence_m);
+            config.icp.max_correspondence_m = plan.fine_correspondence_m;
+            let r = fusion::multiview::register_views(&scans, &coarse.world_from_scan, &config, progress)
+                .context("ICP fusion (simultaneous matching, fine pass)")?;
+            traces = coarse.traces.into_iter().chain(r.traces).collect();
+            let rmse = r.last_match.iter().map(|m| m.as_ref().map(|m| m.rmse_m)).collect();
+            (r.world_from_scan, rmse, coarse.matches + r.matches)
+        }
+        FusionMode::CpsIcp => {
+            let prior = joint_prior(views)?;
+            let r = fusion::multiview::register_with_priors(
+                &scans,
+                &prior,
+                &traced(multiview_config(plan, Strategy::Pairwise, scanner_in_body)),
+                plan.max_partners,
+                plan.icp_variance_factor,
+                &[plan.max_correspondence_m, plan.fine_correspondence_m],
+                progress,
+            )
+            .context("CPS+ICP fusion")?;
+            let mut rmse = vec![None; views.len()];
+            for (_, s, m) in &r.matches {
+                rmse[*s] = Some(m.rmse_m);
+            }
+            traces = r.traces;
+            (r.world_from_scan, rmse, r.matches.len())
+        }
+    };
+    let scans = views
+        .iter()
+        .zip(poses)
+        .zip(rmse)
+        .map(|((v, world_from_body), rmse_m)| FusedScan { station: v.station, world_from_body, rmse_m })
+        .collect();
+    Ok(Fused { mode, scans, matches, seconds: started.elapsed().as_secs_f64(), traces })
+}
+
+/// The scans' joint CPS prior: the 4N×4N covariance of their stations
+/// from each view's covariance and cross-covariances, mapped to the
+/// scanners' poses with the tilt ([`fusion::graph::JointPrior::cps`]).
+pub fn joint_prior(views: &[ScanView]) -> Result<fusion::graph::JointPrior> {
+    let n = views.len();
+    let mut joint = faer::Mat::<f64>::zeros(4 * n, 4 * n);
+    for (i, v) in views.iter().enumerate() {
+        let blocks = v.cross_covariance.iter().take(i).enumerate().chain([(i, &v.covariance)]);
+        for (k, block) in blocks {
+            for r in 0..4 {
+                for c in 0..4 {
+                    joint[(4 * i + r, 4 * k + c)] = block[(r, c)];
+                    joint[(4 * k + c, 4 * i + r)] = block[(r, c)];
+                }
+            }
+        }
+    }
+    let scanners: Vec<Isometry3<f64>> = views.iter().map(ScanView::direct).collect();
+    let poses: Vec<ParentPose> = views.iter().map(|v| v.pose).collect();
+    let tilts: Vec<Tilt> = views.iter().map(|v| v.tilt).collect();
+    Ok(fusion::graph::JointPrior::cps(&scanners, &poses, &tilts, &joint, TILT_SIGMA_RAD)?)
+}
+
+/// Horizontal distance between the body origins of two poses, metres.
+pub fn error_xy(a: &Isometry3<f64>, b: &Isometry3<f64>) -> f64 {
+    (a.translation.vector.xy() - b.translation.vector.xy()).norm()
+}
+
+/// Heading difference of two poses (rotation of the body x axis about z), radians.
+pub fn error_heading(a: &Isometry3<f64>, b: &Isometry3<f64>) -> f64 {
+    let (xa, xb) = (a.rotation * nalgebra::Vector3::x(), b.rotation * nalgebra::Vector3::x());
+    cps::wrap_angle(xa.y.atan2(xa.x) - xb.y.atan2(xb.x))
+}
+
+/// The merged world-frame cloud of `views` at the `fused` poses.
+pub fn merged(views: &[ScanView], fused: &Fused) -> Vec<Point3<f32>> {
+    let mut out = Vec::with_capacity(views.iter().map(|v| v.body.len()).sum());
+    for (v, f) in views.iter().zip(&fused.scans) {
+        out.extend(fusion::direct::transform(&v.body, &f.world_from_body));
+    }
+    out
+}

@@ -1,0 +1,664 @@
+//! The run journal, `journal.jsonl`: one typed [`Event`] per line with the
+//! schema version (`"v"`), appended and flushed as each command is given
+//! and each reading taken — the record a killed run resumes from, and that
+//! `fuse` and `adjust` re-compute from.
+//!
+//! Step events (`drive`, `measure`, `tilt`, `scan`, and the derived `fix`
+//! and `end`) are replayed in order on `--resume`; the informational ones
+//! (`retry`, `stop`, `resume`) are skipped. Version 1 journals (written
+//! before this module was typed) read as version 2 ones: version 2 only
+//! adds fields and events.
+
+use std::collections::VecDeque;
+use std::fs::{File, OpenOptions};
+use std::io::{Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use serde::{Deserialize, Serialize};
+
+/// The schema version this build writes.
+pub const VERSION: u32 = 2;
+
+/// Versions this build reads.
+pub const READS: [u32; 2] = [1, 2];
+
+/// One line of the journal: the version and the event.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct Line {
+    #[serde(flatten)]
+    event: Event,
+    v: u32,
+}
+
+/// A journal event, tagged by `"event"`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "event", rename_all = "snake_case")]
+pub enum Event {
+    /// The run starts: what it is.
+    Start(Start),
+    /// A robot drove (`data`: the distance its odometry reports).
+    Drive(Recorded<DriveKey, Driven>),
+    /// A total-station measurement, in the instrument's convention.
+    Measure(Recorded<MeasureKey, Measured>),
+    /// A tilt reading at a scan station.
+    Tilt(Recorded<StationKey, Tilted>),
+    /// A 3D scan, written to its file before this event names it.
+    Scan(Recorded<StationKey, Scanned>),
+    /// A parent fix (or, for a robot alone, the odometry's pose) — derived.
+    Fix(Derived<FixKey, FixRecord>),
+    /// The run ended — derived.
+    End(Derived<EndKey, EndRecord>),
+    /// A device command failed and is tried again.
+    Retry(Retry),
+    /// A device failed beyond its retries: the run stopped.
+    Stop(Stop),
+    /// A resumed run continues live from here.
+    Resume,
+}
+
+/// `start`: the run's identity, checked when it is resumed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Start {
+    /// `[mission] name`.
+    pub mission: String,
+    /// The simulator's seed.
+    pub seed: u64,
+    /// The scene's name (or the scene file as written).
+    pub scene: String,
+    /// Parent stations planned.
+    pub stations: usize,
+    /// The children's names, team order.
+    pub children: Vec<String>,
+}
+
+/// A device step as journaled: its key (what was commanded), its reading
+/// and the team's state after it (the simulator's whole state, or on serial
+/// ports the parent's odometry).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Recorded<K, D> {
+    /// What was commanded.
+    #[serde(flatten)]
+    pub key: K,
+    /// What the device answered.
+    pub data: D,
+    /// The team's state after the step.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sim: Option<Checkpoint>,
+}
+
+/// A result the run derives, as journaled.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Derived<K, D> {
+    /// Which result.
+    #[serde(flatten)]
+    pub key: K,
+    /// The result.
+    pub data: D,
+}
+
+/// `drive`: which robot, in which cycle, to where.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DriveKey {
+    /// Dance cycle, 1-based.
+    pub cycle: usize,
+    /// `parent` or the child's name.
+    pub robot: String,
+    /// The goal: x, y (m) and heading (rad).
+    pub target: [f64; 3],
+}
+
+/// What a measurement is for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Phase {
+    /// The standing parent places a child.
+    Placement,
+    /// The parent, moved, measures a standing child for its fix.
+    Fix,
+}
+
+/// `measure`: which child, in which cycle, for what.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MeasureKey {
+    /// Dance cycle, 1-based.
+    pub cycle: usize,
+    /// Placement or fix.
+    pub phase: Phase,
+    /// The child's index, team order.
+    pub child: usize,
+}
+
+/// `tilt`, `scan`: at which station.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct StationKey {
+    /// Parent station, 0 = the start.
+    pub station: usize,
+}
+
+/// `fix`: which cycle, which station.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FixKey {
+    /// Dance cycle, 1-based.
+    pub cycle: usize,
+    /// The station the parent fixed itself at.
+    pub station: usize,
+}
+
+/// `end` has no key.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct EndKey {}
+
+/// A drive's report.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Driven {
+    /// Distance the odometry reports, metres.
+    pub distance_m: f64,
+}
+
+/// A total-station measurement in the instrument's convention.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Measured {
+    /// Slope distance before the prism constant, metres.
+    pub slope_raw_m: f64,
+    /// Horizontal direction, clockwise, radians.
+    pub hz_rad: f64,
+    /// Zenith angle, radians.
+    pub v_rad: f64,
+    /// The instrument flagged the measurement as of reduced accuracy.
+    pub reduced_accuracy: bool,
+}
+
+/// A tilt reading.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Tilted {
+    /// Roll, radians.
+    pub roll_rad: f64,
+    /// Pitch, radians.
+    pub pitch_rad: f64,
+}
+
+/// A scan written to the run directory.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Scanned {
+    /// Its file, relative to the run directory.
+    pub file: String,
+    /// Points in it.
+    pub points: usize,
+    /// CRC-32 (IEEE) of the file's bytes, 8 hex digits (version 2).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub crc32: Option<String>,
+}
+
+/// A pose in a record: x, y, z (m) and heading (rad).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PoseRecord {
+    /// x, metres.
+    pub x_m: f64,
+    /// y, metres.
+    pub y_m: f64,
+    /// z, metres.
+    pub z_m: f64,
+    /// Heading, radians.
+    pub heading_rad: f64,
+}
+
+impl From<&cps::ParentPose> for PoseRecord {
+    fn from(p: &cps::ParentPose) -> Self {
+        Self { x_m: p.position.x, y_m: p.position.y, z_m: p.position.z, heading_rad: p.heading_rad }
+    }
+}
+
+impl From<&PoseRecord> for cps::ParentPose {
+    fn from(p: &PoseRecord) -> Self {
+        cps::ParentPose::new(p.x_m, p.y_m, p.z_m, p.heading_rad)
+    }
+}
+
+/// A 4×4 matrix, row-major.
+pub type Matrix4Record = [[f64; 4]; 4];
+
+/// A 4×4 nalgebra matrix as a record.
+pub fn matrix_record(m: &nalgebra::Matrix4<f64>) -> Matrix4Record {
+    std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)]))
+}
+
+/// A record as a 4×4 nalgebra matrix.
+pub fn matrix_of(r: &Matrix4Record) -> nalgebra::Matrix4<f64> {
+    nalgebra::Matrix4::from_fn(|i, j| r[i][j])
+}
+
+/// A parent fix: the pose, its covariance and the fix's statistics; for a
+/// robot alone the odometry's pose (`source`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FixRecord {
+    /// The estimated pose.
+    pub pose: PoseRecord,
+    /// Its 4×4 covariance (x, y, z, θ).
+    pub covariance: Matrix4Record,
+    /// The fix's a-posteriori variance factor.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sigma0_squared: Option<f64>,
+    /// The fix's redundancy.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub redundancy: Option<usize>,
+    /// cov(this station, each earlier scan station), 4×4 each, in scan order.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scan_cross_covariances: Option<Vec<Matrix4Record>>,
+    /// `odometry` for a robot alone.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub source: Option<String>,
+}
+
+/// The end of a run.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct EndRecord {
+    /// Whether the acceptance held.
+    pub accepted: bool,
+}
+
+/// Which step a `retry` or `stop` was about.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "event", rename_all = "snake_case")]
+pub enum StepKey {
+    /// A drive.
+    Drive(DriveKey),
+    /// A measurement.
+    Measure(MeasureKey),
+    /// A tilt reading.
+    Tilt(StationKey),
+    /// A scan.
+    Scan(StationKey),
+}
+
+/// `retry`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Retry {
+    /// `drive`, `total-station`, `tilt` or `scanner`.
+    pub device: String,
+    /// 1 for the first retry.
+    pub attempt: u32,
+    /// What failed.
+    pub error: String,
+    /// The step.
+    pub step: StepKey,
+}
+
+/// `stop`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Stop {
+    /// The device.
+    pub device: String,
+    /// The last failure.
+    pub error: String,
+    /// The step.
+    pub step: StepKey,
+}
+
+/// A robot's state in a checkpoint: its pose as its odometry believes it,
+/// its true pose (simulator) and its noise stream's position.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DriveState {
+    /// x, y (m), heading (rad) as the odometry believes.
+    pub believed: [f64; 3],
+    /// The true x, y, heading (simulator only).
+    #[serde(rename = "true", default, skip_serializing_if = "Option::is_none")]
+    pub truth: Option<[f64; 3]>,
+    /// Position in the drive's noise stream, decimal (simulator only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise: Option<String>,
+}
+
+/// The simulated instruments' noise-stream positions, decimal strings (a
+/// u128 does not fit every reader's JSON numbers).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct NoiseState {
+    /// The total station's (none without children).
+    pub total_station: Option<String>,
+    /// The tilt sensor's.
+    pub tilt: String,
+    /// The laser scanner's.
+    pub scanner: String,
+}
+
+/// The simulated world's truth.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TruthRecord {
+    /// The parent: x, y, z, heading.
+    pub parent: [f64; 4],
+    /// Its roll and pitch.
+    pub tilt: [f64; 2],
+    /// Every child's prism, x, y, z.
+    pub children: Vec<[f64; 3]>,
+    /// The scan head's angle, radians.
+    pub head_rad: f64,
+}
+
+/// The team's state after a step: on the simulator everything needed to
+/// continue bit for bit; on serial ports the parent's odometry
+/// (`drives[0].believed`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Checkpoint {
+    /// The parent's drive first, then the children's.
+    pub drives: Vec<DriveState>,
+    /// The instruments' noise streams (simulator only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise: Option<NoiseState>,
+    /// The truth (simulator only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub truth: Option<TruthRecord>,
+}
+
+impl Checkpoint {
+    /// The parent's odometry.
+    pub fn parent_believed(&self) -> Option<scanner::PlanarPose> {
+        let b = self.drives.first()?.believed;
+        Some(scanner::PlanarPose { x_m: b[0], y_m: b[1], heading_rad: b[2] })
+    }
+}
+
+impl Event {
+    /// The event's name, as in the file.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Event::Start(_) => "start",
+            Event::Drive(_) => "drive",
+            Event::Measure(_) => "measure",
+            Event::Tilt(_) => "tilt",
+            Event::Scan(_) => "scan",
+            Event::Fix(_) => "fix",
+            Event::End(_) => "end",
+            Event::Retry(_) => "retry",
+            Event::Stop(_) => "stop",
+            Event::Resume => "resume",
+        }
+    }
+
+    /// Whether a replay skips it (it records what happened but is no step).
+    pub fn informational(&self) -> bool {
+        matches!(self, Event::Retry(_) | Event::Stop(_) | Event::Resume)
+    }
+
+    /// Whether both are the same derived step (`fix` of one cycle and
+    /// station, or `end`), whatever their data.
+    pub fn same_derived_step(&self, other: &Event) -> bool {
+        match (self, other) {
+            (Event::Fix(a), Event::Fix(b)) => a.key == b.key,
+            (Event::End(_), Event::End(_)) => true,
+            _ => false,
+        }
+    }
+
+    /// The event as one JSON line (without the version), for messages.
+    pub fn describe(&self) -> String {
+        serde_json::to_string(self).unwrap_or_else(|_| self.name().to_string())
+    }
+}
+
+/// The key of a journaled step and the event that carries it with its data.
+pub trait Step: Sized {
+    /// What identifies the step.
+    type Key: PartialEq + Clone + Serialize;
+    /// The event of a recorded step.
+    fn event(recorded: Recorded<Self::Key, Self>) -> Event;
+    /// The recorded step in `event`, if it is one of this kind.
+    fn recorded(event: Event) -> Option<Recorded<Self::Key, Self>>;
+}
+
+macro_rules! step {
+    ($data:ty, $key:ty, $variant:ident) => {
+        impl Step for $data {
+            type Key = $key;
+            fn event(recorded: Recorded<$key, $data>) -> Event {
+                Event::$variant(recorded)
+            }
+            fn recorded(event: Event) -> Option<Recorded<$key, $data>> {
+                match event {
+                    Event::$variant(r) => Some(r),
+                    _ => None,
+                }
+            }
+        }
+    };
+}
+
+step!(Driven, DriveKey, Drive);
+step!(Measured, MeasureKey, Measure);
+step!(Tilted, StationKey, Tilt);
+step!(Scanned, StationKey, Scan);
+
+/// One event of a journal with its 1-based line number.
+#[derive(Debug, Clone)]
+pub struct Numbered {
+    /// Line number, 1-based.
+    pub line: usize,
+    /// The event.
+    pub event: Event,
+    /// Its schema version.
+    pub version: u32,
+}
+
+/// A journal read from its file.
+#[derive(Debug, Clone)]
+pub struct Read {
+    /// Every complete line's event.
+    pub events: Vec<Numbered>,
+    /// Byte offset of a torn last line (a write cut short by a kill), to cut.
+    pub torn: Option<u64>,
+}
+
+impl Read {
+    /// The `start` event, which must come first.
+    pub fn start(&self, path: &Path) -> Result<&Start> {
+        match self.events.first().map(|n| &n.event) {
+            Some(Event::Start(s)) => Ok(s),
+            _ => bail!("{}:1: a journal starts with a \"start\" event; this one does not", path.display()),
+        }
+    }
+
+    /// The version the journal was started with (its `start` line's).
+    pub fn version(&self) -> u32 {
+        self.events.first().map_or(VERSION, |n| n.version)
+    }
+}
+
+/// Reads a journal. A last line without its newline is a write cut short by
+/// a kill (even inside a multi-byte character): it is returned separately
+/// (as its byte offset) so a resume can drop it; any other line that is not
+/// an event of a known version is an error naming it.
+pub fn read(path: &Path) -> Result<Read> {
+    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut events = Vec::new();
+    let mut offset = 0u64;
+    let mut torn = None;
+    for (i, raw) in bytes.split_inclusive(|b| *b == b'\n').enumerate() {
+        if raw.last() != Some(&b'\n') {
+            torn = Some(offset);
+            break;
+        }
+        let text = std::str::from_utf8(raw)
+            .with_context(|| format!("{}:{}: not UTF-8 text: not a journal line", path.display(), i + 1))?;
+        let version: Option<u32> = serde_json::from_str::<serde_json::Value>(text)
+            .with_context(|| format!("{}:{}: not a JSON journal event", path.display(), i + 1))?
+            .get("v")
+            .and_then(serde_json::Value::as_u64)
+            .and_then(|v| u32::try_from(v).ok());
+        match version {
+            Some(v) if READS.contains(&v) => {}
+            _ => bail!(
+                "{}:{}: journal schema version {version:?}; this build reads versions {READS:?}",
+                path.display(),
+                i + 1
+            ),
+        }
+        let line: Line = serde_json::from_str(text)
+            .with_context(|| format!("{}:{}: not a journal event of version {}", path.display(), i + 1, VERSION))?;
+        events.push(Numbered { line: i + 1, event: line.event, version: line.v });
+        offset += raw.len() as u64;
+    }
+    Ok(Read { events, torn })
+}
+
+/// An open journal: appends live events, and on resume first hands back the
+/// recorded ones.
+#[derive(Debug)]
+pub struct Journal {
+    file: File,
+    path: PathBuf,
+    version: u32,
+    /// Recorded step events still to replay, with their line numbers.
+    replay: VecDeque<(usize, Event)>,
+    written: usize,
+    abort_after: Option<usize>,
+}
+
+impl Journal {
+    /// Starts a new journal at `path`; an existing one is never overwritten.
+    pub fn create(path: &Path) -> Result<Self> {
+        let file = OpenOptions::new().write(true).create_new(true).open(path).map_err(|e| {
+            if e.kind() == std::io::ErrorKind::AlreadyExists {
+                anyhow::anyhow!(
+                    "{} already holds a run; continue it with --resume or choose another --out directory",
+                    path.display()
+                )
+            } else {
+                anyhow::Error::new(e).context(format!("creating {}", path.display()))
+            }
+        })?;
+        Ok(Self {
+            file,
+            path: path.to_path_buf(),
+            version: VERSION,
+            replay: VecDeque::new(),
+            written: 0,
+            abort_after: None,
+        })
+    }
+
+    /// Opens the journal `read` from `path` to continue it: its step events
+    /// are queued for replay and a torn last line is cut off the file. The
+    /// journal goes on in the version it was started with.
+    pub fn resume(path: &Path, read: Read) -> Result<Self> {
+        read.start(path)?;
+        let version = read.version();
+        let mut file =
+            OpenOptions::new().write(true).open(path).with_context(|| format!("opening {}", path.display()))?;
+        if let Some(offset) = read.torn {
+            file.set_len(offset).with_context(|| format!("cutting the torn last line of {}", path.display()))?;
+        }
+        file.seek(SeekFrom::End(0)).with_context(|| format!("opening {}", path.display()))?;
+        let replay =
+            read.events.into_iter().skip(1).filter(|n| !n.event.informational()).map(|n| (n.line, n.event)).collect();
+        Ok(Self { file, path: path.to_path_buf(), version, replay, written: 0, abort_after: None })
+    }
+
+    /// Aborts the process right after the `n`-th event this journal writes
+    /// (a crash at a chosen point, for testing `--resume`).
+    pub fn abort_after(&mut self, n: Option<usize>) {
+        self.abort_after = n;
+    }
+
+    /// True while recorded events remain to be replayed.
+    pub fn replaying(&self) -> bool {
+        !self.replay.is_empty()
+    }
+
+    /// The next recorded step event and its line, or `None` once the record
+    /// is exhausted and the run goes live.
+    pub fn next_recorded(&mut self) -> Option<(usize, Event)> {
+        self.replay.pop_front()
+    }
+
+    /// The error for a recorded event that is not the step the run takes.
+    pub fn mismatch(&self, line: usize, recorded: &Event, expected: &str) -> anyhow::Error {
+        anyhow::anyhow!(
+            "{}:{line}: the journal records {} where this mission's run takes {expected}; \
+             the journal belongs to another mission or plan",
+            self.path.display(),
+            recorded.describe()
+        )
+    }
+
+    /// Appends `event` (with the schema version) and flushes it to the disk.
+    pub fn append(&mut self, event: Event) -> Result<()> {
+        let mut line = serde_json::to_string(&Line { event, v: self.version })?;
+        line.push('\n');
+        self.file
+            .write_all(line.as_bytes())
+            .and_then(|()| self.file.flush())
+            .with_context(|| format!("writing {}", self.path.display()))?;
+        self.written += 1;
+        if self.abort_after == Some(self.written) {
+            std::process::abort();
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn start() -> Event {
+        Event::Start(Start { mission: "m".into(), seed: 1, scene: "hall".into(), stations: 2, children: vec![] })
+    }
+
+    fn tilt(station: usize) -> Event {
+        Event::Tilt(Recorded {
+            key: StationKey { station },
+            data: Tilted { roll_rad: 0.1, pitch_rad: -0.2 },
+            sim: None,
+        })
+    }
+
+    #[test]
+    fn a_torn_last_line_is_cut_and_steps_replay_in_order() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("journal.jsonl");
+        let mut j = Journal::create(&path).expect("create");
+        j.append(start()).expect("append");
+        let drive = Event::Drive(Recorded {
+            key: DriveKey { cycle: 1, robot: "c1".into(), target: [1.0, 2.0, 0.5] },
+            data: Driven { distance_m: 1.5 },
+            sim: None,
+        });
+        j.append(drive.clone()).expect("append");
+        let step = StepKey::Tilt(StationKey { station: 0 });
+        j.append(Event::Retry(Retry { device: "tilt".into(), attempt: 1, error: "x".into(), step })).expect("append");
+        j.append(tilt(0)).expect("append");
+        drop(j);
+        assert!(Journal::create(&path).is_err(), "an existing journal is never overwritten");
+        // A write cut inside a multi-byte character.
+        let mut f = OpenOptions::new().append(true).open(&path).expect("open");
+        f.write_all("{\"event\": \"fix\", \"robot\": \"b\u{e9}".as_bytes().split_last().expect("bytes").1)
+            .expect("torn write");
+        drop(f);
+
+        let read = read(&path).expect("read");
+        assert!(read.torn.is_some());
+        let mut j = Journal::resume(&path, read).expect("resume");
+        assert_eq!(j.next_recorded().map(|(_, e)| e), Some(drive));
+        assert_eq!(j.next_recorded(), Some((4, tilt(0))));
+        assert!(!j.replaying() && j.next_recorded().is_none());
+        j.append(tilt(1)).expect("append");
+        let again = super::read(&path).expect("read");
+        assert_eq!(again.torn, None, "the torn line was cut before appending");
+        let names: Vec<&str> = again.events.iter().map(|n| n.event.name()).collect();
+        assert_eq!(names, ["start", "drive", "retry", "tilt", "tilt"]);
+        assert!(again.events.iter().all(|n| n.version == VERSION));
+    }
+
+    #[test]
+    fn a_corrupt_middle_line_and_an_unknown_version_are_named() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("journal.jsonl");
+        std::fs::write(&path, "{\"v\":1,\"event\":\"resume\"}\nnot json\n{\"v\":1,\"event\":\"resume\"}\n")
+            .expect("write");
+        let e = read(&path).expect_err("corrupt");
+        assert!(format!("{e:#}").contains("journal.jsonl:2"), "{e:#}");
+        std::fs::write(&path, "{\"v\":7,\"event\":\"resume\"}\n").expect("write");
+        assert!(format!("{:#}", read(&path).expect_err("version")).contains("version"));
+        std::fs::write(&path, "{\"v\":2,\"event\":\"teleport\"}\n").expect("write");
+        assert!(format!("{:#}", read(&path).expect_err("unknown event")).contains("journal.jsonl:1"));
+    }
+}

@@ -1,0 +1,23 @@
+//! Running a mission: the dance step by step on a backend, journaled and
+//! resumable, then the scans fused and the outputs written.
+//!
+//! - [`runner`]: the dance itself, a short loop of named steps;
+//! - [`steps`]: every device command replayed or given, retried, journaled;
+//! - [`backend`]: the simulator or the instruments on serial ports;
+//! - [`journal`]: the typed, versioned `journal.jsonl`;
+//! - [`resume`]: a run directory opened for a new run or a resume, and read
+//!   back by `fuse`;
+//! - [`fuse`]: the scans fused by `[fusion] mode`;
+//! - [`inspection`]: the `[pipe]` inspection of the fused cloud;
+//! - [`outputs`]: the one output stage of `run` and `fuse`;
+//! - [`report`]: `report.json`, `fusion.json`, `stations.csv`.
+
+pub mod backend;
+pub mod fuse;
+pub mod inspection;
+pub mod journal;
+pub mod outputs;
+pub mod report;
+pub mod resume;
+pub mod runner;
+pub mod steps;

@@ -1,0 +1,85 @@
+//! The one output stage of `run` and `fuse`: the merged cloud in each of
+//! the mission's `[output] formats`, and with `[pipe]` the pipe inspection
+//! of that cloud (its deviation map, the recording's `world/pipe/…`, the
+//! report). A fit that fails is reported ([`PipeReport::Failed`]) after
+//! everything else has been written, not raised — the acceptance fails —
+//! while a file that cannot be written is an error.
+
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::Result;
+use nalgebra::Point3;
+use scanner::io::{Format, PointCloud};
+
+use super::inspection::{DEVIATION_FILE, PipeReport};
+use super::report::Timings;
+use crate::mission::Mission;
+use crate::view::recording::Recorder;
+
+/// What the output stage wrote.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Written {
+    /// Points in the merged cloud.
+    pub points: usize,
+    /// The files, relative to the directory they were written to.
+    pub files: Vec<String>,
+    /// The pipe inspection, with `[pipe]`.
+    pub pipe: Option<PipeReport>,
+}
+
+impl Written {
+    /// Whether the outputs did their job: a pipe mission without its
+    /// deviation map has not.
+    pub fn complete(&self) -> bool {
+        !matches!(self.pipe, Some(PipeReport::Failed { .. }))
+    }
+}
+
+/// Writes the merged `cloud` into `dir` as `cloud.<format>` for each of the
+/// mission's formats and, with `[pipe]`, inspects it (logging the result to
+/// `rec`); the time each takes goes to `timings`.
+pub fn write(
+    mission: &Mission,
+    dir: &Path,
+    cloud: Vec<Point3<f32>>,
+    rec: &mut Recorder,
+    timings: &mut Timings,
+) -> Result<Written> {
+    let started = Instant::now();
+    let cloud = PointCloud::from_points(cloud);
+    let mut files = Vec::new();
+    for format in &mission.output.formats {
+        let name = format!("cloud.{format}");
+        let path = dir.join(&name);
+        scanner::io::write(&path, &cloud, Format::from_path(&path)?)?;
+        files.push(name);
+    }
+    timings.cloud_files_s += started.elapsed().as_secs_f64();
+    let pipe = match &mission.pipe {
+        None => None,
+        Some(plan) => {
+            let started = Instant::now();
+            let result = super::inspection::inspect(plan, &cloud.points);
+            if let Ok(inspection) = &result {
+                super::inspection::write_deviation_map(dir, &cloud.points, inspection)?;
+                files.push(DEVIATION_FILE.into());
+            }
+            timings.pipe_s = Some(started.elapsed().as_secs_f64());
+            Some(match result {
+                Ok(inspection) => {
+                    let t = Instant::now();
+                    rec.pipe(&cloud.points, &inspection, plan.threshold_m)?;
+                    timings.recording_s += t.elapsed().as_secs_f64();
+                    super::inspection::report(plan, &inspection)
+                }
+                Err(e) => {
+                    let error = format!("{e:#}");
+                    rec.warn(format!("pipe inspection failed: {error}"))?;
+                    PipeReport::Failed { error }
+                }
+            })
+        }
+    };
+    Ok(Written { points: cloud.len(), files, pipe })
+}

@@ -1,0 +1,296 @@
+//! The reports a run writes, typed: `report.json` ([`RunReport`]) with its
+//! `fusion` ([`FusionReport`], also `fusion/<mode>/fusion.json` of `fuse`)
+//! and `pipe`, and `stations.csv`.
+
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use cps::ParentPose;
+use nalgebra::Matrix4;
+use serde::{Deserialize, Serialize};
+
+use super::fuse::{Fused, ScanView, error_heading, error_xy};
+use super::inspection::PipeReport;
+use super::journal::{Matrix4Record, PoseRecord, matrix_record};
+use crate::mission::Mission;
+
+/// One parent station of a run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StationRecord {
+    /// Station index (0 = start).
+    pub index: usize,
+    /// The CPS estimate.
+    pub pose: ParentPose,
+    /// Its covariance (x, y, z, θ).
+    pub covariance: Matrix4<f64>,
+    /// The prediction's covariance for this station.
+    pub predicted_covariance: Matrix4<f64>,
+    /// The simulator's true pose (sim backend only).
+    pub truth: Option<ParentPose>,
+    /// Horizontal error against the truth, metres (sim backend only).
+    pub error_xy_m: Option<f64>,
+    /// The scan file taken here, relative to the run directory.
+    pub scan: Option<String>,
+}
+
+/// `report.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunReport {
+    /// `[mission] name`.
+    pub mission: String,
+    /// The simulator's seed.
+    pub seed: u64,
+    /// `sim` or `serial`.
+    pub backend: String,
+    /// The scene's name.
+    pub scene: String,
+    /// Every station, start included.
+    pub stations: Vec<StationReport>,
+    /// The last station's figures.
+    #[serde(rename = "final")]
+    pub final_: FinalReport,
+    /// How the scans were fused.
+    pub fusion: FusionReport,
+    /// The pipe inspection, with `[pipe]`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pipe: Option<PipeReport>,
+    /// Whether the acceptance held.
+    pub accepted: bool,
+    /// Where the wall time went, seconds.
+    pub timings: Timings,
+}
+
+/// One station in `report.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StationReport {
+    /// Station index (0 = start).
+    pub index: usize,
+    /// The estimate.
+    pub pose: PoseRecord,
+    /// Its 4×4 covariance (x, y, z, θ), m², m·rad, rad².
+    pub covariance: Matrix4Record,
+    /// The prediction's.
+    pub predicted_covariance: Matrix4Record,
+    /// The simulator's truth.
+    pub truth: Option<PoseRecord>,
+    /// Horizontal error against the truth, metres.
+    pub error_m: Option<f64>,
+    /// The scan taken here.
+    pub scan: Option<String>,
+}
+
+/// `report.json`'s `final`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FinalReport {
+    /// Path length (the true path on the simulator, the estimated one on
+    /// serial ports), metres.
+    pub distance_m: f64,
+    /// The last station's σx² + σy², m².
+    pub sigma_xy2_m2: f64,
+    /// Its horizontal error against the truth, metres.
+    pub error_xy_m: Option<f64>,
+    /// That error in % of the distance.
+    pub drift_percent: Option<f64>,
+}
+
+/// Where the wall time went, seconds (positioning is the rest of `wall_s`).
+#[derive(Debug, Default, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Timings {
+    /// The whole run.
+    pub wall_s: f64,
+    /// Simulating the 3D scans.
+    pub scan_s: f64,
+    /// Writing `scans/`.
+    pub scan_files_s: f64,
+    /// Fusion of the scans.
+    pub fusion_s: f64,
+    /// Writing the merged cloud files.
+    pub cloud_files_s: f64,
+    /// Recording `mission.rrd` (on the mission's thread; scans are thinned
+    /// and logged on a worker, waited for at the end).
+    pub recording_s: f64,
+    /// The pipe inspection (fit, deviation map, anomalies) and its file.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pipe_s: Option<f64>,
+}
+
+/// How the scans were fused: per scan the fused pose, its RMSE and (on the
+/// simulator) the errors of it and of the direct fusion; their RMS.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FusionReport {
+    /// `direct`, `icp` or `cps-icp`.
+    pub mode: String,
+    /// ICP runs.
+    pub matches: usize,
+    /// Every scan.
+    pub scans: Vec<FusedScanReport>,
+    /// RMS horizontal error of the fused poses (simulator).
+    pub rms_error_xy_m: Option<f64>,
+    /// … of the direct fusion's.
+    pub direct_rms_error_xy_m: Option<f64>,
+    /// Wall time, seconds (`fuse` only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seconds: Option<f64>,
+    /// The pipe inspection of the re-fused cloud (`fuse` with `[pipe]`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pipe: Option<PipeReport>,
+}
+
+/// One scan in a [`FusionReport`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FusedScanReport {
+    /// The parent station.
+    pub station: usize,
+    /// Its file, relative to the run directory.
+    pub file: String,
+    /// The fused body pose (heading = yaw).
+    pub pose: PoseRecord,
+    /// RMSE of its last ICP match.
+    pub rmse_m: Option<f64>,
+    /// Horizontal error of the fused pose (simulator).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub error_xy_m: Option<f64>,
+    /// … of the direct fusion's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub direct_error_xy_m: Option<f64>,
+    /// Heading error of the fused pose.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub error_heading_rad: Option<f64>,
+    /// … of the direct fusion's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub direct_error_heading_rad: Option<f64>,
+}
+
+impl FusionReport {
+    /// The report of `fused` over `views`.
+    pub fn new(views: &[ScanView], fused: &Fused) -> Self {
+        let mut sq = [0.0, 0.0];
+        let mut known = 0usize;
+        let scans = views
+            .iter()
+            .zip(&fused.scans)
+            .map(|(v, f)| {
+                let t = f.world_from_body.translation.vector;
+                let (_, _, yaw) = f.world_from_body.rotation.euler_angles();
+                let mut s = FusedScanReport {
+                    station: v.station,
+                    file: v.file.clone(),
+                    pose: PoseRecord { x_m: t.x, y_m: t.y, z_m: t.z, heading_rad: yaw },
+                    rmse_m: f.rmse_m,
+                    error_xy_m: None,
+                    direct_error_xy_m: None,
+                    error_heading_rad: None,
+                    direct_error_heading_rad: None,
+                };
+                if let Some(truth) = &v.truth {
+                    let (e, d) = (error_xy(&f.world_from_body, truth), error_xy(&v.direct(), truth));
+                    s.error_xy_m = Some(e);
+                    s.direct_error_xy_m = Some(d);
+                    s.error_heading_rad = Some(error_heading(&f.world_from_body, truth));
+                    s.direct_error_heading_rad = Some(error_heading(&v.direct(), truth));
+                    sq[0] += e * e;
+                    sq[1] += d * d;
+                    known += 1;
+                }
+                s
+            })
+            .collect();
+        let rms = |s: f64| (known > 0).then(|| (s / known as f64).sqrt());
+        Self {
+            mode: fused.mode.name().into(),
+            matches: fused.matches,
+            scans,
+            rms_error_xy_m: rms(sq[0]),
+            direct_rms_error_xy_m: rms(sq[1]),
+            seconds: None,
+            pipe: None,
+        }
+    }
+}
+
+impl StationReport {
+    fn new(s: &StationRecord) -> Self {
+        Self {
+            index: s.index,
+            pose: (&s.pose).into(),
+            covariance: matrix_record(&s.covariance),
+            predicted_covariance: matrix_record(&s.predicted_covariance),
+            truth: s.truth.as_ref().map(PoseRecord::from),
+            error_m: s.error_xy_m,
+            scan: s.scan.clone(),
+        }
+    }
+}
+
+impl RunReport {
+    /// The report of a run's stations and results.
+    pub fn new(
+        mission: &Mission,
+        stations: &[StationRecord],
+        fusion: FusionReport,
+        pipe: Option<PipeReport>,
+        accepted: bool,
+        timings: Timings,
+    ) -> Result<Self> {
+        let last = stations.last().context("a run has at least the start station")?;
+        // Along the true path on the simulator, the estimated one on serial ports.
+        let at = |s: &StationRecord| s.truth.unwrap_or(s.pose).position;
+        let distance_m: f64 = stations.windows(2).map(|w| (at(&w[1]) - at(&w[0])).norm()).sum();
+        Ok(Self {
+            mission: mission.name.clone(),
+            seed: mission.backend.seed,
+            backend: if mission.backend.serial.is_some() { "serial" } else { "sim" }.into(),
+            scene: mission.backend.scene.clone(),
+            stations: stations.iter().map(StationReport::new).collect(),
+            final_: FinalReport {
+                distance_m,
+                sigma_xy2_m2: cps::sigma_xy2(&last.covariance),
+                error_xy_m: last.error_xy_m,
+                drift_percent: last.error_xy_m.map(|e| if distance_m > 0.0 { 100.0 * e / distance_m } else { 0.0 }),
+            },
+            fusion,
+            pipe,
+            accepted,
+            timings,
+        })
+    }
+}
+
+/// Writes `value` as pretty JSON (with a final newline) to `path`.
+pub fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<()> {
+    let text = serde_json::to_string_pretty(value)? + "\n";
+    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+}
+
+/// `stations.csv`: one row per station, the header with units.
+pub fn write_stations_csv(path: &Path, stations: &[StationRecord]) -> Result<()> {
+    let mut csv = String::from(
+        "index,x_m,y_m,z_m,heading_rad,sigma_x_m,sigma_y_m,sigma_z_m,sigma_heading_rad,predicted_sigma_xy_m,true_x_m,true_y_m,true_z_m,true_heading_rad,error_xy_m\n",
+    );
+    for s in stations {
+        let sd = |k: usize| s.covariance[(k, k)].max(0.0).sqrt();
+        let p = &s.pose;
+        // Empty cells without a truth (serial ports).
+        let truth = match (&s.truth, s.error_xy_m) {
+            (Some(t), Some(e)) => {
+                format!("{},{},{},{},{}", t.position.x, t.position.y, t.position.z, t.heading_rad, e)
+            }
+            _ => ",,,,".to_string(),
+        };
+        csv += &format!(
+            "{},{},{},{},{},{},{},{},{},{},{}\n",
+            s.index,
+            p.position.x,
+            p.position.y,
+            p.position.z,
+            p.heading_rad,
+            sd(0),
+            sd(1),
+            sd(2),
+            sd(3),
+            cps::sigma_xy2(&s.predicted_covariance).sqrt(),
+            truth
+        );
+    }
+    std::fs::write(path, csv).with_context(|| format!("writing {}", path.display()))
+}

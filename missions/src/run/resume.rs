@@ -1,0 +1,176 @@
+//! A run directory: made ready for a new run or for `--resume` (the
+//! journal opened, the mission checked to be the one the run started with),
+//! and read back by `fuse` and `adjust` — the mission as run, its plan and
+//! the journal's scans with their poses.
+
+use std::path::Path;
+
+use anyhow::{Context, Result, bail};
+use cps::ParentPose;
+use nalgebra::Matrix4;
+use scanner::Tilt;
+
+use super::fuse::ScanView;
+use super::journal::{self, EndRecord, Event, Journal, Start, matrix_of};
+use crate::mission::Mission;
+use crate::planning::Planned;
+
+/// How the journaled run ended, if it did: the `end` event's record.
+fn finished(read: &journal::Read) -> Option<EndRecord> {
+    read.events.iter().rev().find(|n| !n.event.informational()).and_then(|n| match &n.event {
+        Event::End(e) => Some(e.data),
+        _ => None,
+    })
+}
+
+/// The journal of the run in `dir`, opened to write: a new one (with the
+/// mission and its scene file copied beside it), or with `resume` the
+/// interrupted run's, whose mission must be `mission`. The journal aborts
+/// the process after `abort_after` events (a crash test).
+pub fn open(
+    mission: &Mission,
+    planned: &Planned,
+    dir: &Path,
+    resume: bool,
+    abort_after: Option<usize>,
+) -> Result<Journal> {
+    let journal_path = dir.join("journal.jsonl");
+    let mission_copy = dir.join("mission.toml");
+    if !resume && journal_path.exists() && finished(&journal::read(&journal_path)?).is_some() {
+        bail!(
+            "{} holds a finished run (its outputs are there; a run is never overwritten): \
+             choose another --out directory",
+            dir.display()
+        );
+    }
+    if resume {
+        if !journal_path.exists() {
+            bail!("{} does not exist: there is no run to resume there", journal_path.display());
+        }
+        let read = journal::read(&journal_path)?;
+        let start = read.start(&journal_path)?.clone();
+        let as_run =
+            std::fs::read_to_string(&mission_copy).with_context(|| format!("reading {}", mission_copy.display()))?;
+        let scene_changed = match &mission.backend.scene_file {
+            Some((_, text)) => std::fs::read_to_string(dir.join("scene.toml")).ok().as_ref() != Some(text),
+            None => false,
+        };
+        if as_run != mission.source.text || start.seed != mission.backend.seed || scene_changed {
+            bail!(
+                "{} is not the mission this run started with ({}{}); resume with that file",
+                mission.source.file.display(),
+                mission_copy.display(),
+                if scene_changed { ", and its scene file changed since: see scene.toml there" } else { "" }
+            );
+        }
+        if let Some(end) = finished(&read) {
+            bail!(
+                "the run in {} is finished (acceptance {}): nothing to resume; its outputs are there",
+                dir.display(),
+                if end.accepted { "passed" } else { "FAILED" }
+            );
+        }
+        let mut journal = Journal::resume(&journal_path, read)?;
+        journal.abort_after(abort_after);
+        journal.append(Event::Resume)?;
+        return Ok(journal);
+    }
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let mut journal = Journal::create(&journal_path)?;
+    journal.abort_after(abort_after);
+    std::fs::write(&mission_copy, &mission.source.text)
+        .with_context(|| format!("writing {}", mission_copy.display()))?;
+    if let Some((_, text)) = &mission.backend.scene_file {
+        std::fs::write(dir.join("scene.toml"), text)
+            .with_context(|| format!("writing {}/scene.toml", dir.display()))?;
+    }
+    journal.append(Event::Start(Start {
+        mission: mission.name.clone(),
+        seed: mission.backend.seed,
+        scene: mission.backend.scene.clone(),
+        stations: planned.stations(),
+        children: mission.children.clone(),
+    }))?;
+    Ok(journal)
+}
+
+/// A run directory read back.
+#[derive(Debug)]
+pub struct RunDir {
+    /// The mission as run (`mission.toml`, with `scene.toml` for its scene file).
+    pub mission: Mission,
+    /// Its plan.
+    pub planned: Planned,
+    /// The journal.
+    pub journal: journal::Read,
+    /// The scans taken, with their poses (a run interrupted before its end
+    /// gives the scans taken so far).
+    pub views: Vec<ScanView>,
+}
+
+/// Reads the run in `dir`: its mission, its plan, its journal and the
+/// scans the journal names with their poses — each `scan` event's file
+/// (body frame, 3DTK layout), the `tilt` event before it, the `fix` event
+/// of that station (the CPS pose, its covariance and its cross-covariances
+/// with the earlier scan stations), and the team's state (the truth and the
+/// drive's believed pose).
+pub fn load(dir: &Path) -> Result<RunDir> {
+    let mission_path = dir.join("mission.toml");
+    if !mission_path.exists() {
+        bail!("{} is not a run directory: {} is missing", dir.display(), mission_path.display());
+    }
+    let scene_copy = dir.join("scene.toml");
+    let mission = if scene_copy.exists() {
+        Mission::load_with_scene(&mission_path, &scene_copy)?
+    } else {
+        Mission::load(&mission_path)?
+    };
+    let planned = Planned::new(&mission)?;
+    let journal_path = dir.join("journal.jsonl");
+    let journal = journal::read(&journal_path)?;
+    let dance = &planned.dance;
+    let mut pose = (dance.station_pose(0), mission.plan.start_covariance);
+    let mut cross: Vec<Matrix4<f64>> = Vec::new();
+    let mut tilt = None;
+    let mut views = Vec::new();
+    for n in &journal.events {
+        let at = |what: &str| format!("{}:{}: {what}", journal_path.display(), n.line);
+        match &n.event {
+            Event::Fix(f) => {
+                let d = &f.data;
+                pose = ((&d.pose).into(), matrix_of(&d.covariance));
+                cross = d.scan_cross_covariances.iter().flatten().map(matrix_of).collect();
+            }
+            Event::Tilt(t) => tilt = Some(Tilt { roll_rad: t.data.roll_rad, pitch_rad: t.data.pitch_rad }),
+            Event::Scan(s) => {
+                let station = s.key.station;
+                let file = s.data.file.clone();
+                let tilt = tilt.take().with_context(|| at("a scan without a tilt reading before it"))?;
+                let cloud = scanner::io::read(&dir.join(&file)).with_context(|| at(&format!("reading {file}")))?;
+                let truth = s.sim.as_ref().and_then(|c| c.truth.as_ref()).map(|t| {
+                    let p = ParentPose::new(t.parent[0], t.parent[1], t.parent[2], t.parent[3]);
+                    Tilt { roll_rad: t.tilt[0], pitch_rad: t.tilt[1] }.world_from_body(&p)
+                });
+                let nominal = dance.station_pose(station.min(dance.stations.len() - 1));
+                let odometry = s
+                    .sim
+                    .as_ref()
+                    .and_then(|c| c.parent_believed())
+                    .map_or(nominal, |b| ParentPose::new(b.x_m, b.y_m, nominal.position.z, b.heading_rad));
+                views.push(ScanView {
+                    station,
+                    file,
+                    body: cloud.points,
+                    pose: pose.0,
+                    covariance: pose.1,
+                    cross_covariance: std::mem::take(&mut cross),
+                    tilt,
+                    odometry,
+                    truth,
+                });
+            }
+            _ => {}
+        }
+    }
+    Ok(RunDir { mission, planned, journal, views })
+}

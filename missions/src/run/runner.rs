@@ -1,0 +1,595 @@
+//! `cps-survey run`: a mission end to end — the dance cycle by cycle, a
+//! scan at each scan station fused directly with the CPS pose, a journal of
+//! every command and reading, and the outputs.
+//!
+//! Outputs in the run directory:
+//! - `mission.toml` — the mission as run (a resume must use the same);
+//! - `journal.jsonl` — see [`crate::run::journal`]: every command with its
+//!   reading and the team's state after it, flushed as it happens;
+//! - `scans/scanNNN.3d` + `.pose` — each scan in the body frame with its
+//!   CPS `world_from_body` (3DTK layout), written before the journal
+//!   references it;
+//! - `report.json`, `stations.csv` — per-station estimate, covariance,
+//!   prediction, truth and error ([`crate::run::report`]);
+//! - `cloud.<format>` (and with `[pipe]` its deviation map) — the output
+//!   stage ([`crate::run::outputs`]);
+//! - `mission.rrd` — the Rerun recording ([`crate::view::recording`]).
+//!
+//! `--resume` replays the journal: each recorded reading is used as it was
+//! and the simulated world is put back to its recorded state after each
+//! step, so the run continues exactly where it stopped.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result, bail};
+use cps::{FixOptions, ParentPose, TeamState, observe};
+use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
+use nalgebra::{Matrix3, Matrix4, Point3};
+use planner::{CyclePrediction, DanceCycle};
+use scanner::io::{Format, PointCloud};
+use scanner::sim::Robot;
+use scanner::{PlanarPose, Target, Tilt, TsMeasurement, TsStatus};
+
+use super::backend::{DeviceKind, Fault, Team};
+use super::fuse::{Fused, ScanView};
+use super::journal::{
+    Derived, DriveKey, Driven, EndKey, EndRecord, Event, FixKey, FixRecord, MeasureKey, Measured, Phase, Scanned,
+    StationKey, StepKey, Tilted, matrix_record,
+};
+use super::outputs::Written;
+use super::report::{FusionReport, RunReport, StationRecord, Timings};
+use super::steps::Steps;
+use crate::mission::{FusionMode, Mission};
+use crate::planning::Planned;
+use crate::view::recording::{Layout, Recorder, Viewer};
+
+/// Nominal drive speed for the recording's `sim_time`, m/s.
+pub const DRIVE_SPEED_M_PER_S: f64 = 0.3;
+/// Nominal duration of a total-station measurement (ATR lock, distance), s.
+pub const MEASURE_S: f64 = 4.0;
+/// Nominal duration of a tilt reading, s.
+pub const TILT_S: f64 = 1.0;
+
+/// How to run.
+#[derive(Debug, Clone, Default)]
+pub struct RunOptions {
+    /// No progress bars.
+    pub quiet: bool,
+    /// Continue the run whose journal is in the directory.
+    pub resume: bool,
+    /// Faults to inject into the simulated devices.
+    pub faults: Vec<Fault>,
+    /// Abort the process after writing this many journal events (a crash
+    /// at a chosen point, for testing `--resume`).
+    pub abort_after_events: Option<usize>,
+    /// A live viewer to stream to besides `mission.rrd`.
+    pub viewer: Viewer,
+    /// Log every ICP iteration of the fusion to the recording, on the
+    /// `icp_iteration` timeline.
+    pub log_icp_iterations: bool,
+}
+
+/// What a run returns.
+#[derive(Debug, Clone)]
+pub struct RunSummary {
+    /// The run directory.
+    pub dir: PathBuf,
+    /// Every station, start included.
+    pub stations: Vec<StationRecord>,
+    /// Whether the mission's acceptance tolerances hold.
+    pub accepted: bool,
+    /// Journal events replayed from an earlier, interrupted run.
+    pub replayed: usize,
+    /// What the report says (`report.json`).
+    pub report: RunReport,
+    /// The files the run wrote, relative to its directory.
+    pub files: Vec<String>,
+    /// Points in the merged cloud.
+    pub points: usize,
+}
+
+impl Measured {
+    fn new(m: TsMeasurement) -> Self {
+        Self {
+            slope_raw_m: m.slope_raw_m,
+            hz_rad: m.hz_rad,
+            v_rad: m.v_rad,
+            reduced_accuracy: m.status == TsStatus::ReducedAccuracy,
+        }
+    }
+
+    /// The measurement in the instrument's terms.
+    pub fn measurement(&self) -> TsMeasurement {
+        TsMeasurement {
+            slope_raw_m: self.slope_raw_m,
+            hz_rad: self.hz_rad,
+            v_rad: self.v_rad,
+            status: if self.reduced_accuracy { TsStatus::ReducedAccuracy } else { TsStatus::Ok },
+        }
+    }
+}
+
+/// A drive goal as journaled: x, y, heading.
+fn target_of(goal: &PlanarPose) -> [f64; 3] {
+    [goal.x_m, goal.y_m, goal.heading_rad]
+}
+
+/// Adds the seconds `f` takes to `total`.
+fn timed<T>(total: &mut f64, f: impl FnOnce() -> T) -> T {
+    let t = Instant::now();
+    let out = f();
+    *total += t.elapsed().as_secs_f64();
+    out
+}
+
+/// The progress bars: the dance's steps (station n of N, ETA) and the
+/// scans' slices, both only ever moving forward.
+#[derive(Debug)]
+struct Progress {
+    steps: ProgressBar,
+    scans: ProgressBar,
+    /// Slices of the scans already finished.
+    slices_done: u64,
+    stations: usize,
+}
+
+impl Progress {
+    fn new(quiet: bool, planned: &Planned, mission: &Mission) -> Result<Self> {
+        let target = if quiet { ProgressDrawTarget::hidden() } else { ProgressDrawTarget::stderr() };
+        let multi = MultiProgress::with_draw_target(target);
+        let style = |template: &str| -> Result<ProgressStyle> {
+            Ok(ProgressStyle::with_template(template)
+                .map_err(|e| anyhow::anyhow!("progress style: {e}"))?
+                .progress_chars("=> "))
+        };
+        let n_scans = (0..planned.stations()).filter(|k| mission.scan.scans_at(*k)).count() as u64;
+        let steps = multi.add(
+            ProgressBar::new(planned.steps.len() as u64)
+                .with_style(style("{prefix:>8} [{bar:36}] {pos}/{len} steps, {msg}, ETA {eta}")?),
+        );
+        steps.set_prefix("survey");
+        let scans = multi.add(
+            ProgressBar::new(n_scans * mission.scan.slices as u64)
+                .with_style(style("{prefix:>8} [{bar:36}] {msg}, ETA {eta}")?),
+        );
+        scans.set_prefix("scans");
+        Ok(Self { steps, scans, slices_done: 0, stations: planned.stations() })
+    }
+
+    fn at_station(&self, k: usize) {
+        self.steps.set_message(format!("station {} of {}", k + 1, self.stations));
+    }
+}
+
+/// A mission being run.
+struct Run<'m> {
+    mission: &'m Mission,
+    planned: &'m Planned,
+    dir: PathBuf,
+    steps: Steps,
+    team: TeamState,
+    progress: Progress,
+    merged: Vec<Point3<f32>>,
+    /// Every scan with its poses (body points kept for the ICP modes) and
+    /// where it sits on the recording's timelines.
+    views: Vec<ScanView>,
+    scan_times: Vec<(i64, f64)>,
+    stations: Vec<StationRecord>,
+    timings: Timings,
+    log_icp_iterations: bool,
+}
+
+/// Runs `mission` as `planned` into `dir`: a new run (an existing journal
+/// there is an error, so a run is never overwritten), or with `resume` the
+/// continuation of the run whose journal is there. A plan that breaks a
+/// constraint (`cps-survey plan`) is refused before anything moves.
+pub fn run(mission: &Mission, planned: &Planned, dir: &Path, options: &RunOptions) -> Result<RunSummary> {
+    let started = Instant::now();
+    crate::planning::constraints::refuse_violations(mission, planned)?;
+    let journal = super::resume::open(mission, planned, dir, options.resume, options.abort_after_events)?;
+    std::fs::create_dir_all(dir.join("scans")).with_context(|| format!("creating {}", dir.join("scans").display()))?;
+
+    let team = Team::new(mission, &planned.dance, options.faults.clone())?;
+    let rrd = mission.output.rerun.then(|| dir.join("mission.rrd"));
+    let mut rec = Recorder::new(&mission.name, rrd.as_deref(), &options.viewer, mission.robot_labels())?;
+    rec.layout(Layout::Mission)?;
+    rec.scene(team.scene())?;
+    rec.plan(mission, planned, "plan", &[])?;
+    let progress = Progress::new(options.quiet, planned, mission)?;
+    let resume_hint = format!("cps-survey run {} --out {} --resume", mission.source.file.display(), dir.display());
+    let state =
+        TeamState::new(planned.dance.station_pose(0), mission.plan.start_covariance, planned.dance.n_children())?;
+    let steps = Steps {
+        journal,
+        team,
+        rec,
+        max_retries: mission.backend.max_retries,
+        retry_delay: Duration::from_secs_f64(mission.backend.retry_delay_s),
+        resume_hint,
+        replayed: 0,
+    };
+    let mut run = Run {
+        mission,
+        planned,
+        dir: dir.to_path_buf(),
+        steps,
+        team: state,
+        progress,
+        merged: Vec::new(),
+        views: Vec::new(),
+        scan_times: Vec::new(),
+        stations: Vec::new(),
+        timings: Timings::default(),
+        log_icp_iterations: options.log_icp_iterations,
+    };
+    run.steps.rec.info(format!("mission \"{}\" starts", mission.name))?;
+    // The start: the parent stands at station 0 and scans if due.
+    run.log_team(None)?;
+    run.station(0, mission.plan.start_covariance)?;
+    // The dance: cycle by cycle, the children placed ahead, the parent
+    // moved and fixed from them, the new station scanned.
+    for k in 0..planned.dance.cycles.len() {
+        run.cycle(k)?;
+    }
+    // The scans fused, the outputs written, the journal closed.
+    run.finish(started)
+}
+
+impl Run<'_> {
+    /// One dance cycle: the children move to the formation and are placed
+    /// from the standing parent; the parent moves, measures every child and
+    /// fixes itself from them; then the station's scan.
+    fn cycle(&mut self, k: usize) -> Result<()> {
+        let cycle = &self.planned.dance.cycles[k];
+        let predicted = &self.planned.prediction.cycles[k];
+        self.progress.at_station(cycle.from);
+        let Some(instrument) = &self.mission.total_station else {
+            return self.solo_cycle(cycle, predicted);
+        };
+        let from = self.team.parent();
+        for &j in &cycle.moved {
+            self.place_child(cycle, j, &from, instrument)?;
+            self.log_team(Some(predicted))?;
+        }
+        let nominal = self.drive_parent(cycle)?;
+        self.fix_parent(cycle, &nominal, instrument)?;
+        self.log_team(Some(predicted))?;
+        self.station(cycle.to, predicted.covariance)
+    }
+
+    /// Child `j` drives to its formation point and the standing parent at
+    /// `from` measures it: its placement.
+    fn place_child(
+        &mut self,
+        cycle: &DanceCycle,
+        j: usize,
+        from: &ParentPose,
+        instrument: &cps::Instrument,
+    ) -> Result<()> {
+        let at = &cycle.children[j];
+        let goal = PlanarPose { x_m: at.x, y_m: at.y, heading_rad: 0.0 };
+        let key = DriveKey { cycle: cycle.cycle, robot: self.mission.children[j].clone(), target: target_of(&goal) };
+        let driven: Driven = self.steps.step(key, StepKey::Drive, DeviceKind::Drive, |team| {
+            team.drive(Robot::Child(j), &goal).map(|o| Driven { distance_m: o.distance_m })
+        })?;
+        self.steps.rec.advance(driven.distance_m / DRIVE_SPEED_M_PER_S);
+        self.progress.steps.inc(1);
+        let target = Target { child: j, predicted: observe(from, at)? };
+        let key = MeasureKey { cycle: cycle.cycle, phase: Phase::Placement, child: j };
+        let m: Measured = self
+            .steps
+            .step(key, StepKey::Measure, DeviceKind::TotalStation, |team| team.measure(&target).map(Measured::new))?;
+        self.team.place_child(j, &m.measurement().to_reading(instrument), instrument)?;
+        self.steps.rec.advance(MEASURE_S);
+        self.progress.steps.inc(1);
+        let placed = self.team.child(j).context("a placed child has a position")?;
+        self.steps.team.relocalise_child(j, &placed)?;
+        self.steps.rec.sight_lines("placement", &from.position, &[(placed, None)])
+    }
+
+    /// The parent drives to the cycle's station; returns its nominal pose.
+    fn drive_parent(&mut self, cycle: &DanceCycle) -> Result<ParentPose> {
+        let nominal = self.planned.dance.station_pose(cycle.to);
+        let goal = PlanarPose::from(&nominal);
+        let key = DriveKey { cycle: cycle.cycle, robot: "parent".into(), target: target_of(&goal) };
+        let driven: Driven = self.steps.step(key, StepKey::Drive, DeviceKind::Drive, |team| {
+            team.drive(Robot::Parent, &goal).map(|o| Driven { distance_m: o.distance_m })
+        })?;
+        self.steps.rec.advance(driven.distance_m / DRIVE_SPEED_M_PER_S);
+        self.progress.steps.inc(1);
+        Ok(nominal)
+    }
+
+    /// The parent, moved to near `nominal`, measures every child and fixes
+    /// its pose from them (seed 003 eqs 7–16); the fix is journaled with
+    /// the station's cross-covariances to the earlier scan stations, and
+    /// every blunder suspect is logged.
+    fn fix_parent(&mut self, cycle: &DanceCycle, nominal: &ParentPose, instrument: &cps::Instrument) -> Result<()> {
+        let mut readings = Vec::with_capacity(cycle.children.len());
+        for (j, at) in cycle.children.iter().enumerate() {
+            let target = Target { child: j, predicted: observe(nominal, at)? };
+            let key = MeasureKey { cycle: cycle.cycle, phase: Phase::Fix, child: j };
+            let m: Measured = self.steps.step(key, StepKey::Measure, DeviceKind::TotalStation, |team| {
+                team.measure(&target).map(Measured::new)
+            })?;
+            self.steps.rec.advance(MEASURE_S);
+            self.progress.steps.inc(1);
+            readings.push((j, m.measurement().to_reading(instrument)));
+        }
+        let fix = self.team.fix_parent(&readings, instrument, &FixOptions::default())?;
+        let pose = self.team.parent();
+        self.steps.team.relocalise_parent(&pose)?;
+        // cov(this station, each earlier scan station): the scans' joint prior.
+        let cross = (0..self.team.clones())
+            .map(|a| self.team.parent_clone_covariance(a).map(|c| matrix_record(&c)))
+            .collect::<cps::Result<Vec<_>>>()?;
+        self.steps.note(Event::Fix(Derived {
+            key: FixKey { cycle: cycle.cycle, station: cycle.to },
+            data: FixRecord {
+                pose: (&pose).into(),
+                covariance: matrix_record(&self.team.parent_covariance()),
+                sigma0_squared: Some(fix.sigma0_squared),
+                redundancy: Some(fix.redundancy),
+                scan_cross_covariances: Some(cross),
+                source: None,
+            },
+        }))?;
+        self.progress.steps.inc(1);
+        // Sight lines coloured by each child's largest |w|; a blunder is logged.
+        let reliability = fix.reliability();
+        let mut lines = Vec::with_capacity(readings.len());
+        for (k, (j, _)) in readings.iter().enumerate() {
+            let w = reliability.w_statistics[3 * k..3 * k + 3]
+                .iter()
+                .flatten()
+                .copied()
+                .max_by(|a, b| a.abs().total_cmp(&b.abs()));
+            if let Some(w) = w.filter(|w| w.abs() > cps::W_CRITICAL) {
+                self.steps.rec.warn(format!(
+                    "cycle {}: the measurement of {} has |w| = {:.2} > {:.2}: a possible blunder",
+                    cycle.cycle,
+                    self.mission.children[*j],
+                    w.abs(),
+                    cps::W_CRITICAL
+                ))?;
+            }
+            lines.push((self.team.child(*j).context("a sighted child is placed")?, w));
+        }
+        self.steps.rec.sight_lines("fix", &pose.position, &lines)?;
+        self.steps.rec.fix_metrics(fix.sigma0_squared);
+        Ok(())
+    }
+
+    /// A robot alone drives to the next station and takes the pose its
+    /// odometry believes, with the dead-reckoning covariance.
+    fn solo_cycle(&mut self, cycle: &DanceCycle, predicted: &CyclePrediction) -> Result<()> {
+        let nominal = self.drive_parent(cycle)?;
+        let believed = self.steps.team.parent_believed();
+        let pose = ParentPose::new(believed.x_m, believed.y_m, nominal.position.z, believed.heading_rad);
+        self.team = TeamState::new(pose, predicted.covariance, 0)?;
+        self.steps.note(Event::Fix(Derived {
+            key: FixKey { cycle: cycle.cycle, station: cycle.to },
+            data: FixRecord {
+                pose: (&pose).into(),
+                covariance: matrix_record(&predicted.covariance),
+                sigma0_squared: None,
+                redundancy: None,
+                scan_cross_covariances: None,
+                source: Some("odometry".into()),
+            },
+        }))?;
+        self.log_team(Some(predicted))?;
+        self.station(cycle.to, predicted.covariance)
+    }
+
+    /// Logs the team's estimate, truth and ellipsoids to the recording, with
+    /// the prediction of the cycle when given.
+    fn log_team(&mut self, predicted: Option<&CyclePrediction>) -> Result<()> {
+        let truth = self.steps.team.truth();
+        let predicted: Option<(&Matrix4<f64>, &[Matrix3<f64>])> =
+            predicted.map(|p| (&p.covariance, p.children_covariance.as_slice()));
+        self.steps.rec.team(&self.team, truth.as_ref(), predicted)
+    }
+
+    /// The parent stands at station `index`: the scan if one is due, then
+    /// the station's record.
+    fn station(&mut self, index: usize, predicted: Matrix4<f64>) -> Result<()> {
+        self.progress.at_station(index);
+        let scan = if self.mission.scan.scans_at(index) { Some(self.scan(index)?) } else { None };
+        let truth = self.steps.team.truth().map(|t| t.parent);
+        let pose = self.team.parent();
+        let error_xy_m = truth.map(|t| (pose.position.xy() - t.position.xy()).norm());
+        let covariance = self.team.parent_covariance();
+        self.steps.rec.trajectory(&pose, truth.as_ref())?;
+        self.steps.rec.station_metrics(&covariance, &predicted, error_xy_m);
+        self.stations.push(StationRecord {
+            index,
+            pose,
+            covariance,
+            predicted_covariance: predicted,
+            truth,
+            error_xy_m,
+            scan,
+        });
+        Ok(())
+    }
+
+    /// Reads the tilt, takes a 3D scan, writes it to `scans/` and fuses it
+    /// directly with the CPS pose; returns the scan file's name.
+    fn scan(&mut self, index: usize) -> Result<String> {
+        let tilt: Tilted = self.steps.step(StationKey { station: index }, StepKey::Tilt, DeviceKind::Tilt, |team| {
+            team.tilt().map(|t| Tilted { roll_rad: t.roll_rad, pitch_rad: t.pitch_rad })
+        })?;
+        self.steps.rec.advance(TILT_S);
+        let world_from_body =
+            Tilt { roll_rad: tilt.roll_rad, pitch_rad: tilt.pitch_rad }.world_from_body(&self.team.parent());
+        let name = format!("scans/scan{index:03}");
+        let (dir, slices, t) = (&self.dir, self.mission.scan.slices, &mut self.timings);
+        let (bar, done) = (&self.progress.scans, self.progress.slices_done);
+        bar.set_message(format!("scan at station {}", index + 1));
+        let mut taken = None;
+        let scanned: Scanned =
+            self.steps.step(StationKey { station: index }, StepKey::Scan, DeviceKind::Scanner, |team| {
+                let scan =
+                    timed(&mut t.scan_s, || team.scan(slices, &mut |slice, _| bar.set_position(done + slice as u64)))?;
+                let cloud = PointCloud::from_points(scan.points);
+                timed(&mut t.scan_files_s, || {
+                    scanner::io::write(&dir.join(format!("{name}.3d")), &cloud, Format::ThreeDtk)?;
+                    scanner::io::write_3dtk_pose(&dir.join(format!("{name}.pose")), &world_from_body)
+                })?;
+                let points = cloud.len();
+                taken = Some(cloud);
+                Ok(Scanned { file: format!("{name}.3d"), points, crc32: None })
+            })?;
+        self.progress.slices_done += slices as u64;
+        self.progress.scans.set_position(self.progress.slices_done);
+        self.progress.steps.inc(1);
+        let cloud = match taken {
+            Some(cloud) => cloud,
+            None => timed(&mut self.timings.scan_files_s, || scanner::io::read(&self.dir.join(&scanned.file)))?,
+        };
+        if cloud.len() != scanned.points {
+            bail!("{}: {} points, but the journal recorded {}", scanned.file, cloud.len(), scanned.points);
+        }
+        let world = timed(&mut self.timings.fusion_s, || fusion::direct::transform(&cloud.points, &world_from_body));
+        self.steps.rec.advance(slices as f64 / (75.0 * self.mission.scan.resolution.degrees()));
+        if self.steps.rec.enabled() {
+            let rec = &mut self.steps.rec;
+            timed(&mut self.timings.recording_s, || rec.scan("direct", &format!("scan{index:03}"), world.clone()))?;
+        }
+        let truth = self.steps.team.truth();
+        let believed = self.steps.team.parent_believed();
+        let nominal_z = self.planned.dance.station_pose(index).position.z;
+        // The station joins the scan stations whose joint covariance the
+        // team carries (a robot alone, by odometry, carries none).
+        let cross_covariance = (0..self.team.clones().min(self.views.len()))
+            .map(|a| self.team.parent_clone_covariance(a))
+            .collect::<cps::Result<Vec<_>>>()?;
+        self.team.clone_parent();
+        let view = ScanView {
+            station: index,
+            file: scanned.file.clone(),
+            // Direct fusion merges as it goes; the ICP modes need every scan at the end.
+            body: if self.mission.fusion.mode == FusionMode::Direct { Vec::new() } else { cloud.points },
+            pose: self.team.parent(),
+            covariance: self.team.parent_covariance(),
+            cross_covariance,
+            tilt: Tilt { roll_rad: tilt.roll_rad, pitch_rad: tilt.pitch_rad },
+            odometry: ParentPose::new(believed.x_m, believed.y_m, nominal_z, believed.heading_rad),
+            truth: truth.map(|t| t.tilt.world_from_body(&t.parent)),
+        };
+        self.views.push(view);
+        self.scan_times.push(self.steps.rec.now());
+        if self.mission.fusion.mode == FusionMode::Direct {
+            self.merged.extend(world);
+        }
+        Ok(scanned.file)
+    }
+
+    /// Fuses the scans by the mission's `[fusion] mode` (direct fusion has
+    /// merged them already), logs the refined scans and their ICP RMSE.
+    fn fuse(&mut self) -> Result<Fused> {
+        let views = &self.views;
+        let mode = self.mission.fusion.mode;
+        let bar = &self.progress.scans;
+        if mode != FusionMode::Direct {
+            bar.set_message("fusion: ICP matches");
+        }
+        let fused = timed(&mut self.timings.fusion_s, || {
+            let trace = self.log_icp_iterations && self.steps.rec.enabled();
+            let scanner = self.mission.scan.scanner_in_body();
+            super::fuse::fuse(views, mode, &self.mission.fusion, scanner, trace, &mut |done, total| {
+                bar.set_message(format!("fusion: ICP match {done} of {total}"));
+            })
+        })?;
+        if mode == FusionMode::Direct {
+            return Ok(fused);
+        }
+        // Each scan moved once, into the merged cloud and the recording.
+        let rec = &mut self.steps.rec;
+        if !fused.traces.is_empty() {
+            let names: Vec<String> = views.iter().map(|v| format!("scan{:03}", v.station)).collect();
+            let bodies: Vec<&[Point3<f32>]> = views.iter().map(|v| v.body.as_slice()).collect();
+            timed(&mut self.timings.recording_s, || rec.icp_iterations(&fused.traces, &names, &bodies))?;
+        }
+        let (merged, t) = (&mut self.merged, &mut self.timings);
+        for ((view, at), f) in views.iter().zip(&self.scan_times).zip(&fused.scans) {
+            let world = timed(&mut t.fusion_s, || fusion::direct::transform(&view.body, &f.world_from_body));
+            if rec.enabled() {
+                timed(&mut t.recording_s, || -> Result<()> {
+                    rec.scan_at("icp", &format!("scan{:03}", view.station), world.clone(), *at)?;
+                    if let Some(rmse) = f.rmse_m {
+                        rec.icp_metrics(at.0, rmse);
+                    }
+                    Ok(())
+                })?;
+            }
+            merged.extend(world);
+        }
+        Ok(fused)
+    }
+
+    /// The fusion, the output stage, the reports, the recording's end and
+    /// the end of the journal.
+    fn finish(mut self, started: Instant) -> Result<RunSummary> {
+        self.progress.steps.finish_and_clear();
+        let fused = self.fuse()?;
+        self.progress.scans.finish_and_clear();
+        let fusion = FusionReport::new(&self.views, &fused);
+        let merged = std::mem::take(&mut self.merged);
+        let written: Written =
+            super::outputs::write(self.mission, &self.dir, merged, &mut self.steps.rec, &mut self.timings)?;
+        let accepted = mission_accepted(self.mission, &self.stations, &self.views, &fused) && written.complete();
+        self.steps.rec.info(format!("mission ends: acceptance {}", if accepted { "passed" } else { "FAILED" }))?;
+        let recording = std::mem::replace(&mut self.steps.rec, Recorder::disabled());
+        let recorded = recording.enabled();
+        timed(&mut self.timings.recording_s, || recording.finish())?;
+        self.timings.wall_s = started.elapsed().as_secs_f64();
+        let report =
+            RunReport::new(self.mission, &self.stations, fusion, written.pipe.clone(), accepted, self.timings)?;
+        super::report::write_json(&self.dir.join("report.json"), &report)?;
+        super::report::write_stations_csv(&self.dir.join("stations.csv"), &self.stations)?;
+        self.steps.note(Event::End(Derived { key: EndKey {}, data: EndRecord { accepted } }))?;
+        let mut files: Vec<String> =
+            ["mission.toml", "journal.jsonl", "scans/", "report.json", "stations.csv"].map(String::from).to_vec();
+        files.extend(written.files);
+        if recorded {
+            files.push("mission.rrd".into());
+        }
+        Ok(RunSummary {
+            dir: self.dir,
+            stations: self.stations,
+            accepted,
+            replayed: self.steps.replayed,
+            report,
+            files,
+            points: written.points,
+        })
+    }
+}
+
+/// Whether the mission's acceptance tolerances hold. A station's error is
+/// that of the mission's result: the fused scan pose where an ICP mode
+/// refined it, else the station's CPS (or odometry) pose.
+fn mission_accepted(mission: &Mission, stations: &[StationRecord], views: &[ScanView], fused: &Fused) -> bool {
+    let sigma_xy = stations.last().map_or(0.0, |s| cps::sigma_xy2(&s.covariance).sqrt());
+    let refined = |index: usize| -> Option<f64> {
+        if fused.mode == FusionMode::Direct {
+            return None;
+        }
+        let (view, f) = views.iter().zip(&fused.scans).find(|(v, _)| v.station == index)?;
+        view.truth.map(|truth| super::fuse::error_xy(&f.world_from_body, &truth))
+    };
+    // Without a truth (serial ports) there is no station error to check.
+    let max_error = stations.iter().filter_map(|s| refined(s.index).or(s.error_xy_m)).fold(0.0, f64::max);
+    mission.acceptance.max_final_sigma_xy_m.is_none_or(|m| sigma_xy <= m)
+        && mission.acceptance.max_station_error_m.is_none_or(|m| max_error <= m)
+}
+
+/// The points of `cloud` within `tolerance_m` of the scene's surfaces, as a
+/// fraction (used to check a fused cloud).
+pub fn on_surface_fraction(scene: &cps::geom::Scene, cloud: &[Point3<f32>], tolerance_m: f64) -> f64 {
+    let near = cloud.iter().filter(|p| scene.bvh().distance(&p.cast()).0 <= tolerance_m).count();
+    near as f64 / cloud.len().max(1) as f64
+}

@@ -1,0 +1,13 @@
+//! What the user sees: [`tables`] on the terminal, [`json`] documents,
+//! [`plot`]s (SVG) and the Rerun [`recording`]; [`shapes`] is the geometry
+//! the plot and the recording share.
+
+pub mod json;
+pub mod plot;
+#[cfg(feature = "recording")]
+pub mod recording;
+#[cfg(not(feature = "recording"))]
+#[path = "headless.rs"]
+pub mod recording;
+pub mod shapes;
+pub mod tables;
