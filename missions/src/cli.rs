@@ -12,7 +12,7 @@ use crate::commands::{self, Outcome};
 /// survey on the simulator or on real instruments, fuse the scans, and
 /// review it in the Rerun viewer.
 #[derive(Debug, Parser)]
-#[command(name = "cps-survey", version, about, long_about = None)]
+#[command(name = "cps-survey", version)]
 pub struct Cli {
     /// What to do.
     #[command(subcommand)]

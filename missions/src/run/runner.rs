@@ -149,11 +149,13 @@ impl Progress {
                 .with_style(style("{prefix:>8} [{bar:36}] {pos}/{len} steps, {msg}, ETA {eta}")?),
         );
         steps.set_prefix("survey");
+        steps.set_message("starting");
         let scans = multi.add(
             ProgressBar::new(n_scans * mission.scan.slices as u64)
                 .with_style(style("{prefix:>8} [{bar:36}] {msg}, ETA {eta}")?),
         );
         scans.set_prefix("scans");
+        scans.set_message(format!("{n_scans} scans of {} slices", mission.scan.slices));
         Ok(Self { steps, scans, slices_done: 0, stations: planned.stations() })
     }
 
