@@ -15,7 +15,10 @@ fn a_headless_run_writes_everything_but_the_recording() {
     let hall = std::fs::read_to_string(format!("{}/examples/hall.toml", env!("CARGO_MANIFEST_DIR"))).expect("hall");
     let mission = dir.path().join("m.toml");
     let text = hall
-        .replace("[[1.5, 4.2, 1.5], [37.5, 4.2, 1.5], [37.5, 7.8, 1.5], [1.5, 7.8, 1.5]]", "[[1.5, 4.2, 1.5], [8.7, 4.2, 1.5]]")
+        .replace(
+            "[[1.5, 4.2, 1.5], [37.5, 4.2, 1.5], [37.5, 7.8, 1.5], [1.5, 7.8, 1.5]]",
+            "[[1.5, 4.2, 1.5], [8.7, 4.2, 1.5]]",
+        )
         .replace("slices = 180", "slices = 8");
     std::fs::write(&mission, text).expect("mission");
     let out = dir.path().join("run");

@@ -29,6 +29,12 @@ fn optimized_plan_holds(mission: &std::path::Path, dir: &std::path::Path) -> Val
     assert!(chosen < written, "optimized {chosen} vs written {written}");
     // The file is a complete mission: plan finds no violation and predicts
     // the same number; montecarlo confirms it.
+    // Written through toml_edit: every comment of the input is kept.
+    let (input, written) =
+        (std::fs::read_to_string(mission).expect("input"), std::fs::read_to_string(&out).expect("out"));
+    for comment in input.lines().filter_map(|l| l.find('#').map(|i| &l[i..])) {
+        assert!(written.contains(comment), "lost comment {comment:?}");
+    }
     let (code, again) = plan_json(&out, &[]);
     assert_eq!(code, 0, "{again}");
     assert_eq!(again["violations"].as_array().map(Vec::len), Some(0));

@@ -6,7 +6,7 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use planner::{FormationKind, Strategy};
-use toml_edit::{Array, DocumentMut, InlineTable, Item, Value, value};
+use toml_edit::{Array, DocumentMut, InlineTable, Item, TableLike, Value, value};
 
 use super::analysis::Optimized;
 use crate::mission::Mission;
@@ -27,7 +27,7 @@ pub fn write_mission(mission: &Mission, optimized: &Optimized, path: &Path) -> R
         .get_mut("plan")
         .and_then(Item::as_table_like_mut)
         .with_context(|| format!("{}: no [plan] table to edit", mission.source.file.display()))?;
-    plan.insert("stride_m", value(c.stride_m));
+    set(plan, "stride_m", c.stride_m.into());
     if plan.contains_key("formation") {
         let FormationKind::Symmetric { forward_m, lateral_m } = c.formation else {
             anyhow::bail!("the search returns symmetric formations only");
@@ -37,16 +37,16 @@ pub fn write_mission(mission: &Mission, optimized: &Optimized, path: &Path) -> R
         t.insert("forward_m", forward_m.into());
         t.insert("lateral_m", lateral_m.into());
         t.insert("up_m", c.up_m.into());
-        plan.insert("formation", value(t));
+        set(plan, "formation", Value::InlineTable(t));
     } else {
         let offsets: Array =
             optimized.offsets(mission).iter().map(|o| Value::Array(Array::from_iter([o.x, o.y, o.z]))).collect();
-        plan.insert("formation_m", value(offsets));
+        set(plan, "formation_m", Value::Array(offsets));
     }
-    plan.insert("strategy", value(c.strategy.name()));
+    set(plan, "strategy", c.strategy.name().into());
     match c.strategy {
         Strategy::ParentHops { hops } => {
-            plan.insert("hops", value(i64::try_from(hops).context("hops beyond i64")?));
+            set(plan, "hops", i64::try_from(hops).context("hops beyond i64")?.into());
         }
         Strategy::Leapfrog => {
             plan.remove("hops");
@@ -58,7 +58,7 @@ pub fn write_mission(mission: &Mission, optimized: &Optimized, path: &Path) -> R
         && let Some(backend) = doc.get_mut("backend").and_then(Item::as_table_like_mut)
     {
         let absolute = std::fs::canonicalize(resolved).unwrap_or_else(|_| resolved.clone());
-        backend.insert("scene_file", value(absolute.display().to_string()));
+        set(backend, "scene_file", absolute.display().to_string().into());
     }
     let header = format!(
         "# Plan chosen by `cps-survey plan --optimize` from {}: {}, stride {} m, {} cycles,\n\
@@ -71,4 +71,13 @@ pub fn write_mission(mission: &Mission, optimized: &Optimized, path: &Path) -> R
     );
     std::fs::write(path, header + &doc.to_string()).with_context(|| format!("cannot write {}", path.display()))?;
     Ok(())
+}
+
+/// Sets `key` to `new`, keeping the comments and spacing around the value
+/// it replaces (a new key goes at the end of the table).
+fn set(table: &mut dyn TableLike, key: &str, mut new: Value) {
+    if let Some(old) = table.get(key).and_then(Item::as_value) {
+        *new.decor_mut() = old.decor().clone();
+    }
+    table.insert(key, value(new));
 }
