@@ -1,0 +1,256 @@
+//! The rigorous least-squares adjustment of a whole CPS network: every
+//! station (x, y, z, θ), every child placement and every control point
+//! (free, weighted or held fixed, coordinate by coordinate) from every
+//! reading with its covariance — and the statistics a surveyor signs off
+//! with: σ0², the global test, redundancy numbers, Baarda's w, iterative
+//! data snooping, minimal detectable biases and their effects.
+//!
+//! - [`model`]: the [`Network`] and its unknowns' layout;
+//! - [`solve`]: Gauss–Newton on the sparse normal equations;
+//! - [`sparse`]: the sparse Cholesky factor (faer, AMD order) and the
+//!   selected inverse (Takahashi) that gives every covariance needed in
+//!   memory linear in the network;
+//! - [`testing`]: the per-observation statistics.
+//!
+//! For the chain-shaped dance, an open traverse, the covariance of every
+//! station equals the sequential filter's ([`crate::TeamState`]); control
+//! points sighted along the route tie it back and improve every station.
+//! Covariances and w use the a-priori variance factor (σ0 = 1): they are
+//! not scaled by the a-posteriori σ0².
+
+pub mod model;
+pub mod solve;
+pub mod sparse;
+pub mod testing;
+
+use nalgebra::{Matrix3, Matrix4, Point3};
+
+pub use model::{Layout, Network, NetworkReading, Point, Source, Station, Unknown};
+pub use testing::ScalarStats;
+
+use crate::error::{CpsError, Result};
+use crate::observation::ParentPose;
+use crate::stats::{chi2_quantile, noncentrality, normal_quantile};
+
+/// How to adjust and test.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AdjustOptions {
+    /// Gauss–Newton iteration cap (default 20).
+    pub max_iterations: usize,
+    /// Significance level of the global test, two-sided (default 0.05).
+    pub alpha: f64,
+    /// Significance level of one w-test (default 0.001).
+    pub alpha0: f64,
+    /// Power of one w-test against a bias of the MDB (default 0.80).
+    pub beta0: f64,
+    /// Iterative data snooping: remove the observation with the largest
+    /// |w| above the critical value, adjust again, repeat (default true).
+    pub snooping: bool,
+}
+
+impl Default for AdjustOptions {
+    fn default() -> Self {
+        Self {
+            max_iterations: 20,
+            alpha: 0.05,
+            alpha0: crate::stats::ALPHA0,
+            beta0: crate::stats::BETA0,
+            snooping: true,
+        }
+    }
+}
+
+/// The global model test: vᵀPv against χ² with the redundancy as degrees
+/// of freedom, two-sided.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GlobalTest {
+    /// vᵀPv.
+    pub statistic: f64,
+    /// Degrees of freedom (the redundancy).
+    pub dof: usize,
+    /// Its significance level.
+    pub alpha: f64,
+    /// The α/2 quantile of χ²_dof (`None` without redundancy).
+    pub lower: Option<f64>,
+    /// The 1 − α/2 quantile.
+    pub upper: Option<f64>,
+    /// lower ≤ statistic ≤ upper (true without redundancy: nothing to test).
+    pub passed: bool,
+}
+
+/// An observation data snooping removed, in the order removed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Removal {
+    /// Which group.
+    pub source: Source,
+    /// Which scalar of it.
+    pub component: usize,
+    /// Its w when it was removed.
+    pub w: f64,
+    /// Its residual then (adjusted − observed).
+    pub residual: f64,
+}
+
+/// The adjusted network.
+#[derive(Debug, Clone)]
+pub struct Adjustment {
+    /// Adjusted stations.
+    pub stations: Vec<ParentPose>,
+    /// Adjusted points.
+    pub points: Vec<Point3<f64>>,
+    station_covariances: Vec<Matrix4<f64>>,
+    point_covariances: Vec<Matrix3<f64>>,
+    neighbour_covariances: Vec<Matrix4<f64>>,
+    /// Gauss–Newton iterations of the final adjustment.
+    pub iterations: usize,
+    /// Whether it converged.
+    pub converged: bool,
+    /// Unknowns.
+    pub unknowns: usize,
+    /// Observations in the adjustment minus unknowns.
+    pub redundancy: usize,
+    /// vᵀPv / redundancy (0 without redundancy).
+    pub sigma0_squared: f64,
+    /// The global test.
+    pub global_test: GlobalTest,
+    /// Every scalar observation still in the adjustment.
+    pub observations: Vec<ScalarStats>,
+    /// What data snooping removed, in order.
+    pub removed: Vec<Removal>,
+    /// Snooping stopped because removing the next observation would leave
+    /// an unknown undetermined: that observation and why.
+    pub snooping_stopped: Option<String>,
+    /// The w-tests' critical value.
+    pub w_critical: f64,
+    /// Entries of the normal equations' Cholesky factor (its fill).
+    pub factor_nnz: usize,
+}
+
+impl Adjustment {
+    /// Covariance of station `k` (x, y, z, θ); zero rows for fixed coordinates.
+    pub fn station_covariance(&self, k: usize) -> Matrix4<f64> {
+        self.station_covariances.get(k).copied().unwrap_or_else(Matrix4::zeros)
+    }
+
+    /// Covariance of point `p` (x, y, z).
+    pub fn point_covariance(&self, p: usize) -> Matrix3<f64> {
+        self.point_covariances.get(p).copied().unwrap_or_else(Matrix3::zeros)
+    }
+
+    /// cov(station k, station k + 1).
+    pub fn neighbour_covariance(&self, k: usize) -> Matrix4<f64> {
+        self.neighbour_covariances.get(k).copied().unwrap_or_else(Matrix4::zeros)
+    }
+
+    /// Covariance of station k + 1 relative to station k (their difference).
+    pub fn relative_covariance(&self, k: usize) -> Matrix4<f64> {
+        let c = self.neighbour_covariance(k);
+        self.station_covariance(k) + self.station_covariance(k + 1) - c - c.transpose()
+    }
+}
+
+/// The station a group was observed from.
+fn station_of(network: &Network) -> impl Fn(&Source) -> Option<usize> + '_ {
+    |s| match s {
+        Source::Reading(k) => network.readings.get(*k).map(|r| r.station),
+        _ => None,
+    }
+}
+
+/// Adjusts `network`: Gauss–Newton to convergence, the statistics, and with
+/// `options.snooping` iterative data snooping. An unknown no observation
+/// determines is an error that names it.
+pub fn adjust(network: &Network, options: &AdjustOptions) -> Result<Adjustment> {
+    network.validate()?;
+    for (what, v, lo, hi) in [
+        ("alpha", options.alpha, 0.0, 1.0),
+        ("alpha0", options.alpha0, 0.0, 1.0),
+        ("power beta0", options.beta0, 0.0, 1.0),
+    ] {
+        if !(v > lo && v < hi) {
+            return Err(CpsError::OutOfRange {
+                what: what.into(),
+                value: v,
+                expected: "strictly between 0 and 1".into(),
+            });
+        }
+    }
+    let layout = Layout::new(network);
+    let mut groups = network.groups();
+    let lambda0 = noncentrality(options.alpha0, options.beta0);
+    let w_critical = normal_quantile(1.0 - options.alpha0 / 2.0);
+    let station_of = station_of(network);
+    let mut removed: Vec<Removal> = Vec::new();
+    let mut snooping_stopped = None;
+    loop {
+        let scalars: usize = groups.iter().map(|g| g.active.iter().filter(|a| **a).count()).sum();
+        if scalars < layout.len() {
+            return Err(CpsError::DegenerateGeometry {
+                what: format!("{scalars} observations for {} unknowns", layout.len()),
+                condition: f64::INFINITY,
+            });
+        }
+        let solution = solve::solve(network, &layout, &groups, options.max_iterations)?;
+        let inverse = solution.factor.selected_inverse();
+        let (observations, vtpv) = testing::statistics(&groups, &layout, &station_of, &solution, &inverse, lambda0);
+        let redundancy = scalars - layout.len();
+        let worst =
+            observations.iter().filter_map(|o| o.w.map(|w| (o, w))).max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()));
+        if options.snooping
+            && redundancy > 1
+            && snooping_stopped.is_none()
+            && let Some((o, w)) = worst.filter(|(_, w)| w.abs() > w_critical)
+        {
+            let g = groups.iter().position(|g| g.source == o.source).unwrap_or(0);
+            let pos = groups[g].components.iter().position(|c| *c == o.component).unwrap_or(0);
+            let mut trial = groups.clone();
+            trial[g].active[pos] = false;
+            // Removing it must leave every unknown determined.
+            if solve::solve(network, &layout, &trial, 1).is_ok() {
+                removed.push(Removal { source: o.source, component: o.component, w, residual: o.residual });
+                groups = trial;
+                continue;
+            }
+            snooping_stopped = Some(format!(
+                "{:?} component {} has |w| = {:.2} but removing it leaves an unknown undetermined",
+                o.source,
+                o.component,
+                w.abs()
+            ));
+        }
+        let station_covariances = layout.stations.iter().map(|s| testing::block::<4, 4>(&inverse, s, s)).collect();
+        let point_covariances = layout.points.iter().map(|p| testing::block::<3, 3>(&inverse, p, p)).collect();
+        let neighbour_covariances =
+            layout.stations.windows(2).map(|w| testing::block::<4, 4>(&inverse, &w[0], &w[1])).collect();
+        let (lower, upper) = if redundancy > 0 {
+            let dof = redundancy as f64;
+            (Some(chi2_quantile(options.alpha / 2.0, dof)), Some(chi2_quantile(1.0 - options.alpha / 2.0, dof)))
+        } else {
+            (None, None)
+        };
+        let passed = match (lower, upper) {
+            (Some(lo), Some(hi)) => (lo..=hi).contains(&vtpv),
+            _ => true,
+        };
+        let factor_nnz = solution.factor.nnz();
+        drop(inverse);
+        return Ok(Adjustment {
+            stations: solution.stations,
+            points: solution.points,
+            station_covariances,
+            point_covariances,
+            neighbour_covariances,
+            iterations: solution.iterations,
+            converged: solution.converged,
+            unknowns: layout.len(),
+            redundancy,
+            sigma0_squared: if redundancy > 0 { vtpv / redundancy as f64 } else { 0.0 },
+            global_test: GlobalTest { statistic: vtpv, dof: redundancy, alpha: options.alpha, lower, upper, passed },
+            observations,
+            removed,
+            snooping_stopped,
+            w_critical,
+            factor_nnz,
+        });
+    }
+}

@@ -1,0 +1,362 @@
+//! The network a batch adjustment estimates: stations (x, y, z, θ) and
+//! points (x, y, z), each free, weighted by an a-priori covariance or held
+//! fixed coordinate by coordinate, and the readings between them; the
+//! unknowns' layout and the observation groups the adjustment linearises.
+
+use nalgebra::{DMatrix, DVector, Matrix3, Matrix4, Point3};
+
+use crate::error::{CpsError, Result};
+use crate::observation::{ParentPose, Reading, observe_with_jacobians, wrap_angle};
+
+/// A parent station of the network.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Station {
+    /// Its approximate pose — and, with a prior, the prior's mean.
+    pub pose: ParentPose,
+    /// `None`: free. `Some(Σ)`: weighted by Σ (x, y, z, θ), a coordinate
+    /// of zero variance held fixed.
+    pub prior: Option<Matrix4<f64>>,
+}
+
+/// A point of the network: a child placement or a control point.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Point {
+    /// Its approximate position — and, with a prior, the prior's mean.
+    pub position: Point3<f64>,
+    /// `None`: free. `Some(Σ)`: weighted by Σ (x, y, z), a coordinate of
+    /// zero variance held fixed.
+    pub prior: Option<Matrix3<f64>>,
+}
+
+/// One pointing: station → point, its reading and the reading's covariance
+/// (r, φ, ψ; m and rad).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NetworkReading {
+    /// Index into [`Network::stations`].
+    pub station: usize,
+    /// Index into [`Network::points`].
+    pub point: usize,
+    /// The reading (prism constant applied), CPS convention.
+    pub reading: Reading,
+    /// Its covariance, order (r, φ, ψ).
+    pub covariance: Matrix3<f64>,
+}
+
+/// A CPS network: stations, points and every reading between them.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Network {
+    /// The parent's stations, route order (station 0 is the start).
+    pub stations: Vec<Station>,
+    /// Child placements and control points.
+    pub points: Vec<Point>,
+    /// Every pointing.
+    pub readings: Vec<NetworkReading>,
+}
+
+/// What an unknown of the adjustment is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Unknown {
+    /// Coordinate `coordinate` (0 x, 1 y, 2 z, 3 θ) of station `station`.
+    Station {
+        /// The station.
+        station: usize,
+        /// The coordinate.
+        coordinate: usize,
+    },
+    /// Coordinate `coordinate` (0 x, 1 y, 2 z) of point `point`.
+    Point {
+        /// The point.
+        point: usize,
+        /// The coordinate.
+        coordinate: usize,
+    },
+}
+
+impl std::fmt::Display for Unknown {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        const STATION: [&str; 4] = ["x", "y", "z", "heading"];
+        match *self {
+            Unknown::Station { station, coordinate } => write!(f, "{} of station {station}", STATION[coordinate]),
+            Unknown::Point { point, coordinate } => write!(f, "{} of point {point}", ["x", "y", "z"][coordinate]),
+        }
+    }
+}
+
+/// Where each free coordinate's column is.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Layout {
+    /// Per station, the column of each coordinate (`None`: held fixed).
+    pub stations: Vec<[Option<usize>; 4]>,
+    /// Per point, likewise.
+    pub points: Vec<[Option<usize>; 3]>,
+    /// Column → unknown.
+    pub unknowns: Vec<Unknown>,
+}
+
+/// Whether coordinate `k` of a prior is held fixed (zero variance).
+fn fixed<const D: usize>(prior: &Option<nalgebra::SMatrix<f64, D, D>>, k: usize) -> bool {
+    prior.as_ref().is_some_and(|p| p[(k, k)] <= 0.0)
+}
+
+impl Layout {
+    /// Columns for every coordinate that is not held fixed, station by
+    /// station, then point by point.
+    pub fn new(network: &Network) -> Self {
+        let mut unknowns = Vec::new();
+        let mut next = |u: Unknown| {
+            unknowns.push(u);
+            Some(unknowns.len() - 1)
+        };
+        let stations = network
+            .stations
+            .iter()
+            .enumerate()
+            .map(|(s, st)| {
+                std::array::from_fn(|c| {
+                    (!fixed(&st.prior, c))
+                        .then_some(())
+                        .and_then(|()| next(Unknown::Station { station: s, coordinate: c }))
+                })
+            })
+            .collect();
+        let points = network
+            .points
+            .iter()
+            .enumerate()
+            .map(|(p, pt)| {
+                std::array::from_fn(|c| {
+                    (!fixed(&pt.prior, c)).then_some(()).and_then(|()| next(Unknown::Point { point: p, coordinate: c }))
+                })
+            })
+            .collect();
+        Self { stations, points, unknowns }
+    }
+
+    /// The number of unknowns.
+    pub fn len(&self) -> usize {
+        self.unknowns.len()
+    }
+
+    /// True without unknowns.
+    pub fn is_empty(&self) -> bool {
+        self.unknowns.is_empty()
+    }
+}
+
+/// What an observation group is: a reading's (r, φ, ψ), or a prior's
+/// weighted coordinates.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Source {
+    /// Reading `index` of [`Network::readings`].
+    Reading(usize),
+    /// The prior of station `index`.
+    StationPrior(usize),
+    /// The prior of point `index`.
+    PointPrior(usize),
+}
+
+/// Observations that share one covariance block: a reading's three
+/// components, or a prior's weighted coordinates. Scalars that data
+/// snooping removed are left out.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Group {
+    /// Where it comes from.
+    pub source: Source,
+    /// The scalars of the block (0 r / x, 1 φ / y, 2 ψ / z, 3 θ).
+    pub components: Vec<usize>,
+    /// Their full covariance (components × components of the source).
+    pub covariance: DMatrix<f64>,
+    /// Which are in the adjustment (`false`: removed by data snooping).
+    pub active: Vec<bool>,
+}
+
+/// One group linearised at the current estimate: misclosure l − f(x)
+/// (azimuth wrapped) and Jacobian over `columns`, of its active scalars,
+/// with the Cholesky factor of their covariance.
+#[derive(Debug, Clone)]
+pub struct Linearised {
+    /// The active scalars' positions in the group.
+    pub active: Vec<usize>,
+    /// Misclosure observed − computed.
+    pub misclosure: DVector<f64>,
+    /// The unknowns' columns this group involves.
+    pub columns: Vec<usize>,
+    /// ∂f/∂x over `columns` (active rows).
+    pub jacobian: DMatrix<f64>,
+    /// Covariance of the active scalars.
+    pub covariance: DMatrix<f64>,
+}
+
+impl Network {
+    /// Checks indices, finiteness and the covariances; every problem is an
+    /// error naming the reading, station or point.
+    pub fn validate(&self) -> Result<()> {
+        let finite = |what: String, v: f64| crate::error::ensure_finite(|| what.clone(), v);
+        for (k, s) in self.stations.iter().enumerate() {
+            for v in s.pose.to_vector().iter() {
+                finite(format!("pose of station {k}"), *v)?;
+            }
+            if let Some(p) = &s.prior {
+                check_prior(&format!("prior of station {k}"), p.as_slice(), 4)?;
+            }
+        }
+        for (k, p) in self.points.iter().enumerate() {
+            for v in p.position.iter() {
+                finite(format!("position of point {k}"), *v)?;
+            }
+            if let Some(c) = &p.prior {
+                check_prior(&format!("prior of point {k}"), c.as_slice(), 3)?;
+            }
+        }
+        for (k, r) in self.readings.iter().enumerate() {
+            if r.station >= self.stations.len() || r.point >= self.points.len() {
+                return Err(CpsError::OutOfRange {
+                    what: format!("reading {k}: station {} / point {}", r.station, r.point),
+                    value: k as f64,
+                    expected: format!("< {} stations / {} points", self.stations.len(), self.points.len()),
+                });
+            }
+            for (name, v) in [("slope", r.reading.slope_m), ("azimuth", r.reading.azimuth_rad)] {
+                finite(format!("{name} of reading {k}"), v)?;
+            }
+            finite(format!("elevation of reading {k}"), r.reading.elevation_rad)?;
+            if r.covariance.cholesky().is_none() || r.covariance.iter().any(|v| !v.is_finite()) {
+                return Err(CpsError::NotPositiveDefinite { what: format!("covariance of reading {k}") });
+            }
+        }
+        Ok(())
+    }
+
+    /// Every observation group: the readings', then the weighted priors'.
+    pub fn groups(&self) -> Vec<Group> {
+        let mut out = Vec::with_capacity(self.readings.len() + 1);
+        for (k, r) in self.readings.iter().enumerate() {
+            out.push(Group {
+                source: Source::Reading(k),
+                components: vec![0, 1, 2],
+                covariance: DMatrix::from_fn(3, 3, |i, j| r.covariance[(i, j)]),
+                active: vec![true; 3],
+            });
+        }
+        for (k, s) in self.stations.iter().enumerate() {
+            if let Some(p) = &s.prior {
+                let c: Vec<usize> = (0..4).filter(|&i| p[(i, i)] > 0.0).collect();
+                if !c.is_empty() {
+                    out.push(Group {
+                        source: Source::StationPrior(k),
+                        covariance: DMatrix::from_fn(c.len(), c.len(), |i, j| p[(c[i], c[j])]),
+                        active: vec![true; c.len()],
+                        components: c,
+                    });
+                }
+            }
+        }
+        for (k, pt) in self.points.iter().enumerate() {
+            if let Some(p) = &pt.prior {
+                let c: Vec<usize> = (0..3).filter(|&i| p[(i, i)] > 0.0).collect();
+                if !c.is_empty() {
+                    out.push(Group {
+                        source: Source::PointPrior(k),
+                        covariance: DMatrix::from_fn(c.len(), c.len(), |i, j| p[(c[i], c[j])]),
+                        active: vec![true; c.len()],
+                        components: c,
+                    });
+                }
+            }
+        }
+        out
+    }
+
+    /// Linearises `group` at the estimate (`stations`, `points`).
+    pub fn linearise(
+        &self,
+        group: &Group,
+        layout: &Layout,
+        stations: &[ParentPose],
+        points: &[Point3<f64>],
+    ) -> Result<Linearised> {
+        let active: Vec<usize> = (0..group.components.len()).filter(|&i| group.active[i]).collect();
+        let covariance = DMatrix::from_fn(active.len(), active.len(), |i, j| group.covariance[(active[i], active[j])]);
+        let columns;
+        let (misclosure, jacobian) = match group.source {
+            Source::Reading(k) => {
+                let nr = &self.readings[k];
+                let (computed, j) = observe_with_jacobians(&stations[nr.station], &points[nr.point])?;
+                let full = [
+                    nr.reading.slope_m - computed.slope_m,
+                    wrap_angle(nr.reading.azimuth_rad - computed.azimuth_rad),
+                    nr.reading.elevation_rad - computed.elevation_rad,
+                ];
+                let mut cols: Vec<(usize, Vec<f64>)> = Vec::new();
+                for (c, col) in layout.stations[nr.station].iter().enumerate() {
+                    if let Some(col) = col {
+                        cols.push((*col, active.iter().map(|&a| j.wrt_parent[(group.components[a], c)]).collect()));
+                    }
+                }
+                for (c, col) in layout.points[nr.point].iter().enumerate() {
+                    if let Some(col) = col {
+                        cols.push((*col, active.iter().map(|&a| j.wrt_child[(group.components[a], c)]).collect()));
+                    }
+                }
+                columns = cols.iter().map(|(c, _)| *c).collect();
+                let jac = DMatrix::from_fn(active.len(), cols.len(), |i, c| cols[c].1[i]);
+                (DVector::from_iterator(active.len(), active.iter().map(|&a| full[group.components[a]])), jac)
+            }
+            Source::StationPrior(k) => {
+                let s = &self.stations[k];
+                let mut d = s.pose.to_vector() - stations[k].to_vector();
+                d[3] = wrap_angle(d[3]);
+                let comps: Vec<usize> = active.iter().map(|&a| group.components[a]).collect();
+                columns = comps.iter().map(|&c| layout.stations[k][c].unwrap_or(usize::MAX)).collect();
+                (
+                    DVector::from_iterator(comps.len(), comps.iter().map(|&c| d[c])),
+                    DMatrix::identity(comps.len(), comps.len()),
+                )
+            }
+            Source::PointPrior(k) => {
+                let d = self.points[k].position - points[k];
+                let comps: Vec<usize> = active.iter().map(|&a| group.components[a]).collect();
+                columns = comps.iter().map(|&c| layout.points[k][c].unwrap_or(usize::MAX)).collect();
+                (
+                    DVector::from_iterator(comps.len(), comps.iter().map(|&c| d[c])),
+                    DMatrix::identity(comps.len(), comps.len()),
+                )
+            }
+        };
+        Ok(Linearised { active, misclosure, columns, jacobian, covariance })
+    }
+}
+
+/// A prior covariance must be finite, symmetric and positive definite on
+/// its non-fixed coordinates, with no correlation to a fixed one.
+fn check_prior(what: &str, m: &[f64], d: usize) -> Result<()> {
+    let at = |i: usize, j: usize| m[i + d * j];
+    if let Some(bad) = m.iter().find(|v| !v.is_finite()) {
+        return Err(CpsError::NonFinite { what: what.into(), value: *bad });
+    }
+    let free: Vec<usize> = (0..d).filter(|&i| at(i, i) > 0.0).collect();
+    for i in 0..d {
+        if at(i, i) < 0.0 {
+            return Err(CpsError::OutOfRange {
+                what: format!("{what}: variance {i}"),
+                value: at(i, i),
+                expected: "≥ 0".into(),
+            });
+        }
+        for j in 0..d {
+            let fixed_pair = !free.contains(&i) || !free.contains(&j);
+            if (at(i, j) - at(j, i)).abs() > 1e-12 * at(i, i).abs().max(at(j, j).abs()).max(1e-300)
+                || (fixed_pair && i != j && at(i, j) != 0.0)
+            {
+                return Err(CpsError::NotPositiveDefinite {
+                    what: format!("{what} (asymmetric, or correlated with a fixed coordinate)"),
+                });
+            }
+        }
+    }
+    let sub = DMatrix::from_fn(free.len(), free.len(), |i, j| at(free[i], free[j]));
+    if !free.is_empty() && sub.cholesky().is_none() {
+        return Err(CpsError::NotPositiveDefinite { what: what.into() });
+    }
+    Ok(())
+}
