@@ -181,7 +181,7 @@ fn linearise(
     pose: &ParentPose,
     children: &[SightedChild],
     children_cov: &DMatrix<f64>,
-    instrument: &Instrument,
+    instruments: &[&Instrument],
 ) -> Result<Linearisation> {
     let n = children.len();
     let m = 3 * n;
@@ -206,7 +206,7 @@ fn linearise(
             let s_kl: Matrix3<f64> = children_cov.fixed_view::<3, 3>(3 * k, 3 * l).into_owned();
             let mut block = blocks[k] * s_kl * blocks[l].transpose();
             if k == l {
-                block = 0.5 * (block + block.transpose()) + instrument.reading_covariance(&children[k].reading);
+                block = 0.5 * (block + block.transpose()) + instruments[k].reading_covariance(&children[k].reading);
             }
             sigma_l.fixed_view_mut::<3, 3>(3 * k, 3 * l).copy_from(&block);
             if k != l {
@@ -269,6 +269,25 @@ pub fn fix_parent(
     instrument: &Instrument,
     options: &FixOptions,
 ) -> Result<ParentFix> {
+    fix_parent_mixed(children, children_cov, &vec![instrument; children.len()], options)
+}
+
+/// [`fix_parent`] with each sighting's own noise model (`instruments[k]`
+/// for `children[k]`): a control prism's sightings leave its centring out
+/// of the reading, which its position's covariance holds.
+pub fn fix_parent_mixed(
+    children: &[SightedChild],
+    children_cov: &DMatrix<f64>,
+    instruments: &[&Instrument],
+    options: &FixOptions,
+) -> Result<ParentFix> {
+    if instruments.len() != children.len() {
+        return Err(CpsError::OutOfRange {
+            what: "noise models of the sightings".into(),
+            value: instruments.len() as f64,
+            expected: format!("one per sighted point ({})", children.len()),
+        });
+    }
     if children.len() < 2 {
         return Err(CpsError::TooFewChildren { got: children.len() });
     }
@@ -285,7 +304,7 @@ pub fn fix_parent(
     }
     for (k, c) in children.iter().enumerate() {
         c.reading.validate(c.child)?;
-        instrument.check_range(c.child, c.reading.slope_m)?;
+        instruments[k].check_range(c.child, c.reading.slope_m)?;
         for (axis, v) in ["x", "y", "z"].iter().zip(c.position.iter()) {
             ensure_finite(|| format!("{axis} of child {}", c.child), *v)?;
         }
@@ -300,7 +319,7 @@ pub fn fix_parent(
     };
     let mut iterations = 0;
     let (lin, step, converged) = loop {
-        let lin = linearise(&pose, children, children_cov, instrument)?;
+        let lin = linearise(&pose, children, children_cov, instruments)?;
         let step = whitened_step(&lin)?;
         let dx = step.dx;
         iterations += 1;

@@ -2,7 +2,9 @@
 //! covariance with every cross-term.
 //!
 //! State vector order (DESIGN §4): parent (x, y, z, θ), then each child's
-//! (x, y, z) in team order — dimension 4 + 3N. Metres and radians.
+//! (x, y, z) in team order — dimension 4 + 3N — then each fixed point's
+//! (a control point's prism, [`TeamState::add_fixed_point`]). Metres and
+//! radians.
 //!
 //! **Clones.** [`TeamState::clone_parent`] appends a frozen copy of the
 //! parent's current pose to the state (stochastic cloning): placements and
@@ -14,7 +16,7 @@
 use nalgebra::{DMatrix, Matrix3, Matrix4, Point3};
 
 use crate::error::{CpsError, Result};
-use crate::fix::{FixOptions, ParentFix, SightedChild, fix_parent};
+use crate::fix::{FixOptions, ParentFix, SightedChild, fix_parent_mixed};
 use crate::instrument::Instrument;
 use crate::observation::{ParentPose, Reading};
 use crate::placement::{Placement, place};
@@ -31,7 +33,10 @@ pub const fn child_offset(j: usize) -> usize {
 #[derive(Debug, Clone, PartialEq)]
 pub struct TeamState {
     parent: ParentPose,
+    /// The children's prisms, then the fixed points'.
     children: Vec<Option<Point3<f64>>>,
+    /// How many of `children` are fixed points (at the end).
+    fixed_points: usize,
     covariance: DMatrix<f64>,
 }
 
@@ -47,7 +52,44 @@ impl TeamState {
         let n = child_offset(n_children);
         let mut covariance = DMatrix::zeros(n, n);
         covariance.fixed_view_mut::<4, 4>(PARENT, PARENT).copy_from(&parent_cov);
-        Ok(Self { parent, children: vec![None; n_children], covariance })
+        Ok(Self { parent, children: vec![None; n_children], fixed_points: 0, covariance })
+    }
+
+    /// Adds a point that never moves — a control point's prism — at
+    /// `position` with `covariance` (x, y, z; zero for a point held fixed),
+    /// uncorrelated with everything so far; returns its index for
+    /// [`TeamState::fix_parent`] (after the children's and earlier fixed
+    /// points'). Clones keep their place after it.
+    pub fn add_fixed_point(&mut self, position: Point3<f64>, covariance: Matrix3<f64>) -> Result<usize> {
+        for v in position.iter() {
+            crate::error::ensure_finite(|| "fixed point position".into(), *v)?;
+        }
+        let as4 = Matrix4::from_fn(|i, j| if i < 3 && j < 3 { covariance[(i, j)] } else { 0.0 });
+        check_covariance("fixed point covariance", &as4)?;
+        let at = child_offset(self.children.len());
+        let n = self.covariance.ncols();
+        let mut grown = DMatrix::zeros(n + 3, n + 3);
+        let old = |i: usize| {
+            if i < at {
+                Some(i)
+            } else if i >= at + 3 {
+                Some(i - 3)
+            } else {
+                None
+            }
+        };
+        for i in 0..n + 3 {
+            for j in 0..n + 3 {
+                if let (Some(a), Some(b)) = (old(i), old(j)) {
+                    grown[(i, j)] = self.covariance[(a, b)];
+                }
+            }
+        }
+        grown.fixed_view_mut::<3, 3>(at, at).copy_from(&(0.5 * (covariance + covariance.transpose())));
+        self.covariance = grown;
+        self.children.push(Some(position));
+        self.fixed_points += 1;
+        Ok(self.children.len() - 1)
     }
 
     /// The parent's current estimate.
@@ -55,14 +97,15 @@ impl TeamState {
         self.parent
     }
 
-    /// Child `j`'s position, `None` if never placed.
+    /// Child `j`'s position (or fixed point `j`'s, after the children),
+    /// `None` if never placed.
     pub fn child(&self, j: usize) -> Option<Point3<f64>> {
         self.children.get(j).copied().flatten()
     }
 
-    /// Number of children in the team.
+    /// Number of children in the team (fixed points not counted).
     pub fn n_children(&self) -> usize {
-        self.children.len()
+        self.children.len() - self.fixed_points
     }
 
     /// Appends a clone of the parent's current pose (its block and every
@@ -126,8 +169,8 @@ impl TeamState {
     }
 
     fn check_child(&self, j: usize) -> Result<()> {
-        if j >= self.children.len() {
-            return Err(CpsError::UnknownChild { child: j, team: self.children.len() });
+        if j >= self.n_children() {
+            return Err(CpsError::UnknownChild { child: j, team: self.n_children() });
         }
         Ok(())
     }
@@ -172,12 +215,27 @@ impl TeamState {
         instrument: &Instrument,
         options: &FixOptions,
     ) -> Result<ParentFix> {
+        let mixed: Vec<(usize, Reading, &Instrument)> = readings.iter().map(|&(j, r)| (j, r, instrument)).collect();
+        self.fix_parent_mixed(&mixed, options)
+    }
+
+    /// [`TeamState::fix_parent`] from children and fixed points, each
+    /// sighting with its own noise model (a control prism's leaves its
+    /// centring to the point's covariance).
+    pub fn fix_parent_mixed(
+        &mut self,
+        readings: &[(usize, Reading, &Instrument)],
+        options: &FixOptions,
+    ) -> Result<ParentFix> {
         let mut sighted = Vec::with_capacity(readings.len());
-        for &(j, reading) in readings {
-            self.check_child(j)?;
+        for &(j, reading, _) in readings {
+            if j >= self.children.len() {
+                return Err(CpsError::UnknownChild { child: j, team: self.n_children() });
+            }
             let position = self.child(j).ok_or(CpsError::ChildNotPlaced { child: j })?;
             sighted.push(SightedChild { child: j, position, reading });
         }
+        let instruments: Vec<&Instrument> = readings.iter().map(|r| r.2).collect();
         let m = 3 * sighted.len();
         let offsets: Vec<usize> = sighted.iter().map(|c| child_offset(c.child)).collect();
         let n = self.covariance.ncols();
@@ -187,7 +245,7 @@ impl TeamState {
             c_rows.rows_mut(3 * k, 3).copy_from(&self.covariance.rows(o, 3));
         }
         let children_cov = DMatrix::from_fn(m, m, |a, b| c_rows[(a, offsets[b / 3] + b % 3)]);
-        let fix = fix_parent(&sighted, &children_cov, instrument, options)?;
+        let fix = fix_parent_mixed(&sighted, &children_cov, &instruments, options)?;
         // cov(p, s) = F cov(C, s); the old parent's columns are replaced.
         let mut cross = &fix.f_map * &c_rows;
         cross.columns_mut(PARENT, 4).fill(0.0);
@@ -344,7 +402,7 @@ mod tests {
                 .collect();
             let opts =
                 FixOptions { position_tolerance_m: 1e-13, heading_tolerance_rad: 1e-15, ..FixOptions::default() };
-            let fix = fix_parent(&sighted, &sigma_c, &inst, &opts).expect("fix");
+            let fix = crate::fix::fix_parent(&sighted, &sigma_c, &inst, &opts).expect("fix");
             let mut y = x.rows(0, n).into_owned();
             y.fixed_rows_mut::<4>(0).copy_from(&fix.pose.to_vector());
             y
@@ -477,5 +535,42 @@ mod tests {
         assert!(rho > 0.3, "correlation of y between stations 1 and 3: {rho}");
         // The last clone is the parent as it stands.
         assert_eq!(exact_team.parent_clone_covariance(3).expect("clone"), exact_team.parent_covariance());
+    }
+
+    /// A fixed point joins the state between the children and the clones,
+    /// uncorrelated, and leaves every other block as it was; a fix from
+    /// children and fixed points with one noise model equals the plain fix.
+    #[test]
+    fn fixed_points_join_the_state_and_the_fix() {
+        let (mut team, _) = warmed_up();
+        team.clone_parent();
+        let before = team.clone();
+        let cov = Matrix3::from_diagonal(&nalgebra::Vector3::new(1e-6, 2e-6, 0.0));
+        let k = team.add_fixed_point(Point3::new(30.0, -5.0, 1.0), cov).expect("add");
+        assert_eq!(k, 3);
+        assert_eq!(team.n_children(), 3);
+        assert_eq!(team.child(k), Some(Point3::new(30.0, -5.0, 1.0)));
+        assert_eq!(team.child_covariance(k), cov);
+        assert_eq!(team.clone_covariance(0, 0).expect("clone"), before.clone_covariance(0, 0).expect("clone"));
+        assert_eq!(team.parent_clone_covariance(0).expect("clone"), before.parent_clone_covariance(0).expect("clone"));
+        for j in 0..3 {
+            assert_eq!(team.child_covariance(j), before.child_covariance(j));
+        }
+        let o = child_offset(k);
+        assert!(team.covariance().rows(o, 3).iter().zip(0..).all(|(v, i)| *v == 0.0 || (i / 3 >= o && i / 3 < o + 3)));
+        assert!(matches!(
+            team.place_child(k, &Reading { slope_m: 5.0, azimuth_rad: 0.0, elevation_rad: 0.0 }, &instrument()),
+            Err(CpsError::UnknownChild { .. })
+        ));
+        let inst = instrument();
+        let here = ParentPose::new(26.0, 2.0, 0.2, 0.1);
+        let readings: Vec<(usize, Reading)> =
+            [0, 1, k].iter().map(|&j| (j, observe(&here, &team.child(j).expect("placed")).expect("obs"))).collect();
+        let mut plain = team.clone();
+        let a = plain.fix_parent(&readings, &inst, &FixOptions::default()).expect("fix");
+        let mixed: Vec<(usize, Reading, &Instrument)> = readings.iter().map(|&(j, r)| (j, r, &inst)).collect();
+        let b = team.fix_parent_mixed(&mixed, &FixOptions::default()).expect("fix");
+        assert_eq!(a.pose, b.pose);
+        assert_eq!(plain, team);
     }
 }
