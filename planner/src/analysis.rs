@@ -23,7 +23,8 @@ pub struct Sensitivity {
     pub angle_m2: f64,
     /// Centring errors only (instrument and prism), m².
     pub centring_m2: f64,
-    /// The start pose's uncertainty only, m².
+    /// The datum's uncertainty only — the start pose's and the control
+    /// points' given coordinates' — m².
     pub start_m2: f64,
 }
 
@@ -50,9 +51,17 @@ pub fn sensitivity(
     instrument: &Instrument,
     start_covariance: &Matrix4<f64>,
 ) -> Result<Sensitivity, PlanError> {
-    let run = |inst: &Instrument, start: &Matrix4<f64>| -> Result<f64, PlanError> {
-        Ok(predict(dance, inst, start)?.last().map_or(0.0, |l| l.sigma_xy2_m2()))
+    // The control points' given coordinates are part of the datum, with
+    // the start pose: the other parts run with them exact.
+    let exact_control = {
+        let mut d = dance.clone();
+        d.control.iter_mut().for_each(|c| c.covariance = nalgebra::Matrix3::zeros());
+        d
     };
+    let run_on = |d: &Dance, inst: &Instrument, start: &Matrix4<f64>| -> Result<f64, PlanError> {
+        Ok(predict(d, inst, start)?.last().map_or(0.0, |l| l.sigma_xy2_m2()))
+    };
+    let run = |inst: &Instrument, start: &Matrix4<f64>| run_on(&exact_control, inst, start);
     let quiet = Instrument {
         sigma_distance_m: instrument.sigma_distance_m * OFF,
         sigma_distance_ppm: instrument.sigma_distance_ppm * OFF,
@@ -64,7 +73,7 @@ pub fn sensitivity(
     };
     let zero = Matrix4::zeros();
     Ok(Sensitivity {
-        total_m2: run(instrument, start_covariance)?,
+        total_m2: run_on(dance, instrument, start_covariance)?,
         range_m2: run(
             &Instrument {
                 sigma_distance_m: instrument.sigma_distance_m,
@@ -89,7 +98,13 @@ pub fn sensitivity(
         } else {
             0.0
         },
-        start_m2: if start_covariance.iter().any(|v| *v != 0.0) { run(&quiet, start_covariance)? } else { 0.0 },
+        start_m2: if start_covariance.iter().any(|v| *v != 0.0)
+            || dance.control.iter().any(|c| c.covariance != nalgebra::Matrix3::zeros())
+        {
+            run_on(dance, &quiet, start_covariance)?
+        } else {
+            0.0
+        },
     })
 }
 
@@ -111,7 +126,9 @@ pub fn with_one_more_child(
     }
     let mut more = formation_m.to_vec();
     more.push(extra);
-    let d = schedule(dance.stations.clone(), &more, strategy).ok()?;
+    let d = schedule(dance.stations.clone(), &more, strategy)
+        .ok()?
+        .with_control(dance.control.clone(), dance.sightings.clone());
     if !d.range_violations(instrument).is_empty() {
         return None;
     }
@@ -121,9 +138,11 @@ pub fn with_one_more_child(
 /// The redundancy numbers of one parent fix's observations.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FixReliability {
-    /// Dance cycle (1-based).
+    /// Dance cycle (1-based; 0 for the start's resection).
     pub cycle: usize,
-    /// Per sighted child (team order): redundancy numbers of (r, φ, ψ).
+    /// Per sighting — the children in team order, then the control points
+    /// sighted at the fix's station in [`Dance::sighted_at`] order:
+    /// redundancy numbers of (r, φ, ψ).
     pub redundancy_numbers: Vec<[f64; 3]>,
 }
 
@@ -142,10 +161,10 @@ pub fn reliability(
     let mut team = cps::TeamState::new(dance.station_pose(0), *start_covariance, dance.n_children())
         .map_err(|source| PlanError::Model { cycle: 0, source })?;
     let mut out = Vec::with_capacity(dance.cycles.len());
-    run_dance(dance, &mut team, instrument, true, cps::observe, |c, _, fix| {
+    run_dance(dance, &mut team, instrument, true, crate::dance::nominal_reading(dance), |c, _, fix| {
         let r = fix.reliability().redundancy_numbers;
         out.push(FixReliability {
-            cycle: c.cycle,
+            cycle: c.map_or(0, |c| c.cycle),
             redundancy_numbers: r.chunks(3).map(|c| [c[0], c[1], c[2]]).collect(),
         });
     })?;

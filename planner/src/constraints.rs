@@ -254,7 +254,9 @@ pub fn check_steps(dance: &Dance, steps: &[Step], scene: Option<&Scene>, limits:
                     out.push(v(Robot::Parent, *to, check, value, limit));
                 }
             }
-            Action::Fix { .. } => {}
+            // Control is sighted only where it is visible and in range
+            // (`crate::control::sightings`): nothing to break.
+            Action::Fix { .. } | Action::Sight { .. } => {}
             Action::Scan { station } => {
                 let (Some(max), p) = (limits.scanner_max_range_m, dance.stations[*station].position) else {
                     continue;

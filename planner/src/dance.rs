@@ -15,6 +15,7 @@ use nalgebra::{Point3, Rotation3, Vector3};
 
 use cps::{FixOptions, Instrument, ParentFix, ParentPose, Reading, TeamState};
 
+use crate::control::{ControlPoint, sighting_instrument};
 use crate::error::{Phase, PlanError};
 use crate::route::Station;
 
@@ -43,6 +44,12 @@ pub struct Dance {
     pub stations: Vec<Station>,
     /// One cycle per station after the first.
     pub cycles: Vec<DanceCycle>,
+    /// The control points the parent may sight ([`crate::control`]).
+    pub control: Vec<ControlPoint>,
+    /// Per station, the control points sighted there (indices into
+    /// `control`; empty everywhere without control). Two or more at
+    /// station 0 give the start pose by resection.
+    pub sightings: Vec<Vec<usize>>,
 }
 
 /// Formation offsets (forward, left, up) of each child in the parent frame,
@@ -126,7 +133,8 @@ pub fn schedule(stations: Vec<Station>, formation_m: &Formation, strategy: Strat
             DanceCycle { cycle: to, from, to, children: children.clone(), moved }
         })
         .collect();
-    Ok(Dance { stations, cycles })
+    let sightings = vec![Vec::new(); stations.len()];
+    Ok(Dance { stations, cycles, control: Vec::new(), sightings })
 }
 
 /// The schedule of a robot alone (no children, no total station): it
@@ -135,7 +143,8 @@ pub fn solo(stations: Vec<Station>) -> Dance {
     let cycles = (1..stations.len())
         .map(|to| DanceCycle { cycle: to, from: to - 1, to, children: Vec::new(), moved: Vec::new() })
         .collect();
-    Dance { stations, cycles }
+    let sightings = vec![Vec::new(); stations.len()];
+    Dance { stations, cycles, control: Vec::new(), sightings }
 }
 
 /// A formation generated from a few parameters, for any number of children
@@ -195,6 +204,26 @@ impl FormationKind {
 }
 
 impl Dance {
+    /// The dance with control points and the stations that sight them
+    /// (`sightings[station]`, see [`crate::control::sightings`]).
+    pub fn with_control(mut self, control: Vec<ControlPoint>, sightings: Vec<Vec<usize>>) -> Self {
+        self.control = control;
+        self.sightings = sightings;
+        self.sightings.resize(self.stations.len(), Vec::new());
+        self
+    }
+
+    /// Whether the start pose comes from a resection on the control points
+    /// sighted from station 0 (two or more).
+    pub fn resects_start(&self) -> bool {
+        self.sightings.first().is_some_and(|s| s.len() >= 2)
+    }
+
+    /// The control points sighted from station `k`.
+    pub fn sighted_at(&self, k: usize) -> &[usize] {
+        self.sightings.get(k).map_or(&[], Vec::as_slice)
+    }
+
     /// Number of children in the team.
     pub fn n_children(&self) -> usize {
         self.cycles.first().map_or(0, |c| c.children.len())
@@ -270,6 +299,13 @@ pub enum Action {
         /// Placement of a child that has moved, or the parent's fix.
         phase: Phase,
     },
+    /// The parent, standing at `station`, sights control point `control`.
+    Sight {
+        /// Index into [`Dance::control`].
+        control: usize,
+        /// The parent's station.
+        station: usize,
+    },
     /// The parent drives from station `from` to station `to`.
     MoveParent {
         /// Station left.
@@ -277,7 +313,8 @@ pub enum Action {
         /// Station reached.
         to: usize,
     },
-    /// The parent fixes its pose at `station` from the children.
+    /// The parent fixes its pose at `station` from the children and the
+    /// control points sighted there (at station 0: a resection).
     Fix {
         /// The station.
         station: usize,
@@ -302,16 +339,24 @@ pub struct Step {
 }
 
 impl Dance {
-    /// The schedule as the runner executes it: a scan at station 0 if due;
-    /// then per cycle each moved child's move and placement measurement, the
-    /// parent's move, its measurement of every child, its fix, and a scan
-    /// if one is due at the new station (`scan_at(station)`).
+    /// The schedule as the runner executes it: at station 0 the sightings of
+    /// control (and the resection when two or more are seen), a scan if
+    /// due; then per cycle each moved child's move and placement
+    /// measurement, the parent's move, its measurement of every child and
+    /// of the control points it sees there, its fix, and a scan if one is
+    /// due at the new station (`scan_at(station)`).
     pub fn steps(&self, scan_at: impl Fn(usize) -> bool) -> Vec<Step> {
         let mut out = Vec::new();
         let mut push = |cycle, action| {
             let index = out.len();
             out.push(Step { index, cycle, action });
         };
+        for &control in self.sighted_at(0) {
+            push(0, Action::Sight { control, station: 0 });
+        }
+        if self.resects_start() {
+            push(0, Action::Fix { station: 0 });
+        }
         if scan_at(0) {
             push(0, Action::Scan { station: 0 });
         }
@@ -328,6 +373,9 @@ impl Dance {
             for j in 0..c.children.len() {
                 push(c.cycle, Action::Measure { child: j, station: c.to, phase: Phase::Fix });
             }
+            for &control in self.sighted_at(c.to) {
+                push(c.cycle, Action::Sight { control, station: c.to });
+            }
             if !c.children.is_empty() {
                 push(c.cycle, Action::Fix { station: c.to });
             }
@@ -339,37 +387,92 @@ impl Dance {
     }
 }
 
-/// Runs `dance` through `team`: in every cycle each moved child is placed from the
+/// What a reading is taken of.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Sighted<'a> {
+    /// A child's prism where the dance puts it.
+    Child(&'a Point3<f64>),
+    /// Control point `k` of [`Dance::control`].
+    Control(usize),
+}
+
+/// The noise-free reading of what is sighted (a prediction's readings).
+pub fn nominal_reading(dance: &Dance) -> impl Fn(&ParentPose, Sighted<'_>) -> cps::Result<Reading> + '_ {
+    move |from, sighted| match sighted {
+        Sighted::Child(p) => cps::observe(from, p),
+        Sighted::Control(k) => match dance.control.get(k) {
+            Some(c) => cps::observe(from, &c.position),
+            None => Err(cps::CpsError::UnknownChild { child: k, team: dance.control.len() }),
+        },
+    }
+}
+
+/// Runs `dance` through `team` (the start's pose and covariance, the
+/// children not yet placed): the control points join the team as fixed
+/// points; at station 0 the parent resects from the control points it
+/// sights (two or more); in every cycle each moved child is placed from the
 /// reading `read(station, child)` taken at the standing parent's nominal
 /// station, then the parent fixes itself at the next station from fresh
-/// readings; `after_fix` sees the team and the fix after each fix. With
-/// `start_at_nominal`, Gauss–Newton starts at the planned station instead of
-/// the closed-form start (prediction: the readings are exact).
+/// readings of the children and of the control points it sights there;
+/// `after_fix` sees the cycle (`None` for the start's resection), the team
+/// and the fix after each fix. With `start_at_nominal`, Gauss–Newton starts
+/// at the planned station instead of the closed-form start (prediction:
+/// the readings are exact).
 pub fn run_dance(
     dance: &Dance,
     team: &mut TeamState,
     instrument: &Instrument,
     start_at_nominal: bool,
-    mut read: impl FnMut(&ParentPose, &Point3<f64>) -> cps::Result<Reading>,
-    mut after_fix: impl FnMut(&DanceCycle, &TeamState, &ParentFix),
+    mut read: impl FnMut(&ParentPose, Sighted<'_>) -> cps::Result<Reading>,
+    mut after_fix: impl FnMut(Option<&DanceCycle>, &TeamState, &ParentFix),
 ) -> Result<(), PlanError> {
-    let mut readings = Vec::with_capacity(dance.n_children());
+    let start = |source| PlanError::Model { cycle: 0, source };
+    let sighting = sighting_instrument(instrument);
+    let mut control = Vec::with_capacity(dance.control.len());
+    for c in &dance.control {
+        control.push(team.add_fixed_point(c.position, c.prism_covariance(instrument)).map_err(start)?);
+    }
+    let mut readings: Vec<(usize, Reading, &Instrument)> = Vec::with_capacity(dance.n_children() + control.len());
+    // The control points sighted at station `at`, joined to `readings`.
+    fn sight<'i>(
+        dance: &Dance,
+        control: &[usize],
+        sighting: &'i Instrument,
+        at: usize,
+        read: &mut impl FnMut(&ParentPose, Sighted<'_>) -> cps::Result<Reading>,
+        readings: &mut Vec<(usize, Reading, &'i Instrument)>,
+    ) -> cps::Result<()> {
+        let station = dance.station_pose(at);
+        for &k in dance.sighted_at(at) {
+            readings.push((control[k], read(&station, Sighted::Control(k))?, sighting));
+        }
+        Ok(())
+    }
+    // Every control point sighted from the start is read; two or more give
+    // its pose by resection (one is left to the batch adjustment).
+    let here = dance.station_pose(0);
+    sight(dance, &control, &sighting, 0, &mut read, &mut readings).map_err(start)?;
+    if dance.resects_start() {
+        let options = FixOptions { initial: start_at_nominal.then_some(here), ..FixOptions::default() };
+        let fix = team.fix_parent_mixed(&readings, &options).map_err(start)?;
+        after_fix(None, team, &fix);
+    }
     for c in &dance.cycles {
         let model = |source| PlanError::Model { cycle: c.cycle, source };
         let from = dance.station_pose(c.from);
         for &j in &c.moved {
-            let child = &c.children[j];
-            let reading = read(&from, child).map_err(model)?;
+            let reading = read(&from, Sighted::Child(&c.children[j])).map_err(model)?;
             team.place_child(j, &reading, instrument).map_err(model)?;
         }
         let to = dance.station_pose(c.to);
         readings.clear();
         for (j, child) in c.children.iter().enumerate() {
-            readings.push((j, read(&to, child).map_err(model)?));
+            readings.push((j, read(&to, Sighted::Child(child)).map_err(model)?, instrument));
         }
+        sight(dance, &control, &sighting, c.to, &mut read, &mut readings).map_err(model)?;
         let options = FixOptions { initial: start_at_nominal.then_some(to), ..FixOptions::default() };
-        let fix = team.fix_parent(&readings, instrument, &options).map_err(model)?;
-        after_fix(c, team, &fix);
+        let fix = team.fix_parent_mixed(&readings, &options).map_err(model)?;
+        after_fix(Some(c), team, &fix);
     }
     Ok(())
 }

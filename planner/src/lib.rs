@@ -9,17 +9,20 @@
 
 pub mod analysis;
 pub mod constraints;
+pub mod control;
 pub mod dance;
 pub mod error;
 pub mod montecarlo;
+pub mod network;
 pub mod predict;
 pub mod route;
 pub mod search;
 
 pub use constraints::{Check, Limits, Violation, check, check_steps};
+pub use control::ControlPoint;
 pub use dance::{
-    Action, Dance, DanceCycle, Formation, FormationKind, Robot, STRATEGIES, Step, Strategy, leapfrog, run_dance,
-    schedule, solo,
+    Action, Dance, DanceCycle, Formation, FormationKind, Robot, STRATEGIES, Sighted, Step, Strategy, leapfrog,
+    nominal_reading, run_dance, schedule, solo,
 };
 pub use error::{Phase, PlanError};
 pub use predict::{

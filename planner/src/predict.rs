@@ -3,7 +3,7 @@
 
 use nalgebra::{DMatrix, Matrix2, Matrix3, Matrix4, Point3};
 
-use cps::{ErrorEllipse, Instrument, ParentPose, TeamState, observe};
+use cps::{ErrorEllipse, Instrument, ParentPose, TeamState};
 
 use crate::dance::{Action, Dance, Robot, Step, run_dance};
 use crate::error::Phase;
@@ -49,6 +49,9 @@ impl CyclePrediction {
 /// Predicted accuracy along a whole dance.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Prediction {
+    /// The start station's covariance: from its resection on control
+    /// points, else the start covariance as given.
+    pub start: Matrix4<f64>,
     /// One entry per cycle, in order.
     pub cycles: Vec<CyclePrediction>,
 }
@@ -75,17 +78,19 @@ pub fn predict(
     instrument.validate().map_err(model)?;
     let n = dance.n_children();
     let mut team = TeamState::new(dance.station_pose(0), *start_covariance, n).map_err(model)?;
+    let mut start = *start_covariance;
     let mut cycles = Vec::with_capacity(dance.cycles.len());
-    run_dance(dance, &mut team, instrument, true, observe, |c, team, _| {
-        cycles.push(CyclePrediction {
+    run_dance(dance, &mut team, instrument, true, crate::dance::nominal_reading(dance), |c, team, _| match c {
+        None => start = team.parent_covariance(),
+        Some(c) => cycles.push(CyclePrediction {
             cycle: c.cycle,
             distance_m: dance.stations[c.to].distance_m,
             parent: dance.station_pose(c.to),
             covariance: team.parent_covariance(),
             children_covariance: (0..n).map(|j| team.child_covariance(j)).collect(),
-        })
+        }),
     })?;
-    Ok(Prediction { cycles })
+    Ok(Prediction { start, cycles })
 }
 
 /// A robot's predicted estimate right after the step that set it: a child
@@ -127,14 +132,9 @@ impl StepEstimate {
 /// cross-terms change), so the end-of-cycle child covariance is its
 /// covariance right after placement. Steps that set no estimate are skipped;
 /// cycles the prediction does not cover yield nothing.
-pub fn step_estimates(
-    dance: &Dance,
-    prediction: &Prediction,
-    steps: &[Step],
-    start_covariance: &Matrix4<f64>,
-) -> Vec<StepEstimate> {
+pub fn step_estimates(dance: &Dance, prediction: &Prediction, steps: &[Step]) -> Vec<StepEstimate> {
     let parent_cov = |cycle: usize| -> Option<Matrix4<f64>> {
-        if cycle == 0 { Some(*start_covariance) } else { prediction.cycles.get(cycle - 1).map(|c| c.covariance) }
+        if cycle == 0 { Some(prediction.start) } else { prediction.cycles.get(cycle - 1).map(|c| c.covariance) }
     };
     let parent = |s: &Step, station: usize, scan: bool| {
         parent_cov(s.cycle).map(|cov| StepEstimate {
@@ -218,5 +218,5 @@ pub fn predict_odometry(dance: &Dance, noise: &OdometryNoise, start_covariance: 
             children_covariance: Vec::new(),
         });
     }
-    Prediction { cycles }
+    Prediction { start: *start_covariance, cycles }
 }

@@ -31,7 +31,7 @@ fn check(formation: &[Vector3<f64>], start: Matrix4<f64>, trials: usize, seed: u
 }
 
 fn check_dance(dance: &planner::Dance, start: Matrix4<f64>, trials: usize, seed: u64) {
-    let stats = monte_carlo(dance, &instrument(), &start, trials, seed).expect("runs");
+    let stats = monte_carlo(dance, &instrument(), &start, trials, seed).expect("runs").filter;
     let last = stats.last().expect("cycles");
     let p_xy = Matrix2::from_fn(|i, j| last.predicted[(i, j)]);
     let n = trials as f64;
@@ -79,7 +79,7 @@ fn an_inconsistent_prediction_would_fail_the_check() {
     // Guard against a test that cannot fail: the same Monte Carlo compared
     // with a prediction that is off by 30 % is outside the bound.
     let dance = common::straight_dance(10, 10.0, &common::symmetric(5.0, 10.0));
-    let stats = monte_carlo(&dance, &instrument(), &Matrix4::zeros(), 1000, 1).expect("runs");
+    let stats = monte_carlo(&dance, &instrument(), &Matrix4::zeros(), 1000, 1).expect("runs").filter;
     let last = stats.last().expect("cycles");
     let p_xy = Matrix2::from_fn(|i, j| last.predicted[(i, j)]);
     let bound = 3.0 * (2.0 * (p_xy * p_xy).trace() / 1000.0).sqrt() / p_xy.trace();
@@ -100,7 +100,7 @@ fn every_robots_step_estimate_matches_monte_carlo() {
     let start = Matrix4::zeros();
     let prediction = planner::predict(&dance, &instrument, &start).expect("predicts");
     let steps = dance.steps(|k| k % 2 == 0);
-    let estimates = planner::step_estimates(&dance, &prediction, &steps, &start);
+    let estimates = planner::step_estimates(&dance, &prediction, &steps);
     // One estimate per placement, per fix and per scan.
     let placements = dance.cycles.iter().map(|c| c.moved.len()).sum::<usize>();
     let scans = (0..dance.stations.len()).filter(|k| k % 2 == 0).count();
@@ -121,12 +121,13 @@ fn every_robots_step_estimate_matches_monte_carlo() {
     let mut sums = [0.0_f64; 2];
     for _ in 0..trials {
         let mut team = cps::TeamState::new(dance.station_pose(0), start, 2).expect("team");
-        let read = |from: &cps::ParentPose, to: &nalgebra::Point3<f64>| {
-            planner::montecarlo::noisy_reading(from, to, &instrument, &mut rng)
+        let read = |from: &cps::ParentPose, to: planner::Sighted<'_>| match to {
+            planner::Sighted::Child(to) => planner::montecarlo::noisy_reading(from, to, &instrument, &mut rng),
+            planner::Sighted::Control(_) => unreachable!("no control in this dance"),
         };
         let mut errors = [0.0_f64; 2];
         planner::run_dance(&dance, &mut team, &instrument, false, read, |c, team, _| {
-            if c.cycle == 10 {
+            if let Some(c) = c.filter(|c| c.cycle == 10) {
                 for (j, e) in errors.iter_mut().enumerate() {
                     let d = team.child(j).expect("placed") - c.children[j];
                     *e = d.x * d.x + d.y * d.y;

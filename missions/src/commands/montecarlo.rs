@@ -49,10 +49,16 @@ pub struct MonteCarlo {
     pub trials: usize,
     /// Seed of trial streams (the mission's `[backend] seed`).
     pub seed: u64,
-    /// Per station after the start.
+    /// The filter, per station after the start.
     pub stations: Vec<CycleStatistics>,
     /// 95 % interval of the mean NEES for this many trials.
     pub nees_interval: (f64, f64),
+    /// With control points: the batch adjustment of every trial, per
+    /// station, against the planned adjustment's covariance.
+    pub adjusted: Vec<CycleStatistics>,
+    /// The interval every adjusted station's mean NEES must lie in: 95 %
+    /// for all of them together (each at 1 − 0.05 / stations, Bonferroni).
+    pub adjusted_interval: (f64, f64),
 }
 
 impl MonteCarlo {
@@ -61,9 +67,12 @@ impl MonteCarlo {
         self.stations.last()
     }
 
-    /// Whether the final station's mean NEES lies in its interval.
+    /// Whether the final station's mean NEES lies in its interval, and
+    /// every adjusted station's in theirs.
     pub fn consistent(&self) -> bool {
-        self.last().is_some_and(|s| (self.nees_interval.0..=self.nees_interval.1).contains(&s.nees_mean))
+        let within = |s: &CycleStatistics, (lo, hi): (f64, f64)| (lo..=hi).contains(&s.nees_mean);
+        self.last().is_some_and(|s| within(s, self.nees_interval))
+            && self.adjusted.iter().all(|s| within(s, self.adjusted_interval))
     }
 }
 
@@ -79,7 +88,21 @@ pub fn simulate(mission: &Mission, planned: &Planned, trials: usize) -> Result<M
             mission.name
         );
     };
-    let stations = monte_carlo(&planned.dance, instrument, &mission.plan.start_covariance, trials, seed)
+    let result = monte_carlo(&planned.dance, instrument, &mission.plan.start_covariance, trials, seed)
         .with_context(|| format!("Monte Carlo of mission \"{}\"", mission.name))?;
-    Ok(MonteCarlo { trials, seed, stations, nees_interval: nees_interval(NEES_DIM, trials) })
+    // The mean of n NEES of a d-dimensional error is χ²_{dn} / n.
+    let dof = (NEES_DIM * trials) as f64;
+    let level = 0.05 / result.adjusted.len().max(1) as f64;
+    let adjusted_interval = (
+        cps::stats::chi2_quantile(level / 2.0, dof) / trials as f64,
+        cps::stats::chi2_quantile(1.0 - level / 2.0, dof) / trials as f64,
+    );
+    Ok(MonteCarlo {
+        trials,
+        seed,
+        stations: result.filter,
+        nees_interval: nees_interval(NEES_DIM, trials),
+        adjusted: result.adjusted,
+        adjusted_interval,
+    })
 }

@@ -92,7 +92,7 @@ impl Planned {
             }
         };
         let steps = dance.steps(|k| mission.scan.scans_at(k));
-        let estimates = planner::step_estimates(&dance, &prediction, &steps, start);
+        let estimates = planner::step_estimates(&dance, &prediction, &steps);
         let scene = mission.backend.given.then(|| Arc::clone(mission.scene()));
         Ok(Self { scene, dance, steps, prediction, estimates })
     }

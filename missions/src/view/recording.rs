@@ -474,6 +474,15 @@ impl Recorder {
                         rr(rec.log(format!("world/{}/sight_lines", plan.root), &line(&from, &c, step.index)))?;
                     }
                 }
+                Action::Sight { control, station } => {
+                    if let Some(c) = dance.control.get(*control) {
+                        let from = dance.stations[*station].position;
+                        rr(rec.log(
+                            format!("world/{}/control_sight_lines", plan.root),
+                            &line(&from, &c.position, step.index),
+                        ))?;
+                    }
+                }
                 Action::Fix { .. } | Action::Scan { .. } => {}
             }
             for e in plan.estimates.iter().filter(|e| e.step == step.index && !e.scan) {
