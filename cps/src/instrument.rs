@@ -153,6 +153,14 @@ impl Instrument {
         }
     }
 
+    /// The noise model of a sighting of a prism set up once for the whole
+    /// survey (a control point's): without the prism's centring, which is
+    /// one offset shared by every sighting of it and belongs to the prism's
+    /// position instead.
+    pub fn without_target_centring(&self) -> Instrument {
+        Instrument { centring_target_m: 0.0, ..self.clone() }
+    }
+
     /// The raw slope distance corrected by the prism constant.
     pub fn corrected_slope_m(&self, raw_slope_m: f64) -> f64 {
         raw_slope_m + self.prism_constant_m

@@ -41,6 +41,11 @@ pub enum Command {
     /// Re-fuse a finished (or interrupted) run's scans from its journal into
     /// RUN_DIR/fusion/<mode>/, without re-running it.
     Fuse(commands::fuse::FuseArgs),
+    /// Adjust a run's whole network from its journal (every station, child
+    /// placement and control point from every reading): the global test,
+    /// data snooping, reliability; writes RUN_DIR/adjustment.txt (exit 1
+    /// when the global test fails).
+    Adjust(commands::adjust::AdjustArgs),
     /// Align one scan file to another with ICP.
     Register(commands::register::RegisterArgs),
     /// Serve a mission's instruments on pseudo-terminals (total station,
@@ -69,6 +74,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> anyhow::Result<Outcome> {
         Command::Validate(args) => commands::validate::run(args, out),
         Command::Montecarlo(args) => commands::montecarlo::run(args, out),
         Command::Fuse(args) => commands::fuse::run(args, out),
+        Command::Adjust(args) => commands::adjust::run(args, out),
         Command::Register(args) => commands::register::run(args, out),
         Command::Emulate(args) => commands::emulate::run(args, out),
     }?;

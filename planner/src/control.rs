@@ -42,7 +42,7 @@ impl ControlPoint {
 /// The noise model of a sighting of a control prism: the instrument's,
 /// without the prism's centring (carried in the prism's position).
 pub fn sighting_instrument(instrument: &Instrument) -> Instrument {
-    Instrument { centring_target_m: 0.0, ..instrument.clone() }
+    instrument.without_target_centring()
 }
 
 /// Why a station does not see a control point (for `plan`'s listing).

@@ -22,10 +22,28 @@ pub enum TsStatus {
 /// a real instrument uses to search for the prism.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Target {
-    /// Child index (team order).
-    pub child: usize,
+    /// The prism.
+    pub prism: Prism,
     /// Predicted reading in the CPS convention.
     pub predicted: Reading,
+}
+
+/// Which prism a measurement aims at.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Prism {
+    /// A child's (team order).
+    Child(usize),
+    /// A control point's (mission order).
+    Control(usize),
+}
+
+impl std::fmt::Display for Prism {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Prism::Child(j) => write!(f, "child {j}"),
+            Prism::Control(k) => write!(f, "control point {k}"),
+        }
+    }
 }
 
 /// One total-station measurement in the instrument's convention.

@@ -29,8 +29,8 @@ pub mod sim;
 
 pub use assembly::{Scan, assemble, scan_3d};
 pub use devices::{
-    Drive, HeadKind, Odometry, PlanarPose, RangeFinder2D, ScanHead, Slice, Target, Tilt, TiltSensor, TotalStation,
-    TsMeasurement, TsStatus,
+    Drive, HeadKind, Odometry, PlanarPose, Prism, RangeFinder2D, ScanHead, Slice, Target, Tilt, TiltSensor,
+    TotalStation, TsMeasurement, TsStatus,
 };
 pub use error::{Location, Result, ScannerError};
 pub use io::PointCloud;

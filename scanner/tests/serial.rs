@@ -44,7 +44,7 @@ fn world() -> SimWorld {
 
 fn target(world: &SimWorld, child: usize) -> Target {
     let t = world.truth();
-    Target { child, predicted: observe(&t.parent, &t.children[child]).expect("reading") }
+    Target { prism: scanner::Prism::Child(child), predicted: observe(&t.parent, &t.children[child]).expect("reading") }
 }
 
 fn station(world: &SimWorld, config: GeoComConfig) -> (Emulator, GeoCom) {

@@ -100,7 +100,10 @@ fn restored_devices_continue_the_same_noise() {
         let ts = SimTotalStation::new(world.clone(), Instrument::default(), 3);
         (world, drive, ts)
     };
-    let target = Target { child: 0, predicted: Reading { slope_m: 4.0, azimuth_rad: 0.0, elevation_rad: 0.0 } };
+    let target = Target {
+        prism: scanner::Prism::Child(0),
+        predicted: Reading { slope_m: 4.0, azimuth_rad: 0.0, elevation_rad: 0.0 },
+    };
     let (world, mut drive, mut ts) = make();
     for k in 0..3 {
         drive.move_to(&PlanarPose { x_m: 9.0 + k as f64, y_m: 2.5, heading_rad: 0.1 }).expect("move");

@@ -235,4 +235,16 @@ mod tests {
         assert_eq!(sewer.object_name(down.object), "brick");
         assert!((down.point.z - (SEWER_BRICK_CENTER[2] + SEWER_BRICK_SIZE_M[2] / 2.0)).abs() < 1e-12);
     }
+
+    #[test]
+    fn enclosing_objects_by_ray_parity() {
+        let hall = builtin("hall").expect("hall");
+        let names = |p| hall.enclosing(&p).into_iter().map(|o| hall.object_name(o).to_string()).collect::<Vec<_>>();
+        assert_eq!(names(p3(2.0, 4.2, 1.5)), ["hall"], "the hall's free space");
+        assert_eq!(names(p3(20.0, 6.0, 1.5)), ["hall", "pillar 2"], "inside a pillar");
+        assert_eq!(names(p3(50.0, 6.0, 1.5)), Vec::<String>::new(), "outside");
+        let sewer = builtin("sewer").expect("sewer");
+        assert_eq!(sewer.enclosing(&p3(3.0, 0.0, 0.5)).len(), 1, "inside the pipe");
+        assert_eq!(sewer.object_name(sewer.enclosing(&p3(3.0, 0.0, 0.5))[0]), "pipe");
+    }
 }

@@ -215,4 +215,23 @@ impl Scene {
     pub fn distance(&self, p: &Point3<f64>) -> (f64, usize) {
         self.bvh.distance(p)
     }
+
+    /// The objects whose closed surface encloses `p` (by the parity of the
+    /// crossings of a ray from `p` out of the scene, per object), sorted.
+    /// The free space a team works in is inside the room of an indoor scene
+    /// and outside everything outdoors: compare with a point known free.
+    pub fn enclosing(&self, p: &Point3<f64>) -> Vec<usize> {
+        // An oblique direction, so that the ray does not run along a face.
+        let Ok(ray) = Ray::new(*p, Vector3::new(0.2134, 0.4471, 0.8688)) else { return Vec::new() };
+        let far = (self.bounds().extent().norm() + (p - self.bounds().center()).norm()) * 2.0 + 1.0;
+        let mut crossings: std::collections::BTreeMap<usize, usize> = std::collections::BTreeMap::new();
+        let mut t = 0.0;
+        // Each cast moves past one crossing; a scene has finitely many.
+        for _ in 0..10_000 {
+            let Some(hit) = self.cast_between(&ray, t + 1e-7, far) else { break };
+            *crossings.entry(hit.object).or_default() += 1;
+            t = hit.distance_m;
+        }
+        crossings.into_iter().filter(|(_, n)| n % 2 == 1).map(|(o, _)| o).collect()
+    }
 }

@@ -3,6 +3,7 @@
 //! it to the rooms that do the work ([`crate::planning`], [`crate::run`])
 //! and show it ([`crate::view`]).
 
+pub mod adjust;
 pub mod emulate;
 pub mod fuse;
 pub mod montecarlo;

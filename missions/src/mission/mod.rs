@@ -44,6 +44,44 @@ pub struct Plan {
     pub footprint_radius_m: f64,
     /// What `plan --optimize` may change (`[plan.search]`).
     pub search: Search,
+    /// Where the parent sights the control points (`control_at`).
+    pub control_at: ControlAt,
+}
+
+/// The stations where the parent also sights every control point within
+/// the instrument's range and in line of sight (`[plan] control_at`).
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub enum ControlAt {
+    /// Every station (`"every"`, the default).
+    #[default]
+    Every,
+    /// The first and the last (`"start-end"`).
+    StartEnd,
+    /// These stations (`[0, 5, 11]`).
+    Stations(Vec<usize>),
+}
+
+impl ControlAt {
+    /// Whether station `k` of `n` sights control.
+    pub fn includes(&self, k: usize, n: usize) -> bool {
+        match self {
+            ControlAt::Every => true,
+            ControlAt::StartEnd => k == 0 || k + 1 == n,
+            ControlAt::Stations(list) => list.contains(&k),
+        }
+    }
+}
+
+/// A control point (`[[control]]`): a reflector at given coordinates.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Control {
+    /// `name`, unique.
+    pub name: String,
+    /// `position_m`, world frame (the mission's coordinate system).
+    pub position_m: Point3<f64>,
+    /// `sigma_m` squared on the diagonal (x, y, z); zero holds a
+    /// coordinate fixed (absent: all fixed).
+    pub covariance: nalgebra::Matrix3<f64>,
 }
 
 /// The space `cps-survey plan --optimize` searches (`[plan.search]`).
@@ -70,6 +108,9 @@ pub struct Acceptance {
     /// Largest acceptable horizontal error of any station against the
     /// simulator's truth, metres (sim backend only).
     pub max_station_error_m: Option<f64>,
+    /// Largest acceptable √(σx² + σy²) of any station, metres: the batch
+    /// adjustment's (predicted, and of the run).
+    pub max_station_sigma_xy_m: Option<f64>,
 }
 
 /// Where the devices come from (`[backend]`).
@@ -322,6 +363,10 @@ pub struct Spans {
     pub scene_file: Option<Range<usize>>,
     /// `[scan] stations`, when given.
     pub scan_stations: Option<Range<usize>>,
+    /// Each `[[control]]` table's `position_m`.
+    pub control: Vec<Range<usize>>,
+    /// `[plan] control_at`, when given.
+    pub control_at: Option<Range<usize>>,
 }
 
 /// A validated mission.
@@ -350,6 +395,8 @@ pub struct Mission {
     pub output: Output,
     /// The pipe inspection, when `[pipe]` is given.
     pub pipe: Option<PipePlan>,
+    /// The control points (`[[control]]`).
+    pub control: Vec<Control>,
     /// Spans for later diagnostics.
     pub spans: Spans,
 }

@@ -14,8 +14,8 @@ use toml::de::{DeTable, DeValue};
 use super::diagnostics::{Diagnostic, Diagnostics, Source};
 use super::reader::{At, Reader, Table};
 use super::{
-    Acceptance, Backend, FUSION_MODES, FusionMode, FusionPlan, Mission, MissionError, OUTPUT_FORMATS, Output, PipePlan,
-    Plan, ScanPlan, Search, SerialPorts, Spans,
+    Acceptance, Backend, Control, ControlAt, FUSION_MODES, FusionMode, FusionPlan, Mission, MissionError,
+    OUTPUT_FORMATS, Output, PipePlan, Plan, ScanPlan, Search, SerialPorts, Spans,
 };
 
 /// A raw TOML value with its span.
@@ -82,6 +82,7 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>, scene_override: Op
     let fusion = read_fusion(r, root, solo);
     let output = read_output(r, root);
     let pipe = read_pipe_table(r, root);
+    let control = read_control(r, root);
 
     let (children, footprint) = team?;
     let (mut plan, mut spans) = plan?;
@@ -90,6 +91,31 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>, scene_override: Op
     let (scan, scan_stations_span) = scan?;
     spans.scene_file = scene_file_span;
     spans.scan_stations = scan_stations_span;
+    let control = control?;
+    if !control.is_empty() && total_station.as_ref().is_some_and(Option::is_none) {
+        r.problem(
+            &control[0].1,
+            "control[0]",
+            "control points are sighted by the total station, and a robot alone has none",
+        );
+        return None;
+    }
+    // A control prism stands in the free space the team works in (where
+    // the route starts), not inside an object.
+    let start = plan.route_m.first().copied().unwrap_or_else(Point3::origin);
+    let free = backend.scene_model.enclosing(&start);
+    for (k, (c, span)) in control.iter().enumerate() {
+        if let Some(&o) = backend.scene_model.enclosing(&c.position_m).iter().find(|o| !free.contains(o)) {
+            let object = backend.scene_model.object_name(o);
+            let message = format!(
+                "control point \"{}\" at {:?} lies inside \"{object}\"; expected it in the free space of the route",
+                c.name,
+                c.position_m.coords.as_slice()
+            );
+            r.problem(span, &format!("control[{k}].position_m"), message);
+        }
+    }
+    spans.control = control.iter().map(|(_, span)| span.clone()).collect();
     Some(Mission {
         source: r.source.clone(),
         name: name?,
@@ -102,6 +128,7 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>, scene_override: Op
         fusion: fusion?,
         output: output?,
         pipe: pipe?,
+        control: control.into_iter().map(|(c, _)| c).collect(),
         spans,
     })
 }
@@ -163,8 +190,13 @@ fn read_acceptance(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Accep
     let mut t = root.table(r, "acceptance");
     let max_xy = t.optional(r, "max_final_sigma_xy_m", positive);
     let max_err = t.optional(r, "max_station_error_m", positive);
+    let max_station = t.optional(r, "max_station_sigma_xy_m", positive);
     t.finish(r);
-    Some(Acceptance { max_final_sigma_xy_m: max_xy?, max_station_error_m: max_err? })
+    Some(Acceptance {
+        max_final_sigma_xy_m: max_xy?,
+        max_station_error_m: max_err?,
+        max_station_sigma_xy_m: max_station?,
+    })
 }
 
 /// `[backend]` (with `[backend.serial]`) and the span of its `scene_file`.
@@ -600,6 +632,7 @@ fn read_plan(r: &mut Reader<'_>, t: &mut Table<'_, '_>, n_children: Option<usize
     let hops_v = t.optional(r, "hops", |r, v, f| r.integer_in(v, f, 1, 1000).map(|h| (h as usize, v.span())));
     let track = t.optional(r, "track", |r, v, f| r.boolean(v, f));
     let slope = t.optional(r, "max_slope_deg", |r, v, f| r.number_in(v, f, 0.0, false, Some(90.0)).map(At::into_inner));
+    let control_at = t.optional(r, "control_at", read_control_at);
     let mut st = t.table(r, "search");
     let strategies = st.optional(r, "strategies", |r, v, f| {
         let list = r.array(v, f, |r, e, f| r.choice(e, f, &planner::STRATEGIES).map(At::into_inner))?;
@@ -634,7 +667,7 @@ fn read_plan(r: &mut Reader<'_>, t: &mut Table<'_, '_>, n_children: Option<usize
         _ => Some(planner::Strategy::Leapfrog),
     };
     let (route, stride, formation) = (route?, stride?, formation?);
-    let (strategy, track, slope) = (strategy?, track?, slope?);
+    let (strategy, track, slope, control_at) = (strategy?, track?, slope?, control_at?);
     let s = start_sigma?.unwrap_or([0.0; 3]);
     let h = start_heading?.unwrap_or(0.0) * RAD_PER_ARCSEC;
     let (offsets, generated, offset_spans, formation_value) = match formation {
@@ -654,6 +687,8 @@ fn read_plan(r: &mut Reader<'_>, t: &mut Table<'_, '_>, n_children: Option<usize
         hops: hops_v.map(|(_, span)| span),
         scan_stations: None,
         scene_file: None,
+        control: Vec::new(),
+        control_at: control_at.as_ref().map(|(_, span)| span.clone()),
     };
     let stride_m = stride.0;
     let plan = Plan {
@@ -672,8 +707,105 @@ fn read_plan(r: &mut Reader<'_>, t: &mut Table<'_, '_>, n_children: Option<usize
             strides_m: strides?.unwrap_or_else(|| [0.5, 0.75, 1.0, 1.25, 1.5, 2.0].map(|f| f * stride_m).to_vec()),
             max_sight_line_m: sight?.unwrap_or(f64::INFINITY),
         },
+        control_at: control_at.map(|(c, _)| c).unwrap_or_default(),
     };
     Some((plan, spans))
+}
+
+/// `control_at = "every" | "start-end" | [station indices]`.
+fn read_control_at(r: &mut Reader<'_>, v: &Raw<'_>, f: &str) -> Option<(ControlAt, Range<usize>)> {
+    let at = match v.get_ref() {
+        DeValue::Array(_) => {
+            let list = r.array(v, f, |r, e, f| r.integer_in(e, f, 0, 1_000_000).map(|k| k as usize))?;
+            if list.windows(2).any(|w| w[1] <= w[0]) || list.is_empty() {
+                r.problem(&v.span(), f, "expected station indices in ascending order, each once, at least one");
+                return None;
+            }
+            ControlAt::Stations(list)
+        }
+        DeValue::String(_) => match r.choice(v, f, &["every", "start-end"])?.get_ref().as_str() {
+            "every" => ControlAt::Every,
+            _ => ControlAt::StartEnd,
+        },
+        _ => {
+            r.problem(&v.span(), f, "expected \"every\", \"start-end\" or a list of station indices");
+            return None;
+        }
+    };
+    Some((at, v.span()))
+}
+
+/// Every `[[control]]` table: name, position, σ; with the span of each
+/// position.
+fn read_control(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Vec<(Control, Range<usize>)>> {
+    let Some(v) = root.get("control") else { return Some(Vec::new()) };
+    let DeValue::Array(items) = v.get_ref() else {
+        r.problem(&v.span(), "control", "expected [[control]] tables, one per control point");
+        return None;
+    };
+    let mut out = Vec::with_capacity(items.len());
+    let mut ok = true;
+    for (k, item) in items.iter().enumerate() {
+        let path = format!("control[{k}]");
+        let DeValue::Table(table) = item.get_ref() else {
+            r.problem(&item.span(), &path, "expected a table with name, position_m and sigma_m");
+            ok = false;
+            continue;
+        };
+        let mut t = Table::element(table, item.span(), path);
+        let name = t.required(r, "name", "the control point's name (string)", |r, v, f| {
+            let s = r.string(v, f)?;
+            if s.get_ref().trim().is_empty() {
+                r.problem(&s.span(), f, "expected a non-empty name");
+                return None;
+            }
+            Some(s.into_inner())
+        });
+        let position =
+            t.required(r, "position_m", "its coordinates [x, y, z] in metres, the mission's frame", |r, v, f| {
+                r.point3(v, f).map(|p| (Point3::from(*p.get_ref()), p.span()))
+            });
+        let sigma = t.optional(r, "sigma_m", |r, v, f| {
+            let s = match v.get_ref() {
+                DeValue::Array(_) => *r.point3(v, f)?.get_ref(),
+                _ => [r.number(v, f)?.into_inner(); 3],
+            };
+            if s.iter().any(|x| *x < 0.0) {
+                r.problem(
+                    &v.span(),
+                    f,
+                    format!("{s:?}: expected standard deviations ≥ 0 (0 holds a coordinate fixed)"),
+                );
+                return None;
+            }
+            Some(s)
+        });
+        t.finish(r);
+        match (name, position, sigma) {
+            (Some(name), Some((position_m, span)), Some(sigma)) => {
+                let s = sigma.unwrap_or([0.0; 3]);
+                let covariance = nalgebra::Matrix3::from_diagonal(&Vector3::new(s[0] * s[0], s[1] * s[1], s[2] * s[2]));
+                out.push((Control { name, position_m, covariance }, span));
+            }
+            _ => ok = false,
+        }
+    }
+    for (k, (c, span)) in out.iter().enumerate() {
+        if let Some((_, (o, _))) = out[..k].iter().enumerate().find(|(_, (o, _))| o.name == c.name) {
+            r.problem(
+                span,
+                &format!("control[{k}].name"),
+                format!("duplicate control point name \"{}\" (also {})", c.name, o.name),
+            );
+            ok = false;
+        } else if let Some((o, _)) = out[..k].iter().find(|(o, _)| (o.position_m - c.position_m).norm() < 1e-3) {
+            let message =
+                format!("control point \"{}\" coincides with \"{}\"; expected points ≥ 1 mm apart", c.name, o.name);
+            r.problem(span, &format!("control[{k}].position_m"), message);
+            ok = false;
+        }
+    }
+    ok.then_some(out)
 }
 
 enum Formation {

@@ -171,6 +171,12 @@ impl<'d, 'i> Table<'d, 'i> {
         Self { table: Some(doc.get_ref()), span: doc.span(), path: String::new(), read: Vec::new(), broken: false }
     }
 
+    /// A table found inside an array (`[[control]]`), named `path` in
+    /// diagnostics.
+    pub fn element(table: &'d DeTable<'i>, span: Range<usize>, path: String) -> Self {
+        Self { table: Some(table), span, path, read: Vec::new(), broken: false }
+    }
+
     fn field(&self, key: &str) -> String {
         if self.path.is_empty() { key.to_string() } else { format!("{}.{key}", self.path) }
     }

@@ -18,8 +18,11 @@ use cps::Instrument;
 use cps::geom::Scene;
 use planner::{Dance, PlanError, Prediction, StepEstimate};
 
+use planner::ControlPoint;
+use planner::control::Unseen;
+
 use crate::mission::diagnostics::{Diagnostic, Diagnostics};
-use crate::mission::{Mission, MissionError};
+use crate::mission::{ControlAt, Mission, MissionError};
 
 /// A mission's plan: everything the commands share, built once.
 #[derive(Debug, Clone)]
@@ -118,17 +121,73 @@ fn schedule(mission: &Mission) -> Result<Dance, Diagnostics> {
         Some(_) => planner::schedule(stations, &plan.formation_m, plan.strategy)
             .map_err(|e| plan_diagnostics(mission, vec![e]))?,
     };
+    let n = dance.stations.len();
+    let missing = |list: &[usize]| list.iter().find(|k| **k >= n).copied();
+    let exist =
+        |k: usize| format!("station {k} does not exist; expected indices 0 to {} (the plan has {n} stations)", n - 1);
     if let (Some(list), Some(span)) = (&mission.scan.stations, &mission.spans.scan_stations)
-        && let Some(k) = list.iter().find(|k| **k >= dance.stations.len())
+        && let Some(k) = missing(list)
     {
-        let message = format!(
-            "station {k} does not exist; expected indices 0 to {} (the plan has {} stations)",
-            dance.stations.len() - 1,
-            dance.stations.len()
-        );
-        return Err(Diagnostics(vec![mission.diagnostic(span, "scan.stations", message)]));
+        return Err(Diagnostics(vec![mission.diagnostic(span, "scan.stations", exist(k))]));
     }
-    Ok(dance)
+    if let (ControlAt::Stations(list), Some(span)) = (&mission.plan.control_at, &mission.spans.control_at)
+        && let Some(k) = missing(list)
+    {
+        return Err(Diagnostics(vec![mission.diagnostic(span, "plan.control_at", exist(k))]));
+    }
+    with_control(mission, dance)
+}
+
+/// The dance with the mission's control points and the stations that see
+/// them (`[plan] control_at`, within the instrument's range, in line of
+/// sight against the scene checked); a control point no station sees is an
+/// error that says why from the station nearest to it.
+fn with_control(mission: &Mission, dance: Dance) -> Result<Dance, Diagnostics> {
+    let Some(instrument) = mission.total_station.as_ref().filter(|_| !mission.control.is_empty()) else {
+        return Ok(dance);
+    };
+    let control: Vec<ControlPoint> = mission
+        .control
+        .iter()
+        .map(|c| ControlPoint { name: c.name.clone(), position: c.position_m, covariance: c.covariance })
+        .collect();
+    let scene = mission.backend.given.then(|| mission.scene().as_ref());
+    let n = dance.stations.len();
+    let at = |k: usize| mission.plan.control_at.includes(k, n);
+    let sightings = planner::control::sightings(&dance, &control, &at, instrument, scene);
+    let mut problems = Vec::new();
+    for (c, point) in control.iter().enumerate() {
+        if sightings.iter().any(|s| s.contains(&c)) {
+            continue;
+        }
+        let nearest = (0..n).filter(|&k| at(k)).min_by(|&a, &b| {
+            let d = |k: usize| (dance.stations[k].position - point.position).norm();
+            d(a).total_cmp(&d(b))
+        });
+        let why = match nearest {
+            None => "no station sights control (control_at)".to_string(),
+            Some(k) => match planner::control::visibility(&dance.station_pose(k), &point.position, instrument, scene) {
+                Err(Unseen::OutOfRange(r)) => format!(
+                    "the nearest station that sights control, {k}, is {r:.1} m away, outside the instrument's range [{}, {}] m",
+                    instrument.min_range_m, instrument.max_range_m
+                ),
+                Err(Unseen::Blocked(object, at)) => {
+                    format!(
+                        "from the nearest station that sights control, {k}, \"{object}\" blocks the sight line {at:.1} m out"
+                    )
+                }
+                Err(Unseen::Vertical) => format!("it stands straight above or below station {k}"),
+                Err(Unseen::NotScheduled) | Ok(_) => format!("station {k} does not sight it"),
+            },
+        };
+        let span = mission.spans.control.get(c).cloned().unwrap_or(mission.spans.plan.clone());
+        let message = format!("control point \"{}\" is seen from no station: {why}", point.name);
+        problems.push(mission.diagnostic(&span, &format!("control[{c}]"), message));
+    }
+    if !problems.is_empty() {
+        return Err(Diagnostics(problems));
+    }
+    Ok(dance.with_control(control, sightings))
 }
 
 /// Turns planner errors into diagnostics at the responsible field. Range

@@ -136,6 +136,10 @@ impl SimTeam {
         let start = dance.station_pose(0);
         let first = dance.cycles.first().map(|c| c.children.clone()).unwrap_or_default();
         let world = SimWorld::new(mission.scene().clone(), start, first.clone());
+        let centring = mission.total_station.as_ref().map_or(0.0, |i| i.centring_target_m);
+        let given: Vec<(Point3<f64>, nalgebra::Matrix3<f64>)> =
+            mission.control.iter().map(|c| (c.position_m, c.covariance)).collect();
+        world.set_control(scanner::sim::control_prisms(&given, centring, seed));
         let odometry = mission.backend.odometry;
         let parent = SimDrive::new(world.clone(), Robot::Parent, PlanarPose::from(&start), odometry, seed)?;
         let children = first
@@ -301,6 +305,8 @@ impl SimTeam {
         }
         let p = t.parent;
         self.world.set_truth(Truth {
+            // The control prisms never move.
+            control: self.world.truth().control,
             parent: ParentPose::new(p[0], p[1], p[2], p[3]),
             tilt: Tilt { roll_rad: t.tilt[0], pitch_rad: t.tilt[1] },
             children: t.children.iter().map(|x| Point3::new(x[0], x[1], x[2])).collect(),

@@ -15,6 +15,7 @@ use std::io::{Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
+use scanner::{TsMeasurement, TsStatus};
 use serde::{Deserialize, Serialize};
 
 /// The schema version this build writes.
@@ -116,17 +117,23 @@ pub enum Phase {
     Placement,
     /// The parent, moved, measures a standing child for its fix.
     Fix,
+    /// The parent sights a control point (version 2).
+    Control,
 }
 
-/// `measure`: which child, in which cycle, for what.
+/// `measure`: which prism, in which cycle, for what.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct MeasureKey {
-    /// Dance cycle, 1-based.
+    /// Dance cycle, 1-based (0: at the start).
     pub cycle: usize,
-    /// Placement or fix.
+    /// Placement, fix or control.
     pub phase: Phase,
-    /// The child's index, team order.
-    pub child: usize,
+    /// The child's index, team order (placement and fix).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub child: Option<usize>,
+    /// The control point's name (control).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub control: Option<String>,
 }
 
 /// `tilt`, `scan`: at which station.
@@ -167,6 +174,28 @@ pub struct Measured {
     pub v_rad: f64,
     /// The instrument flagged the measurement as of reduced accuracy.
     pub reduced_accuracy: bool,
+}
+
+impl Measured {
+    /// The record of a measurement.
+    pub fn new(m: TsMeasurement) -> Self {
+        Self {
+            slope_raw_m: m.slope_raw_m,
+            hz_rad: m.hz_rad,
+            v_rad: m.v_rad,
+            reduced_accuracy: m.status == TsStatus::ReducedAccuracy,
+        }
+    }
+
+    /// The measurement in the instrument's terms.
+    pub fn measurement(&self) -> TsMeasurement {
+        TsMeasurement {
+            slope_raw_m: self.slope_raw_m,
+            hz_rad: self.hz_rad,
+            v_rad: self.v_rad,
+            status: if self.reduced_accuracy { TsStatus::ReducedAccuracy } else { TsStatus::Ok },
+        }
+    }
 }
 
 /// A tilt reading.

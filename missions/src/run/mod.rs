@@ -10,8 +10,10 @@
 //! - [`fuse`]: the scans fused by `[fusion] mode`;
 //! - [`inspection`]: the `[pipe]` inspection of the fused cloud;
 //! - [`outputs`]: the one output stage of `run` and `fuse`;
-//! - [`report`]: `report.json`, `fusion.json`, `stations.csv`.
+//! - [`report`]: `report.json`, `fusion.json`, `stations.csv`;
+//! - [`adjust`]: the network adjustment of the journal's readings.
 
+pub mod adjust;
 pub mod backend;
 pub mod fuse;
 pub mod inspection;

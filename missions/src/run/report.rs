@@ -9,6 +9,7 @@ use cps::ParentPose;
 use nalgebra::Matrix4;
 use serde::{Deserialize, Serialize};
 
+use super::adjust::{AdjustmentOutcome, AdjustmentReport};
 use super::fuse::{Fused, ScanView, error_heading, error_xy};
 use super::inspection::PipeReport;
 use super::journal::{Matrix4Record, PoseRecord, matrix_record};
@@ -58,6 +59,10 @@ pub struct RunReport {
     pub accepted: bool,
     /// Where the wall time went, seconds.
     pub timings: Timings,
+    /// The network adjustment of the journal's readings (with a total
+    /// station): the same object as `adjust --json`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub adjustment: Option<AdjustmentOutcome>,
 }
 
 /// One station in `report.json`.
@@ -252,6 +257,7 @@ impl RunReport {
             pipe,
             accepted,
             timings,
+            adjustment: None,
         })
     }
 }
@@ -262,10 +268,13 @@ pub fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<()> {
     std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
 }
 
-/// `stations.csv`: one row per station, the header with units.
-pub fn write_stations_csv(path: &Path, stations: &[StationRecord]) -> Result<()> {
+/// `stations.csv`: one row per station, the header with units; with an
+/// adjustment its coordinates, σ and 95 % ellipse (a, b, orientation
+/// counter-clockwise from +x) at the end of each row.
+pub fn write_stations_csv(path: &Path, stations: &[StationRecord], adjusted: Option<&AdjustmentReport>) -> Result<()> {
     let mut csv = String::from(
-        "index,x_m,y_m,z_m,heading_rad,sigma_x_m,sigma_y_m,sigma_z_m,sigma_heading_rad,predicted_sigma_xy_m,true_x_m,true_y_m,true_z_m,true_heading_rad,error_xy_m\n",
+        "index,x_m,y_m,z_m,heading_rad,sigma_x_m,sigma_y_m,sigma_z_m,sigma_heading_rad,predicted_sigma_xy_m,true_x_m,true_y_m,true_z_m,true_heading_rad,error_xy_m,\
+         adjusted_x_m,adjusted_y_m,adjusted_z_m,adjusted_heading_rad,adjusted_sigma_x_m,adjusted_sigma_y_m,adjusted_sigma_z_m,adjusted_sigma_heading_rad,adjusted_sigma_xy_m,ellipse_a95_m,ellipse_b95_m,ellipse_orientation_rad\n",
     );
     for s in stations {
         let sd = |k: usize| s.covariance[(k, k)].max(0.0).sqrt();
@@ -277,8 +286,30 @@ pub fn write_stations_csv(path: &Path, stations: &[StationRecord]) -> Result<()>
             }
             _ => ",,,,".to_string(),
         };
+        let adj = adjusted.and_then(|a| a.stations.get(s.index)).map_or_else(
+            || ",,,,,,,,,,,".to_string(),
+            |a| {
+                let c = &a.covariance;
+                let sd = |k: usize| c[k][k].max(0.0).sqrt();
+                format!(
+                    "{},{},{},{},{},{},{},{},{},{},{},{}",
+                    a.x_m,
+                    a.y_m,
+                    a.z_m,
+                    a.heading_rad,
+                    sd(0),
+                    sd(1),
+                    sd(2),
+                    sd(3),
+                    a.sigma_xy_m,
+                    a.ellipse_95.semi_major_m,
+                    a.ellipse_95.semi_minor_m,
+                    a.ellipse_95.orientation_rad
+                )
+            },
+        );
         csv += &format!(
-            "{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{adj}\n",
             s.index,
             p.position.x,
             p.position.y,

@@ -104,17 +104,13 @@ pub struct RunDir {
     /// The journal.
     pub journal: journal::Read,
     /// The scans taken, with their poses (a run interrupted before its end
-    /// gives the scans taken so far).
+    /// gives the scans taken so far); empty from [`load_journal`].
     pub views: Vec<ScanView>,
 }
 
-/// Reads the run in `dir`: its mission, its plan, its journal and the
-/// scans the journal names with their poses — each `scan` event's file
-/// (body frame, 3DTK layout), the `tilt` event before it, the `fix` event
-/// of that station (the CPS pose, its covariance and its cross-covariances
-/// with the earlier scan stations), and the team's state (the truth and the
-/// drive's believed pose).
-pub fn load(dir: &Path) -> Result<RunDir> {
+/// Reads the run in `dir` without its scans: its mission (`mission.toml`,
+/// with `scene.toml` for its scene file), its plan and its journal.
+pub fn load_journal(dir: &Path) -> Result<RunDir> {
     let mission_path = dir.join("mission.toml");
     if !mission_path.exists() {
         bail!("{} is not a run directory: {} is missing", dir.display(), mission_path.display());
@@ -126,8 +122,19 @@ pub fn load(dir: &Path) -> Result<RunDir> {
         Mission::load(&mission_path)?
     };
     let planned = Planned::new(&mission)?;
+    let journal = journal::read(&dir.join("journal.jsonl"))?;
+    Ok(RunDir { mission, planned, journal, views: Vec::new() })
+}
+
+/// Reads the run in `dir`: its mission, its plan, its journal and the
+/// scans the journal names with their poses — each `scan` event's file
+/// (body frame, 3DTK layout), the `tilt` event before it, the `fix` event
+/// of that station (the CPS pose, its covariance and its cross-covariances
+/// with the earlier scan stations), and the team's state (the truth and the
+/// drive's believed pose).
+pub fn load(dir: &Path) -> Result<RunDir> {
+    let RunDir { mission, planned, journal, .. } = load_journal(dir)?;
     let journal_path = dir.join("journal.jsonl");
-    let journal = journal::read(&journal_path)?;
     let dance = &planned.dance;
     let mut pose = (dance.station_pose(0), mission.plan.start_covariance);
     let mut cross: Vec<Matrix4<f64>> = Vec::new();

@@ -29,8 +29,9 @@ use nalgebra::{Matrix3, Matrix4, Point3};
 use planner::{CyclePrediction, DanceCycle};
 use scanner::io::{Format, PointCloud};
 use scanner::sim::Robot;
-use scanner::{PlanarPose, Target, Tilt, TsMeasurement, TsStatus};
+use scanner::{PlanarPose, Prism, Target, Tilt};
 
+use super::adjust::{AdjustmentOutcome, AdjustmentReport};
 use super::backend::{DeviceKind, Fault, Team};
 use super::fuse::{Fused, ScanView};
 use super::journal::{
@@ -87,27 +88,6 @@ pub struct RunSummary {
     pub files: Vec<String>,
     /// Points in the merged cloud.
     pub points: usize,
-}
-
-impl Measured {
-    fn new(m: TsMeasurement) -> Self {
-        Self {
-            slope_raw_m: m.slope_raw_m,
-            hz_rad: m.hz_rad,
-            v_rad: m.v_rad,
-            reduced_accuracy: m.status == TsStatus::ReducedAccuracy,
-        }
-    }
-
-    /// The measurement in the instrument's terms.
-    pub fn measurement(&self) -> TsMeasurement {
-        TsMeasurement {
-            slope_raw_m: self.slope_raw_m,
-            hz_rad: self.hz_rad,
-            v_rad: self.v_rad,
-            status: if self.reduced_accuracy { TsStatus::ReducedAccuracy } else { TsStatus::Ok },
-        }
-    }
 }
 
 /// A drive goal as journaled: x, y, heading.
@@ -180,6 +160,8 @@ struct Run<'m> {
     stations: Vec<StationRecord>,
     timings: Timings,
     log_icp_iterations: bool,
+    /// The team state's index of the first control prism.
+    control_index: usize,
 }
 
 /// Runs `mission` as `planned` into `dir`: a new run (an existing journal
@@ -200,8 +182,14 @@ pub fn run(mission: &Mission, planned: &Planned, dir: &Path, options: &RunOption
     rec.plan(mission, planned, "plan", &[])?;
     let progress = Progress::new(options.quiet, planned, mission)?;
     let resume_hint = format!("cps-survey run {} --out {} --resume", mission.source.file.display(), dir.display());
-    let state =
+    let mut state =
         TeamState::new(planned.dance.station_pose(0), mission.plan.start_covariance, planned.dance.n_children())?;
+    let control_index = state.n_children();
+    if let Some(instrument) = &mission.total_station {
+        for c in &planned.dance.control {
+            state.add_fixed_point(c.position, c.prism_covariance(instrument))?;
+        }
+    }
     let steps = Steps {
         journal,
         team,
@@ -224,11 +212,14 @@ pub fn run(mission: &Mission, planned: &Planned, dir: &Path, options: &RunOption
         stations: Vec::new(),
         timings: Timings::default(),
         log_icp_iterations: options.log_icp_iterations,
+        control_index,
     };
     run.steps.rec.info(format!("mission \"{}\" starts", mission.name))?;
-    // The start: the parent stands at station 0 and scans if due.
+    // The start: the parent stands at station 0, sights the control
+    // points there (resecting its pose from two or more), and scans if due.
+    run.start()?;
     run.log_team(None)?;
-    run.station(0, mission.plan.start_covariance)?;
+    run.station(0, planned.prediction.start)?;
     // The dance: cycle by cycle, the children placed ahead, the parent
     // moved and fixed from them, the new station scanned.
     for k in 0..planned.dance.cycles.len() {
@@ -277,8 +268,8 @@ impl Run<'_> {
         })?;
         self.steps.rec.advance(driven.distance_m / DRIVE_SPEED_M_PER_S);
         self.progress.steps.inc(1);
-        let target = Target { child: j, predicted: observe(from, at)? };
-        let key = MeasureKey { cycle: cycle.cycle, phase: Phase::Placement, child: j };
+        let target = Target { prism: Prism::Child(j), predicted: observe(from, at)? };
+        let key = MeasureKey { cycle: cycle.cycle, phase: Phase::Placement, child: Some(j), control: None };
         let m: Measured = self
             .steps
             .step(key, StepKey::Measure, DeviceKind::TotalStation, |team| team.measure(&target).map(Measured::new))?;
@@ -303,31 +294,65 @@ impl Run<'_> {
         Ok(nominal)
     }
 
-    /// The parent, moved to near `nominal`, measures every child and fixes
-    /// its pose from them (seed 003 eqs 7–16); the fix is journaled with
-    /// the station's cross-covariances to the earlier scan stations, and
-    /// every blunder suspect is logged.
-    fn fix_parent(&mut self, cycle: &DanceCycle, nominal: &ParentPose, instrument: &cps::Instrument) -> Result<()> {
-        let mut readings = Vec::with_capacity(cycle.children.len());
-        for (j, at) in cycle.children.iter().enumerate() {
-            let target = Target { child: j, predicted: observe(nominal, at)? };
-            let key = MeasureKey { cycle: cycle.cycle, phase: Phase::Fix, child: j };
+    /// The parent at station `station` (cycle `cycle`, 0 at the start),
+    /// standing near `nominal`, sights every control point the plan has it
+    /// sight there; each reading with the team-state index of the prism and
+    /// its noise model (a control prism's centring is in its position).
+    fn sight_control<'i>(
+        &mut self,
+        cycle: usize,
+        station: usize,
+        nominal: &ParentPose,
+        instrument: &'i cps::Instrument,
+    ) -> Result<Vec<(usize, cps::Reading, &'i cps::Instrument)>> {
+        let dance = &self.planned.dance;
+        let mut readings = Vec::new();
+        for &k in dance.sighted_at(station) {
+            let control = &dance.control[k];
+            let target = Target { prism: Prism::Control(k), predicted: observe(nominal, &control.position)? };
+            let key = MeasureKey { cycle, phase: Phase::Control, child: None, control: Some(control.name.clone()) };
             let m: Measured = self.steps.step(key, StepKey::Measure, DeviceKind::TotalStation, |team| {
                 team.measure(&target).map(Measured::new)
             })?;
             self.steps.rec.advance(MEASURE_S);
             self.progress.steps.inc(1);
-            readings.push((j, m.measurement().to_reading(instrument)));
+            readings.push((self.control_index + k, m.measurement().to_reading(instrument), instrument));
         }
-        let fix = self.team.fix_parent(&readings, instrument, &FixOptions::default())?;
+        Ok(readings)
+    }
+
+    /// At the start: the control points sighted from station 0, and with
+    /// two or more the parent's pose by resection — journaled as the fix
+    /// of cycle 0.
+    fn start(&mut self) -> Result<()> {
+        let Some(instrument) = self.mission.total_station.clone() else { return Ok(()) };
+        let sighting = instrument.without_target_centring();
+        let nominal = self.planned.dance.station_pose(0);
+        let readings = self.sight_control(0, 0, &nominal, &sighting)?;
+        if !self.planned.dance.resects_start() {
+            return Ok(());
+        }
+        let fix = self.team.fix_parent_mixed(&readings, &FixOptions::default())?;
+        self.journal_fix(0, 0, &fix)?;
+        self.progress.steps.inc(1);
         let pose = self.team.parent();
         self.steps.team.relocalise_parent(&pose)?;
-        // cov(this station, each earlier scan station): the scans' joint prior.
+        let lines: Vec<(Point3<f64>, Option<f64>)> =
+            self.planned.dance.sighted_at(0).iter().map(|&k| (self.planned.dance.control[k].position, None)).collect();
+        self.steps.rec.sight_lines("control", &pose.position, &lines)?;
+        self.steps.rec.fix_metrics(fix.sigma0_squared);
+        Ok(())
+    }
+
+    /// Journals a fix with the station's cross-covariances to the earlier
+    /// scan stations (the scans' joint prior).
+    fn journal_fix(&mut self, cycle: usize, station: usize, fix: &cps::ParentFix) -> Result<()> {
+        let pose = self.team.parent();
         let cross = (0..self.team.clones())
             .map(|a| self.team.parent_clone_covariance(a).map(|c| matrix_record(&c)))
             .collect::<cps::Result<Vec<_>>>()?;
         self.steps.note(Event::Fix(Derived {
-            key: FixKey { cycle: cycle.cycle, station: cycle.to },
+            key: FixKey { cycle, station },
             data: FixRecord {
                 pose: (&pose).into(),
                 covariance: matrix_record(&self.team.parent_covariance()),
@@ -336,12 +361,36 @@ impl Run<'_> {
                 scan_cross_covariances: Some(cross),
                 source: None,
             },
-        }))?;
+        }))
+    }
+
+    /// The parent, moved to near `nominal`, measures every child and every
+    /// control point it sees there and fixes its pose from them (seed 003
+    /// eqs 7–16); the fix is journaled, and every blunder suspect logged.
+    fn fix_parent(&mut self, cycle: &DanceCycle, nominal: &ParentPose, instrument: &cps::Instrument) -> Result<()> {
+        let mut readings = Vec::with_capacity(cycle.children.len());
+        for (j, at) in cycle.children.iter().enumerate() {
+            let target = Target { prism: Prism::Child(j), predicted: observe(nominal, at)? };
+            let key = MeasureKey { cycle: cycle.cycle, phase: Phase::Fix, child: Some(j), control: None };
+            let m: Measured = self.steps.step(key, StepKey::Measure, DeviceKind::TotalStation, |team| {
+                team.measure(&target).map(Measured::new)
+            })?;
+            self.steps.rec.advance(MEASURE_S);
+            self.progress.steps.inc(1);
+            readings.push((j, m.measurement().to_reading(instrument), instrument));
+        }
+        let sighting = instrument.without_target_centring();
+        let control = self.sight_control(cycle.cycle, cycle.to, nominal, &sighting)?;
+        readings.extend(control);
+        let fix = self.team.fix_parent_mixed(&readings, &FixOptions::default())?;
+        let pose = self.team.parent();
+        self.steps.team.relocalise_parent(&pose)?;
+        self.journal_fix(cycle.cycle, cycle.to, &fix)?;
         self.progress.steps.inc(1);
         // Sight lines coloured by each child's largest |w|; a blunder is logged.
         let reliability = fix.reliability();
         let mut lines = Vec::with_capacity(readings.len());
-        for (k, (j, _)) in readings.iter().enumerate() {
+        for (k, (j, _, _)) in readings.iter().enumerate() {
             let w = reliability.w_statistics[3 * k..3 * k + 3]
                 .iter()
                 .flatten()
@@ -351,7 +400,7 @@ impl Run<'_> {
                 self.steps.rec.warn(format!(
                     "cycle {}: the measurement of {} has |w| = {:.2} > {:.2}: a possible blunder",
                     cycle.cycle,
-                    self.mission.children[*j],
+                    self.prism_name(*j),
                     w.abs(),
                     cps::W_CRITICAL
                 ))?;
@@ -361,6 +410,16 @@ impl Run<'_> {
         self.steps.rec.sight_lines("fix", &pose.position, &lines)?;
         self.steps.rec.fix_metrics(fix.sigma0_squared);
         Ok(())
+    }
+
+    /// The name of the team state's point `j`: a child or a control point.
+    fn prism_name(&self, j: usize) -> String {
+        match j.checked_sub(self.control_index) {
+            Some(k) => {
+                format!("control point \"{}\"", self.planned.dance.control.get(k).map_or("?", |c| c.name.as_str()))
+            }
+            None => self.mission.children.get(j).cloned().unwrap_or_else(|| format!("child {j}")),
+        }
     }
 
     /// A robot alone drives to the next station and takes the pose its
@@ -532,6 +591,34 @@ impl Run<'_> {
         Ok(fused)
     }
 
+    /// The network adjustment of the journal's readings (with a total
+    /// station): its listing `adjustment.txt` and its place in the
+    /// recording; a network that cannot be adjusted is reported, not raised.
+    fn adjust(&mut self) -> Result<Option<AdjustmentOutcome>> {
+        if self.mission.total_station.is_none() {
+            return Ok(None);
+        }
+        let path = self.dir.join("journal.jsonl");
+        let read = super::journal::read(&path)?;
+        let report = super::adjust::network(self.mission, self.planned, &read, &path).and_then(|net| {
+            super::adjust::adjust(self.mission, self.planned, &net, &cps::batch::AdjustOptions::default())
+        });
+        Ok(Some(match report {
+            Ok(report) => {
+                let listing = self.dir.join("adjustment.txt");
+                std::fs::write(&listing, crate::view::listing::listing(self.mission, &report))
+                    .with_context(|| format!("writing {}", listing.display()))?;
+                self.steps.rec.adjustment(self.mission, &report)?;
+                AdjustmentOutcome::Adjusted(Box::new(report))
+            }
+            Err(e) => {
+                let error = format!("{e:#}");
+                self.steps.rec.warn(format!("network adjustment failed: {error}"))?;
+                AdjustmentOutcome::Failed { error }
+            }
+        }))
+    }
+
     /// The fusion, the output stage, the reports, the recording's end and
     /// the end of the journal.
     fn finish(mut self, started: Instant) -> Result<RunSummary> {
@@ -542,19 +629,28 @@ impl Run<'_> {
         let merged = std::mem::take(&mut self.merged);
         let written: Written =
             super::outputs::write(self.mission, &self.dir, merged, &mut self.steps.rec, &mut self.timings)?;
-        let accepted = mission_accepted(self.mission, &self.stations, &self.views, &fused) && written.complete();
+        let adjustment = self.adjust()?;
+        let adjusted = adjustment.as_ref().and_then(AdjustmentOutcome::report);
+        let accepted = mission_accepted(self.mission, &self.stations, &self.views, &fused, adjusted)
+            && written.complete()
+            && !matches!(adjustment, Some(AdjustmentOutcome::Failed { .. }));
         self.steps.rec.info(format!("mission ends: acceptance {}", if accepted { "passed" } else { "FAILED" }))?;
         let recording = std::mem::replace(&mut self.steps.rec, Recorder::disabled());
         let recorded = recording.enabled();
         timed(&mut self.timings.recording_s, || recording.finish())?;
         self.timings.wall_s = started.elapsed().as_secs_f64();
-        let report =
+        let mut report =
             RunReport::new(self.mission, &self.stations, fusion, written.pipe.clone(), accepted, self.timings)?;
+        report.adjustment = adjustment;
         super::report::write_json(&self.dir.join("report.json"), &report)?;
-        super::report::write_stations_csv(&self.dir.join("stations.csv"), &self.stations)?;
+        let adjusted = report.adjustment.as_ref().and_then(AdjustmentOutcome::report);
+        super::report::write_stations_csv(&self.dir.join("stations.csv"), &self.stations, adjusted)?;
         self.steps.note(Event::End(Derived { key: EndKey {}, data: EndRecord { accepted } }))?;
         let mut files: Vec<String> =
             ["mission.toml", "journal.jsonl", "scans/", "report.json", "stations.csv"].map(String::from).to_vec();
+        if adjusted.is_some() {
+            files.push("adjustment.txt".into());
+        }
         files.extend(written.files);
         if recorded {
             files.push("mission.rrd".into());
@@ -573,9 +669,20 @@ impl Run<'_> {
 
 /// Whether the mission's acceptance tolerances hold. A station's error is
 /// that of the mission's result: the fused scan pose where an ICP mode
-/// refined it, else the station's CPS (or odometry) pose.
-fn mission_accepted(mission: &Mission, stations: &[StationRecord], views: &[ScanView], fused: &Fused) -> bool {
+/// refined it, else the station's CPS (or odometry) pose. Every station's
+/// σxy is the network adjustment's where there is one, else the filter's.
+fn mission_accepted(
+    mission: &Mission,
+    stations: &[StationRecord],
+    views: &[ScanView],
+    fused: &Fused,
+    adjusted: Option<&AdjustmentReport>,
+) -> bool {
     let sigma_xy = stations.last().map_or(0.0, |s| cps::sigma_xy2(&s.covariance).sqrt());
+    let worst_station = match adjusted {
+        Some(a) => a.stations.iter().map(|s| s.sigma_xy_m).fold(0.0, f64::max),
+        None => stations.iter().map(|s| cps::sigma_xy2(&s.covariance).sqrt()).fold(0.0, f64::max),
+    };
     let refined = |index: usize| -> Option<f64> {
         if fused.mode == FusionMode::Direct {
             return None;
@@ -587,6 +694,7 @@ fn mission_accepted(mission: &Mission, stations: &[StationRecord], views: &[Scan
     let max_error = stations.iter().filter_map(|s| refined(s.index).or(s.error_xy_m)).fold(0.0, f64::max);
     mission.acceptance.max_final_sigma_xy_m.is_none_or(|m| sigma_xy <= m)
         && mission.acceptance.max_station_error_m.is_none_or(|m| max_error <= m)
+        && mission.acceptance.max_station_sigma_xy_m.is_none_or(|m| worst_station <= m)
 }
 
 /// The points of `cloud` within `tolerance_m` of the scene's surfaces, as a

@@ -15,6 +15,7 @@ use planner::Violation;
 
 use crate::mission::Mission;
 use crate::planning::Planned;
+use crate::run::adjust::AdjustmentReport;
 use crate::run::inspection::Inspection;
 
 const WHY: &str = "this cps-survey was built without the `recording` feature (cargo build --no-default-features): \
@@ -152,6 +153,11 @@ impl Recorder {
 
     /// Does nothing.
     pub fn pipe(&mut self, _cloud: &[Point3<f32>], _inspection: &Inspection, _threshold_m: f64) -> Result<()> {
+        Ok(())
+    }
+
+    /// Does nothing.
+    pub fn adjustment(&mut self, _mission: &Mission, _report: &AdjustmentReport) -> Result<()> {
         Ok(())
     }
 

@@ -54,6 +54,7 @@ use rerun::{RecordingStream, RecordingStreamBuilder};
 use super::shapes::{ellipse_scale, ellipse_scale_name, scene_mesh};
 use crate::mission::Mission;
 use crate::planning::Planned;
+use crate::run::adjust::AdjustmentReport;
 use crate::run::inspection::{Inspection, label};
 
 /// Voxel for the display copy of each scan, metres.
@@ -746,6 +747,93 @@ impl Recorder {
             "world/pipe/anomalies",
             &rerun::Boxes3D::from_mins_and_sizes(mins, sizes).with_labels(labels).with_colors([red()]),
         ))
+    }
+
+    /// The network adjustment at the end of a run: the control points
+    /// (`world/control`, labelled), every reading as a sight line between
+    /// the adjusted station and point coloured by its largest |w|
+    /// (`world/adjustment/observations`), the ones data snooping removed in
+    /// red (`world/adjustment/removed`), the misclosure at each control
+    /// point as an arrow from its given position, exaggerated ×k
+    /// (`world/adjustment/misclosures_x<k>`), and the tests in the log.
+    pub fn adjustment(&mut self, mission: &Mission, report: &AdjustmentReport) -> Result<()> {
+        let Some(rec) = &self.rec else { return Ok(()) };
+        if !mission.control.is_empty() {
+            rr(rec.log(
+                "world/control",
+                &rerun::Points3D::new(mission.control.iter().map(|c| p32(&c.position_m)))
+                    .with_labels(mission.control.iter().map(|c| c.name.clone()))
+                    .with_colors([rerun::Color::from_rgb(200, 60, 200)])
+                    .with_radii([0.06_f32]),
+            ))?;
+        }
+        let point = |id: &str| report.points.iter().find(|p| p.id == id).map(|p| Point3::new(p.x_m, p.y_m, p.z_m));
+        let (mut lines, mut colours, mut removed) = (Vec::new(), Vec::new(), Vec::new());
+        for reading in report.observations.chunks(3) {
+            let Some(o) = reading.first() else { continue };
+            let (Some(station), Some(to)) = (report.stations.get(o.station), point(&o.target)) else { continue };
+            let line = [p32(&Point3::new(station.x_m, station.y_m, station.z_m)), p32(&to)];
+            if reading.iter().any(|o| o.removed) {
+                removed.push(line);
+                continue;
+            }
+            let w = reading.iter().filter_map(|o| o.w).max_by(|a, b| a.abs().total_cmp(&b.abs()));
+            lines.push(line);
+            colours.push(w_colour(w));
+        }
+        rr(rec.log(
+            "world/adjustment/observations",
+            &rerun::LineStrips3D::new(lines).with_colors(colours).with_radii([0.008_f32]),
+        ))?;
+        if !removed.is_empty() {
+            rr(rec.log(
+                "world/adjustment/removed",
+                &rerun::LineStrips3D::new(removed).with_colors([red()]).with_radii([0.02_f32]),
+            ))?;
+        }
+        if !report.misclosures.is_empty() {
+            let largest =
+                report.misclosures.iter().map(|m| (m.horizontal_m.powi(2) + m.dz_m.powi(2)).sqrt()).fold(0.0, f64::max);
+            let scale = ellipse_scale(largest, 1.0);
+            let (origins, vectors): (Vec<[f32; 3]>, Vec<[f32; 3]>) = report
+                .misclosures
+                .iter()
+                .filter_map(|m| {
+                    let c = mission.control.iter().find(|c| c.name == m.control)?;
+                    let v = [m.dx_m, m.dy_m, m.dz_m].map(|d| (d * scale) as f32);
+                    Some((p32(&c.position_m), v))
+                })
+                .unzip();
+            rr(rec.log(
+                format!("world/adjustment/misclosures_x{}", ellipse_scale_name(scale)),
+                &rerun::Arrows3D::from_vectors(vectors)
+                    .with_origins(origins)
+                    .with_labels(
+                        report.misclosures.iter().map(|m| format!("{} {:.1} mm", m.control, 1e3 * m.horizontal_m)),
+                    )
+                    .with_colors([rerun::Color::from_rgb(200, 60, 200)]),
+            ))?;
+        }
+        let g = &report.global_test;
+        let level = if g.passed { rerun::TextLogLevel::INFO } else { rerun::TextLogLevel::WARN };
+        let text = format!(
+            "network adjustment: σ0² = {:.3}, redundancy {}, global test {}; {} observation(s) removed by data snooping",
+            report.sigma0_squared,
+            report.redundancy,
+            if g.passed { "passed" } else { "FAILED" },
+            report.removed.len()
+        );
+        self.event(level, text)?;
+        for o in report.observations.iter().filter(|o| o.removed) {
+            self.warn(format!(
+                "removed by data snooping: {} of {} from station {} (w = {:.2})",
+                o.kind,
+                o.target,
+                o.station,
+                o.w.unwrap_or(f64::NAN)
+            ))?;
+        }
+        Ok(())
     }
 
     /// A mission event in the text log.

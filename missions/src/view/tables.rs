@@ -10,6 +10,7 @@ use crate::commands::montecarlo::MonteCarlo;
 use crate::mission::Mission;
 use crate::planning::Planned;
 use crate::planning::analysis::{self, PlanReport};
+use crate::run::adjust::AdjustmentOutcome;
 use crate::run::fuse::{Fused, ScanView, error_heading, error_xy};
 use crate::run::inspection::PipeReport;
 use crate::run::runner::RunSummary;
@@ -270,6 +271,11 @@ pub fn run_summary(out: &mut dyn Write, mission: &Mission, s: &RunSummary) -> st
     }
     if let Some(pipe) = &s.report.pipe {
         pipe_summary(out, pipe)?;
+    }
+    match &s.report.adjustment {
+        Some(AdjustmentOutcome::Adjusted(report)) => super::listing::summary(out, report)?,
+        Some(AdjustmentOutcome::Failed { error }) => writeln!(out, "network adjustment failed: {error}")?,
+        None => {}
     }
     if s.replayed > 0 {
         writeln!(out, "resumed: {} journal events replayed", s.replayed)?;

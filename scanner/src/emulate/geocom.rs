@@ -15,7 +15,9 @@ use std::f64::consts::{FRAC_PI_2, TAU};
 use cps::{Instrument, observe, wrap_angle};
 
 use super::{Device, FaultState};
-use crate::devices::{Target, TotalStation, TsMeasurement};
+use nalgebra::Point3;
+
+use crate::devices::{Prism, Target, TotalStation, TsMeasurement};
 use crate::protocol::geocom::{ReturnCode, format_reply, parse_request, rpc};
 use crate::protocol::{Line, LineSplitter};
 use crate::sim::{SimTotalStation, SimWorld};
@@ -50,15 +52,27 @@ impl GeoComEmulator {
         }
     }
 
-    /// Hz (clockwise) and V (zenith) from the instrument to child `j`.
+    /// Prism `j` of the world: the children's, then the control prisms'.
+    fn prism(truth: &crate::sim::Truth, j: usize) -> Option<(Prism, Point3<f64>)> {
+        let n = truth.children.len();
+        match truth.children.get(j) {
+            Some(p) => Some((Prism::Child(j), *p)),
+            None => truth.control.get(j - n).map(|p| (Prism::Control(j - n), *p)),
+        }
+    }
+
+    /// Hz (clockwise) and V (zenith) from the instrument to prism `j`.
     fn direction(&self, j: usize) -> Option<(f64, f64)> {
         let truth = self.world.truth();
-        let r = observe(&truth.parent, truth.children.get(j)?).ok()?;
+        let r = observe(&truth.parent, &Self::prism(&truth, j)?.1).ok()?;
         Some(((-r.azimuth_rad).rem_euclid(TAU), FRAC_PI_2 - r.elevation_rad))
     }
 
     fn fine_adjust(&mut self, window_hz: f64, window_v: f64) -> ReturnCode {
-        let n = self.world.truth().children.len();
+        let n = {
+            let truth = self.world.truth();
+            truth.children.len() + truth.control.len()
+        };
         let Some((hz, v)) = self.pointing.or_else(|| self.direction(0)) else { return ReturnCode::NoTarget };
         let inside: Vec<usize> = (0..n)
             .filter(|&j| {
@@ -81,8 +95,9 @@ impl GeoComEmulator {
     fn measure(&mut self) -> Result<TsMeasurement, ReturnCode> {
         let j = self.locked.ok_or(ReturnCode::NoTarget)?;
         let truth = self.world.truth();
-        let exact = truth.children.get(j).and_then(|c| observe(&truth.parent, c).ok()).ok_or(ReturnCode::NoTarget)?;
-        match self.station.measure(&Target { child: j, predicted: exact }) {
+        let (prism, at) = Self::prism(&truth, j).ok_or(ReturnCode::NoTarget)?;
+        let exact = observe(&truth.parent, &at).map_err(|_| ReturnCode::NoTarget)?;
+        match self.station.measure(&Target { prism, predicted: exact }) {
             Ok(m) => Ok(m),
             // Out of range or blocked: the ATR may still see the prism's
             // direction, but the EDM gets no distance.

@@ -36,6 +36,9 @@ pub struct Truth {
     pub tilt: Tilt,
     /// True prism centres of the children, world frame.
     pub children: Vec<Point3<f64>>,
+    /// True centres of the control prisms (each off its monument by its
+    /// centring), world frame; they never move.
+    pub control: Vec<Point3<f64>>,
     /// The scan head's true angle, radians.
     pub head_angle_rad: f64,
 }
@@ -51,7 +54,7 @@ impl SimWorld {
     /// A world with the team standing at the given true positions, level.
     /// The scene may be shared (`Arc<Scene>`) with whoever built it.
     pub fn new(scene: impl Into<Arc<Scene>>, parent: ParentPose, children: Vec<Point3<f64>>) -> Self {
-        let truth = Truth { parent, tilt: Tilt::default(), children, head_angle_rad: 0.0 };
+        let truth = Truth { parent, tilt: Tilt::default(), children, control: Vec::new(), head_angle_rad: 0.0 };
         Self { scene: scene.into(), truth: Arc::new(Mutex::new(truth)) }
     }
 
@@ -63,6 +66,11 @@ impl SimWorld {
     /// A copy of the current truth.
     pub fn truth(&self) -> Truth {
         self.lock().clone()
+    }
+
+    /// Sets up the control prisms at their true positions.
+    pub fn set_control(&self, control: Vec<Point3<f64>>) {
+        self.lock().control = control;
     }
 
     /// Overwrites the truth (used when resuming a journaled run).
@@ -82,6 +90,7 @@ pub(crate) mod stream {
     pub const TOTAL_STATION: u64 = 1;
     pub const LMS: u64 = 2;
     pub const TILT: u64 = 3;
+    pub const CONTROL: u64 = 5;
     pub const PARENT_DRIVE: u64 = 4;
     pub const CHILD_DRIVE: u64 = 16;
 }
@@ -109,6 +118,29 @@ macro_rules! noise_stream {
     )*};
 }
 noise_stream!(SimTilt, SimDrive, SimLms, SimTotalStation);
+
+/// Where the control prisms truly stand: each off its given coordinates by
+/// a draw of their covariance (`given`: position, covariance x, y, z) and,
+/// horizontally, of the prism's centring `centring_m` (1σ per axis) —
+/// seeded, on a stream of its own, so that every other device's noise is
+/// the same with or without control.
+pub fn control_prisms(given: &[(Point3<f64>, nalgebra::Matrix3<f64>)], centring_m: f64, seed: u64) -> Vec<Point3<f64>> {
+    use rand_distr::{Distribution, StandardNormal};
+    let mut r = rng(seed, stream::CONTROL);
+    given
+        .iter()
+        .map(|(p, cov)| {
+            let c2 = centring_m * centring_m;
+            let cov = cov + nalgebra::Matrix3::from_diagonal(&nalgebra::Vector3::new(c2, c2, 0.0));
+            let eig = nalgebra::SymmetricEigen::new(cov);
+            let z = nalgebra::Vector3::from_fn(|i, _| {
+                let n: f64 = StandardNormal.sample(&mut r);
+                eig.eigenvalues[i].max(0.0).sqrt() * n
+            });
+            p + eig.eigenvectors * z
+        })
+        .collect()
+}
 
 pub(crate) fn rng(seed: u64, stream: u64) -> ChaCha8Rng {
     let mut r = ChaCha8Rng::seed_from_u64(seed);

@@ -8,7 +8,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
 use super::{SimWorld, rng, stream};
-use crate::devices::{Target, TotalStation, TsMeasurement};
+use crate::devices::{Prism, Target, TotalStation, TsMeasurement};
 use crate::error::{Result, ScannerError};
 
 /// A simulated total station on the parent.
@@ -33,25 +33,30 @@ impl TotalStation for SimTotalStation {
 
     fn measure(&mut self, target: &Target) -> Result<TsMeasurement> {
         let truth = self.world.truth();
-        let child = *truth
-            .children
-            .get(target.child)
-            .ok_or(cps::CpsError::UnknownChild { child: target.child, team: truth.children.len() })?;
+        let (prism, sighting) = match target.prism {
+            Prism::Child(j) => (truth.children.get(j), self.instrument.clone()),
+            // A control prism's centring is in its true position.
+            Prism::Control(k) => (truth.control.get(k), self.instrument.without_target_centring()),
+        };
+        let Some(&child) = prism else {
+            let message = format!("no {} in this world", target.prism);
+            return Err(ScannerError::Device { device: self.name().into(), message });
+        };
         let from = truth.parent.position;
         if let Some(hit) = self.world.scene().obstruction(&from, &child) {
             return Err(ScannerError::NoLineOfSight {
                 device: self.name().into(),
-                target: format!("child {}", target.child),
+                target: target.prism.to_string(),
                 blocked_by: self.world.scene().object_name(hit.object).into(),
                 at_m: hit.distance_m,
             });
         }
         let exact = observe(&truth.parent, &child)?;
-        let inst = &self.instrument;
+        let inst = &sighting;
         if exact.slope_m < inst.min_range_m || exact.slope_m > inst.max_range_m {
             return Err(ScannerError::OutOfRange {
                 device: self.name().into(),
-                what: format!("slope distance to child {} (m)", target.child),
+                what: format!("slope distance to {} (m)", target.prism),
                 value: exact.slope_m,
                 expected: format!("{} m … {} m", inst.min_range_m, inst.max_range_m),
             });
@@ -76,7 +81,10 @@ mod tests {
     }
 
     fn target(child: usize) -> Target {
-        Target { child, predicted: cps::Reading { slope_m: 10.0, azimuth_rad: 0.0, elevation_rad: 0.0 } }
+        Target {
+            prism: Prism::Child(child),
+            predicted: cps::Reading { slope_m: 10.0, azimuth_rad: 0.0, elevation_rad: 0.0 },
+        }
     }
 
     #[test]
@@ -87,7 +95,8 @@ mod tests {
         assert!(e.to_string().contains("blocked by 'pillar 2'"), "{e}");
         let e = ts.measure(&target(2)).expect_err("0.5 m is below the 4 m minimum");
         assert!(e.to_string().contains("slope distance to child 2"), "{e}");
-        assert!(matches!(ts.measure(&target(5)), Err(ScannerError::Cps(cps::CpsError::UnknownChild { .. }))));
+        let e = ts.measure(&target(5)).expect_err("no such child");
+        assert!(e.to_string().contains("no child 5"), "{e}");
     }
 
     /// Mean and spread of many measurements match the truth and the model,

@@ -1,0 +1,76 @@
+//! `cps-survey adjust RUN_DIR`: the rigorous least-squares adjustment of a
+//! run's whole network from its journal — every station, child placement
+//! and control point from every reading — with the global test, data
+//! snooping and reliability; `adjustment.txt` in the run directory, a
+//! summary or one JSON object on the terminal.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use cps::batch::AdjustOptions;
+
+use super::Outcome;
+
+/// `adjust`'s arguments.
+#[derive(Debug, Clone, clap::Args)]
+pub struct AdjustArgs {
+    /// The run directory (holds mission.toml and journal.jsonl).
+    pub run_dir: PathBuf,
+    /// Print one JSON object instead of the summary.
+    #[arg(long)]
+    pub json: bool,
+    /// Significance level of the global test, two-sided.
+    #[arg(long, value_name = "A", default_value_t = 0.05, value_parser = probability)]
+    pub alpha: f64,
+    /// Significance level of one w-test (data snooping).
+    #[arg(long, value_name = "A0", default_value_t = cps::stats::ALPHA0, value_parser = probability)]
+    pub alpha0: f64,
+    /// Power of one w-test against a bias of the MDB.
+    #[arg(long, value_name = "B", default_value_t = cps::stats::BETA0, value_parser = probability)]
+    pub power: f64,
+    /// Test every observation but remove none.
+    #[arg(long)]
+    pub no_snooping: bool,
+}
+
+fn probability(s: &str) -> Result<f64, String> {
+    let p: f64 = s.trim().parse().map_err(|_| format!("\"{s}\" is not a number"))?;
+    if !(p > 0.0 && p < 1.0) {
+        return Err(format!("{s} is out of range; expected strictly between 0 and 1"));
+    }
+    Ok(p)
+}
+
+impl AdjustArgs {
+    /// The adjustment's options.
+    pub fn options(&self) -> AdjustOptions {
+        AdjustOptions {
+            alpha: self.alpha,
+            alpha0: self.alpha0,
+            beta0: self.power,
+            snooping: !self.no_snooping,
+            ..AdjustOptions::default()
+        }
+    }
+}
+
+/// Runs `adjust`: exit 1 when the global test fails.
+pub fn run(args: &AdjustArgs, out: &mut dyn Write) -> Result<Outcome> {
+    let dir = &args.run_dir;
+    let run = crate::run::resume::load_journal(dir)?;
+    let path = dir.join("journal.jsonl");
+    let net = crate::run::adjust::network(&run.mission, &run.planned, &run.journal, &path)?;
+    let report = crate::run::adjust::adjust(&run.mission, &run.planned, &net, &args.options())?;
+    let listing = dir.join("adjustment.txt");
+    std::fs::write(&listing, crate::view::listing::listing(&run.mission, &report))
+        .with_context(|| format!("writing {}", listing.display()))?;
+    if args.json {
+        serde_json::to_writer(&mut *out, &report)?;
+        writeln!(out)?;
+    } else {
+        crate::view::listing::summary(out, &report)?;
+        writeln!(out, "the listing: {}", listing.display())?;
+    }
+    Ok(Outcome::passed(report.global_test.passed))
+}
