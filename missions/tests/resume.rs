@@ -23,7 +23,8 @@ fn mission(dir: &Path, slices: usize, resolution_deg: f64) -> PathBuf {
         .replace(route, "route_m = [[1.5, 4.2, 1.5], [26.7, 4.2, 1.5]]")
         .replace("slices = 180", &format!("slices = {slices}"))
         .replace("resolution_deg = 1", &format!("resolution_deg = {resolution_deg}"))
-        .replace("seed = 1", "seed = 1\nretry_delay_s = 0");
+        .replace("seed = 1", "seed = 1\nretry_delay_s = 0")
+        .replace("control_at = [0, 10, 21]", "control_at = \"start-end\"");
     let path = dir.join(format!("hall-{slices}.toml"));
     std::fs::write(&path, text).expect("write mission");
     path
@@ -61,7 +62,11 @@ fn a_run_aborted_after_any_event_resumes_to_the_same_report() {
     assert_eq!(run(&m, &whole, &[]).status.code(), Some(0));
     let expected = report(&whole);
     let events = journal(&whole).len();
-    assert_eq!(events, 74, "start, 8 × (tilt, scan), 7 × (2 × (drive, measure), drive, 2 × measure, fix), end");
+    assert_eq!(
+        events, 81,
+        "start, 2 × measure (W1, W2) and the resection's fix, 8 × (tilt, scan), \
+         7 × (2 × (drive, measure), drive, 2 × measure, fix), 4 × measure (the end's control), end"
+    );
 
     // The first events, one in each kind of step, the last steps, the end.
     for n in [1, 2, 3, 4, 5, 6, 9, 12, 13, 30, 51, events - 2, events - 1, events] {
@@ -160,9 +165,10 @@ fn intermittent_faults_are_retried_without_changing_the_result() {
     assert_eq!(report(&out), report(&whole));
     let retries: Vec<Value> = journal(&out).into_iter().filter(|e| e["event"] == "retry").collect();
     // n successes with every k-th command failing take c = n + ⌊(n−1)/(k−1)⌋
-    // commands, ⌊c/k⌋ of them failed: 28 measurements (k = 3) → 41 commands,
-    // 13 retries; 21 drives (k = 4) → 27 commands, 6 retries.
-    assert_eq!(retries.iter().filter(|e| e["device"] == "total-station").count(), 13);
+    // commands, ⌊c/k⌋ of them failed: 34 measurements (28 of the children,
+    // 6 of control; k = 3) → 50 commands, 16 retries; 21 drives (k = 4) →
+    // 27 commands, 6 retries.
+    assert_eq!(retries.iter().filter(|e| e["device"] == "total-station").count(), 16);
     assert_eq!(retries.iter().filter(|e| e["device"] == "drive").count(), 6);
 }
 

@@ -21,12 +21,18 @@ pub fn example(name: &str) -> PathBuf {
 /// The hall's route as written in `hall.toml`.
 pub const HALL_ROUTE: &str = "route_m = [[1.5, 4.2, 1.5], [37.5, 4.2, 1.5], [37.5, 7.8, 1.5], [1.5, 7.8, 1.5]]";
 
+/// Where `hall.toml` sights its control.
+pub const HALL_CONTROL_AT: &str = "control_at = [0, 10, 21]";
+
 /// `hall.toml`'s text with the route cut to its first, straight leg of 8
-/// stations (x = 1.5 … 26.7 m at y = 4.2 m), for tests of mechanisms that
-/// need no more of the hall.
+/// stations (x = 1.5 … 26.7 m at y = 4.2 m), control sighted at its start
+/// and end, for tests of mechanisms that need no more of the hall.
 pub fn hall_first_leg(hall_text: &str) -> String {
     assert!(hall_text.contains(HALL_ROUTE), "hall.toml's route changed: update HALL_ROUTE");
-    hall_text.replace(HALL_ROUTE, "route_m = [[1.5, 4.2, 1.5], [26.7, 4.2, 1.5]]")
+    assert!(hall_text.contains(HALL_CONTROL_AT), "hall.toml's control_at changed: update HALL_CONTROL_AT");
+    hall_text
+        .replace(HALL_ROUTE, "route_m = [[1.5, 4.2, 1.5], [26.7, 4.2, 1.5]]")
+        .replace(HALL_CONTROL_AT, "control_at = \"start-end\"")
 }
 
 /// A mission file in its own temporary directory, removed when dropped.

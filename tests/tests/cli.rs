@@ -38,7 +38,7 @@ fn paper_1km_predicts_100_cycles_near_the_model_floor() {
 #[test]
 fn predict_reports_every_robot_and_every_scan_station() {
     // hall: 21 leapfrog cycles, two children placed every cycle, a scan at
-    // every station (22).
+    // every station (22), the start resected on control (a fix of cycle 0).
     let run = cps_survey(["predict".into(), example("hall.toml").into_os_string(), "--json".into()]);
     assert_eq!(run.code, 0, "{}", run.stderr);
     let v = json(&run);
@@ -46,13 +46,15 @@ fn predict_reports_every_robot_and_every_scan_station() {
     let steps = v["steps"].as_array().expect("steps");
     let scans = v["scans"].as_array().expect("scans");
     let of = |a: &str| steps.iter().filter(|s| s["action"] == a).count();
-    assert_eq!((of("placement"), of("fix"), scans.len()), (42, 21, 22));
+    assert_eq!((of("placement"), of("fix"), scans.len()), (42, 22, 22));
+    let start = steps.iter().find(|s| s["action"] == "fix" && s["cycle"] == 0).expect("the resection");
     for (k, scan) in scans.iter().enumerate() {
         assert_eq!(scan["station"], k);
         let cov = &scan["covariance"];
         if k == 0 {
-            // The start is known exactly in this mission.
-            assert_eq!(scan["sigma_xy_m"], 0.0);
+            // The start's pose comes from its resection on W1 and W2.
+            assert_eq!(cov, &start["covariance"]);
+            assert!(scan["sigma_xy_m"].as_f64().is_some_and(|s| s > 0.0 && s < 1e-3), "{scan}");
         } else {
             // A scan station inherits the fix of the cycle that reached it.
             assert_eq!(cov, &cycles[k - 1]["covariance"], "station {k}");
@@ -60,7 +62,7 @@ fn predict_reports_every_robot_and_every_scan_station() {
     }
     // Each child's covariance after its placement is the cycle's child row;
     // it is 3×3 and the parent's 4×4.
-    for s in steps {
+    for s in steps.iter().filter(|s| s["cycle"] != 0) {
         let size = s["covariance"].as_array().map(Vec::len);
         let cycle = &cycles[s["cycle"].as_u64().expect("cycle") as usize - 1];
         if s["robot"] == "parent" {

@@ -37,7 +37,16 @@ fn the_hall_recording_holds_every_entity() {
     for series in ["sigma_xy_m", "predicted_sigma_xy_m", "sigma_heading_rad", "error_xy_m"] {
         assert_eq!(get(&format!("/metrics/{series}")).0, stations, "{series}");
     }
-    assert_eq!(get("/metrics/fix_sigma0_squared").0, cycles);
+    // Every fix, the start's resection on W1 and W2 too.
+    assert_eq!(get("/metrics/fix_sigma0_squared").0, cycles + 1);
+    assert_eq!(get("/world/sight_lines/control").0, 1);
+    // The network adjustment at the end: the control points, every reading
+    // coloured by |w|, the misclosures at E1 and E2.
+    assert_eq!(get("/world/control").0, 1);
+    assert_eq!(get("/world/adjustment/observations").0, 1);
+    assert!(rows.keys().any(|k| k.starts_with("/world/adjustment/misclosures_x")), "{:?}", rows.keys());
+    // Control sighted at the start, the east end and back at the start.
+    assert_eq!(get("/world/plan/control_sight_lines").0, 6);
     assert!(get("/log").0 >= 2, "start and end at least");
     // The plan as it was driven, on its own timeline.
     assert_eq!(get("/world/plan/route"), (1, true));

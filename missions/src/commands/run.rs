@@ -44,7 +44,11 @@ pub struct RunArgs {
     pub log_icp_iterations: bool,
     /// Inject a fault into a simulated device: DEVICE:after=N (stops
     /// answering after N commands) or DEVICE:every=K (every K-th command
-    /// fails); DEVICE is drive, total-station, tilt or scanner. Repeatable.
+    /// fails), DEVICE drive, total-station, tilt or scanner; or a blunder:
+    /// total-station:blunder=N:METRES adds METRES to the N-th distance
+    /// measured, total-station:blunder-angle=N:ARCSEC to the N-th
+    /// horizontal angle (counting from 1, children and control alike).
+    /// Repeatable.
     #[arg(long, value_name = "FAULT")]
     pub sim_fault: Vec<Fault>,
     /// Abort the process after writing N journal events (crash test).

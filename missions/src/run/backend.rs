@@ -54,7 +54,7 @@ impl DeviceKind {
 }
 
 /// A fault injected into a simulated device (`--sim-fault`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Fault {
     /// The device.
     pub device: DeviceKind,
@@ -63,28 +63,57 @@ pub struct Fault {
 }
 
 /// When an injected fault strikes, counting the device's commands from 1
-/// (each retry is a command).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// (each retry is a command) — or, for a blunder, the total station's
+/// measurements from 1 (children and control alike).
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub enum FaultRule {
     /// Every command after the n-th fails: the device stopped answering.
     After(usize),
     /// Every k-th command fails once (a retry then succeeds).
     Every(usize),
+    /// The n-th distance measured is off by this many metres.
+    Blunder(usize, f64),
+    /// The n-th horizontal angle measured is off by this many radians.
+    BlunderAngle(usize, f64),
 }
 
 impl FromStr for Fault {
     type Err = String;
 
     /// `DEVICE:after=N` or `DEVICE:every=K`, DEVICE one of `drive`,
-    /// `total-station`, `tilt`, `scanner`.
+    /// `total-station`, `tilt`, `scanner`; `total-station:blunder=N:D`
+    /// (metres) or `total-station:blunder-angle=N:ARCSEC`.
     fn from_str(s: &str) -> Result<Self, String> {
-        let expected = "expected DEVICE:after=N or DEVICE:every=K with DEVICE drive, total-station, tilt or scanner";
+        let expected = "expected DEVICE:after=N or DEVICE:every=K with DEVICE drive, total-station, tilt or scanner, \
+                        or total-station:blunder=N:METRES or total-station:blunder-angle=N:ARCSEC";
         let (device, rule) = s.split_once(':').ok_or_else(|| format!("fault \"{s}\": {expected}"))?;
         let device = [DeviceKind::Drive, DeviceKind::TotalStation, DeviceKind::Tilt, DeviceKind::Scanner]
             .into_iter()
             .find(|d| d.name() == device)
             .ok_or_else(|| format!("fault \"{s}\": unknown device \"{device}\"; {expected}"))?;
         let (kind, n) = rule.split_once('=').ok_or_else(|| format!("fault \"{s}\": {expected}"))?;
+        if let Some(blunder) = ["blunder", "blunder-angle"].into_iter().find(|b| *b == kind) {
+            if device != DeviceKind::TotalStation {
+                return Err(format!("fault \"{s}\": blunders are the total station's; {expected}"));
+            }
+            let (n, d) = n.split_once(':').ok_or_else(|| format!("fault \"{s}\": {expected}"))?;
+            let n: usize = n
+                .parse()
+                .ok()
+                .filter(|n| *n >= 1)
+                .ok_or_else(|| format!("fault \"{s}\": \"{n}\" is not a measurement number ≥ 1; {expected}"))?;
+            let d: f64 = d
+                .parse()
+                .ok()
+                .filter(|d: &f64| d.is_finite() && d.abs() < 1e6)
+                .ok_or_else(|| format!("fault \"{s}\": \"{d}\" is not a finite size below 1e6; {expected}"))?;
+            let rule = if blunder == "blunder" {
+                FaultRule::Blunder(n, d)
+            } else {
+                FaultRule::BlunderAngle(n, d * cps::RAD_PER_ARCSEC)
+            };
+            return Ok(Fault { device, rule });
+        }
         let n: usize = n.parse().map_err(|_| format!("fault \"{s}\": \"{n}\" is not a whole number; {expected}"))?;
         let rule = match (kind, n) {
             ("after", n) => FaultRule::After(n),
@@ -109,6 +138,8 @@ pub struct SimTeam {
     body_from_head: Isometry3<f64>,
     faults: Vec<Fault>,
     commands: [usize; 4],
+    /// The total station's measurements so far (blunders count them).
+    measurements: usize,
 }
 
 /// The simulated team taken apart ([`SimTeam::into_parts`]).
@@ -164,6 +195,7 @@ impl SimTeam {
             body_from_head,
             faults,
             commands: [0; 4],
+            measurements: 0,
         })
     }
 
@@ -223,6 +255,7 @@ impl SimTeam {
                 && match f.rule {
                     FaultRule::After(k) => *n > k,
                     FaultRule::Every(k) => n.is_multiple_of(k),
+                    FaultRule::Blunder(..) | FaultRule::BlunderAngle(..) => false,
                 }
         });
         if strikes {
@@ -250,16 +283,30 @@ impl SimTeam {
         }
     }
 
-    /// Measures a child with the total station.
+    /// Measures a prism with the total station; a planted blunder
+    /// (`--sim-fault total-station:blunder…`) strikes its measurement.
     pub fn measure(&mut self, target: &Target) -> scanner::Result<TsMeasurement> {
         self.command(DeviceKind::TotalStation, "simulated total station")?;
-        match &mut self.total_station {
-            Some(ts) => ts.measure(target),
-            None => Err(ScannerError::Device {
-                device: "total station".into(),
-                message: "the team has no total station (no children)".into(),
-            }),
+        let mut m = match &mut self.total_station {
+            Some(ts) => ts.measure(target)?,
+            None => {
+                return Err(ScannerError::Device {
+                    device: "total station".into(),
+                    message: "the team has no total station (no children)".into(),
+                });
+            }
+        };
+        self.measurements += 1;
+        for f in &self.faults {
+            match f.rule {
+                FaultRule::Blunder(n, d) if n == self.measurements => m.slope_raw_m += d,
+                FaultRule::BlunderAngle(n, a) if n == self.measurements => {
+                    m.hz_rad = (m.hz_rad + a).rem_euclid(std::f64::consts::TAU);
+                }
+                _ => {}
+            }
         }
+        Ok(m)
     }
 
     /// Reads the tilt sensor.
@@ -292,6 +339,7 @@ impl SimTeam {
                 total_station: self.total_station.as_ref().map(|t| t.noise_position().to_string()),
                 tilt: self.tilt.noise_position().to_string(),
                 scanner: self.lms.noise_position().to_string(),
+                measurements: Some(self.measurements),
             }),
             truth: Some(truth_record(&self.world.truth())),
         }
@@ -326,6 +374,8 @@ impl SimTeam {
             ts.set_noise_position(noise_position(n.total_station.as_deref(), "noise.total_station")?);
         }
         self.tilt.set_noise_position(noise_position(Some(&n.tilt), "noise.tilt")?);
+        // Journals of version 1 did not count; they knew no blunders.
+        self.measurements = n.measurements.unwrap_or(0);
         self.lms.set_noise_position(noise_position(Some(&n.scanner), "noise.scanner")?);
         Ok(())
     }

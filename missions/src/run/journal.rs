@@ -348,6 +348,9 @@ pub struct NoiseState {
     pub tilt: String,
     /// The laser scanner's.
     pub scanner: String,
+    /// The total station's measurements so far (version 2).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub measurements: Option<usize>,
 }
 
 /// The simulated world's truth.

@@ -12,6 +12,10 @@ use super::{SimWorld, rng, stream};
 use crate::devices::{Drive, Odometry, PlanarPose, Tilt};
 use crate::error::{Result, ScannerError};
 
+/// Moves shorter than this (a micrometre; the drive protocol carries
+/// nanometres) are a robot told to stay where it is.
+const STAY_M: f64 = 1e-6;
+
 /// The odometry error model of a drive. Per move of length d (m): true
 /// distance d·(1 + `scale_error`) + N(0, `sigma_distance_m_per_sqrt_m`²·d);
 /// heading error `heading_drift_rad_per_m`·d + N(0,
@@ -148,8 +152,10 @@ impl Drive for SimDrive {
         let (fwd, left) = (c * dx + s * dy, -s * dx + c * dy);
         let mut n = || -> f64 { self.rng.sample(StandardNormal) };
         let heading_error = e.heading_drift_rad_per_m * d + e.sigma_heading_rad_per_sqrt_m * d.sqrt() * n();
+        // A move shorter than the wire's rounding (a robot told to stay
+        // where it is) draws no distance noise, on any backend.
         let scale =
-            if d > 0.0 { 1.0 + e.scale_error + e.sigma_distance_m_per_sqrt_m * d.sqrt() * n() / d } else { 1.0 };
+            if d > STAY_M { 1.0 + e.scale_error + e.sigma_distance_m_per_sqrt_m * d.sqrt() * n() / d } else { 1.0 };
         let travel_heading = self.true_pose.heading_rad + heading_error / 2.0;
         let (ts, tc) = travel_heading.sin_cos();
         self.true_pose.x_m += scale * (tc * fwd - ts * left);
