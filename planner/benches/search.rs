@@ -23,6 +23,8 @@ fn bench(c: &mut Criterion) {
         scene: None,
         limits: Limits::range(4.0, 400.0),
         scan_at: &no_scans,
+        control: &[],
+        control_at: &[],
     };
     let leapfrog =
         SearchSpace { strategies: vec![Strategy::Leapfrog], strides_m: vec![10.0], max_sight_line_m: 100.0, up_m: 0.0 };
@@ -50,6 +52,8 @@ fn bench(c: &mut Criterion) {
         scene: Some(&scene),
         limits: Limits { footprint_radius_m: Some(0.3), scanner_max_range_m: Some(32.0), ..Limits::range(2.0, 500.0) },
         scan_at: &every,
+        control: &[],
+        control_at: &[],
     };
     let space = SearchSpace {
         strategies: [Strategy::Leapfrog, Strategy::ParentHops { hops: 2 }, Strategy::ParentHops { hops: 3 }].to_vec(),

@@ -45,6 +45,52 @@ pub fn sighting_instrument(instrument: &Instrument) -> Instrument {
     instrument.without_target_centring()
 }
 
+/// The stations where the parent also sights every control point within
+/// the instrument's range and in line of sight (`[plan] control_at`).
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub enum ControlAt {
+    /// Every station (`"every"`, the default).
+    #[default]
+    Every,
+    /// The first and the last (`"start-end"`).
+    StartEnd,
+    /// These stations (`[0, 5, 11]`).
+    Stations(Vec<usize>),
+}
+
+impl ControlAt {
+    /// Whether station `k` of `n` sights control.
+    pub fn includes(&self, k: usize, n: usize) -> bool {
+        match self {
+            ControlAt::Every => true,
+            ControlAt::StartEnd => k == 0 || k + 1 == n,
+            ControlAt::Stations(list) => list.contains(&k),
+        }
+    }
+
+    /// The first station index it names that a plan of `n` stations does
+    /// not have.
+    pub fn missing(&self, n: usize) -> Option<usize> {
+        match self {
+            ControlAt::Stations(list) => list.iter().find(|k| **k >= n).copied(),
+            _ => None,
+        }
+    }
+}
+
+impl std::fmt::Display for ControlAt {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ControlAt::Every => write!(f, "\"every\""),
+            ControlAt::StartEnd => write!(f, "\"start-end\""),
+            ControlAt::Stations(list) => {
+                let list: Vec<String> = list.iter().map(usize::to_string).collect();
+                write!(f, "[{}]", list.join(", "))
+            }
+        }
+    }
+}
+
 /// Why a station does not see a control point (for `plan`'s listing).
 #[derive(Debug, Clone, PartialEq)]
 pub enum Unseen {
@@ -99,6 +145,33 @@ pub fn sightings(
             (0..control.len()).filter(|&c| visibility(&pose, &control[c].position, instrument, scene).is_ok()).collect()
         })
         .collect()
+}
+
+/// `dance` with `control` sighted at the stations `at` names, where they
+/// are seen; or the control points no station sees (index into `control`).
+pub fn attach(
+    dance: Dance,
+    control: &[ControlPoint],
+    at: &ControlAt,
+    instrument: &Instrument,
+    scene: Option<&Scene>,
+) -> Result<Dance, Vec<usize>> {
+    if control.is_empty() {
+        return Ok(dance);
+    }
+    let n = dance.stations.len();
+    let seen = sightings(&dance, control, &|k| at.includes(k, n), instrument, scene);
+    let unseen: Vec<usize> = (0..control.len()).filter(|c| !seen.iter().any(|s| s.contains(c))).collect();
+    if !unseen.is_empty() {
+        return Err(unseen);
+    }
+    Ok(dance.with_control(control.to_vec(), seen))
+}
+
+/// How many stations sight control in `dance` (each a setup that costs
+/// time in the field).
+pub fn setups(dance: &Dance) -> usize {
+    dance.sightings.iter().filter(|s| !s.is_empty()).count()
 }
 
 #[cfg(test)]

@@ -5,7 +5,7 @@
 //! readings: the pre-analysis) or an executed one (a journal's readings, a
 //! Monte Carlo trial's).
 
-use cps::batch::{Network, NetworkReading, Point, Station};
+use cps::batch::{AdjustOptions, Adjustment, Network, NetworkReading, Point, Station};
 use cps::{Instrument, ParentPose, Reading};
 use nalgebra::Matrix4;
 
@@ -182,4 +182,25 @@ pub fn planned(dance: &Dance, instrument: &Instrument, start_covariance: &Matrix
         .collect::<cps::Result<Vec<_>>>()?;
     let stations: Vec<ParentPose> = (0..dance.stations.len()).map(|k| dance.station_pose(k)).collect();
     build(dance, instrument, start_covariance, &stations, &readings)
+}
+
+/// The pre-analysis: the planned network ([`planned`]) adjusted — every
+/// station's covariance and every planned reading's redundancy number and
+/// MDB with the default test settings (no snooping: nothing to remove).
+pub fn pre_analysis(
+    dance: &Dance,
+    instrument: &Instrument,
+    start_covariance: &Matrix4<f64>,
+) -> cps::Result<(DanceNetwork, Adjustment)> {
+    let net = planned(dance, instrument, start_covariance)?;
+    let options = AdjustOptions { snooping: false, ..AdjustOptions::default() };
+    let adjustment = cps::batch::adjust(&net.network, &options)?;
+    Ok((net, adjustment))
+}
+
+/// The adjusted station with the largest √(σx² + σy²): (index, metres).
+pub fn worst_station(adjustment: &Adjustment) -> Option<(usize, f64)> {
+    (0..adjustment.stations.len())
+        .map(|k| (k, cps::sigma_xy2(&adjustment.station_covariance(k)).sqrt()))
+        .max_by(|a, b| a.1.total_cmp(&b.1))
 }

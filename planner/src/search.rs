@@ -1,6 +1,7 @@
-//! Formation, stride and strategy search: the plan with the smallest
-//! predicted final horizontal variance — or the fewest cycles that meet a
-//! tolerance — that breaks no constraint.
+//! Formation, stride, strategy and control search: the plan with the
+//! smallest predicted final horizontal variance — or the fewest cycles that
+//! meet a tolerance, at the last station (the filter's) or at every station
+//! (the batch adjustment's) — that breaks no constraint.
 //!
 //! The search predicts every candidate of a grid (strategies × strides ×
 //! symmetric formations (forward a, lateral ±b) within the longest allowed
@@ -8,6 +9,11 @@
 //! of their score until one passes (range first; the scene checks are the
 //! expensive part), then refines (a, b) of the winner by a pattern search
 //! that only accepts feasible improvements.
+//!
+//! With control points, every candidate is tried with each of the
+//! problem's `control_at` choices; one that leaves a control point unseen
+//! is no plan. Among plans of as many cycles that meet an every-station
+//! tolerance, fewer control setups win.
 
 use nalgebra::{Matrix4, Point3};
 use rayon::prelude::*;
@@ -16,6 +22,7 @@ use cps::Instrument;
 use cps::geom::Scene;
 
 use crate::constraints::{Limits, Violation, check};
+use crate::control::{ControlAt, ControlPoint, attach, setups};
 use crate::dance::{Dance, FormationKind, Strategy, schedule};
 use crate::error::PlanError;
 use crate::predict::predict;
@@ -32,6 +39,8 @@ pub struct Candidate {
     pub formation: FormationKind,
     /// The children's prism height relative to the parent's instrument, metres.
     pub up_m: f64,
+    /// Which of the problem's `control_at` choices (0 without control).
+    pub control_at: usize,
 }
 
 /// What is fixed while searching.
@@ -51,6 +60,10 @@ pub struct Problem<'a> {
     pub limits: Limits,
     /// Whether the parent scans at a station.
     pub scan_at: &'a (dyn Fn(usize) -> bool + Sync),
+    /// The control points (none: an open traverse).
+    pub control: &'a [ControlPoint],
+    /// Where the parent may sight them: the choices the search tries.
+    pub control_at: &'a [ControlAt],
 }
 
 /// What may change.
@@ -73,11 +86,25 @@ pub enum Objective {
     /// The final σx² + σy².
     MinVariance,
     /// The fewest dance cycles whose final √(σx² + σy²) is at most the
-    /// tolerance; ties (and plans that all miss it) by the final variance.
+    /// tolerance; ties by fewer control setups, then (and plans that all
+    /// miss it) by the final variance.
     FewestCycles {
         /// The tolerance, metres.
         max_sigma_xy_m: f64,
     },
+    /// The fewest dance cycles whose every station's adjusted (batch)
+    /// √(σx² + σy²) is at most the tolerance; ties by fewer control
+    /// setups, then by the worst station's variance.
+    FewestCyclesEveryStation {
+        /// The tolerance, metres.
+        max_sigma_xy_m: f64,
+    },
+}
+
+impl Objective {
+    fn every_station(&self) -> bool {
+        matches!(self, Objective::FewestCyclesEveryStation { .. })
+    }
 }
 
 /// A candidate with its schedule and predicted accuracy.
@@ -89,6 +116,9 @@ pub struct Evaluated {
     pub dance: Dance,
     /// Predicted final σx² + σy², m².
     pub sigma_xy2_m2: f64,
+    /// The worst station's adjusted √(σx² + σy²), metres (computed for an
+    /// every-station objective).
+    pub worst_station_sigma_xy_m: Option<f64>,
 }
 
 impl Evaluated {
@@ -98,19 +128,32 @@ impl Evaluated {
     }
 
     /// Orders two plans under `objective`: better first.
-    fn cmp_by(&self, other: &Self, objective: &Objective) -> std::cmp::Ordering {
-        let (a, b) = (self.score(objective), other.score(objective));
-        a.0.cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.total_cmp(&b.2))
+    /// Stations that sight control.
+    pub fn control_setups(&self) -> usize {
+        setups(&self.dance)
     }
 
-    fn score(&self, objective: &Objective) -> (u8, usize, f64) {
+    fn cmp_by(&self, other: &Self, objective: &Objective) -> std::cmp::Ordering {
+        let (a, b) = (self.score(objective), other.score(objective));
+        a.0.cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)).then(a.3.total_cmp(&b.3))
+    }
+
+    fn score(&self, objective: &Objective) -> (u8, usize, usize, f64) {
         match objective {
-            Objective::MinVariance => (0, 0, self.sigma_xy2_m2),
+            Objective::MinVariance => (0, 0, 0, self.sigma_xy2_m2),
             Objective::FewestCycles { max_sigma_xy_m } => {
                 if self.sigma_xy2_m2.sqrt() <= *max_sigma_xy_m {
-                    (0, self.cycles(), self.sigma_xy2_m2)
+                    (0, self.cycles(), self.control_setups(), self.sigma_xy2_m2)
                 } else {
-                    (1, 0, self.sigma_xy2_m2)
+                    (1, 0, 0, self.sigma_xy2_m2)
+                }
+            }
+            Objective::FewestCyclesEveryStation { max_sigma_xy_m } => {
+                let worst = self.worst_station_sigma_xy_m.unwrap_or(f64::INFINITY);
+                if worst <= *max_sigma_xy_m {
+                    (0, self.cycles(), self.control_setups(), worst)
+                } else {
+                    (1, 0, 0, worst)
                 }
             }
         }
@@ -142,18 +185,36 @@ impl Problem<'_> {
         inst
     }
 
-    /// Schedules and predicts `candidate`; `None` when it breaks a range
-    /// limit or the model rejects it.
-    pub fn evaluate(&self, candidate: &Candidate, instrument: &Instrument) -> Option<Evaluated> {
+    /// Schedules and predicts `candidate` (with the batch adjustment for
+    /// an every-station `objective`); `None` when it breaks a range limit,
+    /// leaves a control point unseen, names a station it does not have or
+    /// the model rejects it.
+    pub fn evaluate(&self, candidate: &Candidate, instrument: &Instrument, objective: &Objective) -> Option<Evaluated> {
         let st = stations(self.route_m, candidate.stride_m).ok()?;
         let offsets = candidate.formation.offsets(self.n_children, candidate.up_m);
-        let dance = schedule(st, &offsets, candidate.strategy).ok()?;
+        let mut dance = schedule(st, &offsets, candidate.strategy).ok()?;
         if !dance.range_violations(instrument).is_empty() {
             return None;
         }
+        if !self.control.is_empty() {
+            let at = self.control_at.get(candidate.control_at)?;
+            if at.missing(dance.stations.len()).is_some() {
+                return None;
+            }
+            dance = attach(dance, self.control, at, instrument, self.scene).ok()?;
+        }
         let prediction = predict(&dance, instrument, &self.start_covariance).ok()?;
         let sigma_xy2_m2 = prediction.last()?.sigma_xy2_m2();
-        sigma_xy2_m2.is_finite().then_some(Evaluated { candidate: *candidate, dance, sigma_xy2_m2 })
+        if !sigma_xy2_m2.is_finite() {
+            return None;
+        }
+        let worst_station_sigma_xy_m = if objective.every_station() {
+            let (_, adjusted) = crate::network::pre_analysis(&dance, instrument, &self.start_covariance).ok()?;
+            Some(crate::network::worst_station(&adjusted)?.1)
+        } else {
+            None
+        };
+        Some(Evaluated { candidate: *candidate, dance, sigma_xy2_m2, worst_station_sigma_xy_m })
     }
 
     /// Every constraint `dance` breaks, with the search's sight-line limit.
@@ -182,22 +243,26 @@ pub fn search(problem: &Problem<'_>, space: &SearchSpace, objective: Objective) 
     // differ most.
     let half = (GRID_FORWARD / 2) as f64;
     let mut grid = Vec::new();
-    for &strategy in &space.strategies {
-        for &stride_m in &space.strides_m {
-            for i in 0..GRID_FORWARD {
-                let u = (i as f64 - half) / half;
-                let forward_m = extent * u * u.abs();
-                for k in 1..=GRID_LATERAL {
-                    let v = k as f64 / GRID_LATERAL as f64;
-                    let lateral_m = extent / pairs * v * v;
-                    let formation = FormationKind::Symmetric { forward_m, lateral_m };
-                    grid.push(Candidate { strategy, stride_m, formation, up_m: space.up_m });
+    let control_choices = if problem.control.is_empty() { 1 } else { problem.control_at.len() };
+    for control_at in 0..control_choices {
+        for &strategy in &space.strategies {
+            for &stride_m in &space.strides_m {
+                for i in 0..GRID_FORWARD {
+                    let u = (i as f64 - half) / half;
+                    let forward_m = extent * u * u.abs();
+                    for k in 1..=GRID_LATERAL {
+                        let v = k as f64 / GRID_LATERAL as f64;
+                        let lateral_m = extent / pairs * v * v;
+                        let formation = FormationKind::Symmetric { forward_m, lateral_m };
+                        grid.push(Candidate { strategy, stride_m, formation, up_m: space.up_m, control_at });
+                    }
                 }
             }
         }
     }
     let predicted = grid.len();
-    let mut ranked: Vec<Evaluated> = grid.par_iter().filter_map(|c| problem.evaluate(c, &instrument)).collect();
+    let mut ranked: Vec<Evaluated> =
+        grid.par_iter().filter_map(|c| problem.evaluate(c, &instrument, &objective)).collect();
     ranked.sort_by(|a, b| a.cmp_by(b, &objective));
 
     // The best feasible candidate, checking a batch at a time in parallel.
@@ -240,7 +305,7 @@ pub fn search(problem: &Problem<'_>, space: &SearchSpace, objective: Objective) 
         extra += trials.len();
         let better: Vec<Evaluated> = trials
             .par_iter()
-            .filter_map(|c| problem.evaluate(c, &instrument))
+            .filter_map(|c| problem.evaluate(c, &instrument, &objective))
             .filter(|e| e.cmp_by(&best, &objective).is_lt())
             .filter(|e| problem.violations(&e.dance, reach).is_empty())
             .collect();

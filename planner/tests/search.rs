@@ -20,6 +20,8 @@ fn best(max_sight_line_m: f64, strategies: Vec<Strategy>) -> planner::search::Ev
         scene: None,
         limits: Limits::range(inst.min_range_m, inst.max_range_m),
         scan_at: &no_scans,
+        control: &[],
+        control_at: &[],
     };
     let space = SearchSpace { strategies, strides_m: vec![10.0], max_sight_line_m, up_m: 0.0 };
     let result = search(&problem, &space, Objective::MinVariance).expect("search");

@@ -111,3 +111,20 @@ pub fn rrd_rows(path: &Path) -> Result<std::collections::BTreeMap<String, (usize
     }
     Ok(rows)
 }
+
+/// A mission's text without its control points: no `[[control]]` tables,
+/// no `control_at` (the open traverse of the same plan).
+pub fn without_control(text: &str) -> String {
+    let mut skipping = false;
+    let mut out = Vec::new();
+    for line in text.lines() {
+        let t = line.trim_start();
+        if t.starts_with('[') {
+            skipping = t.starts_with("[[control]]");
+        }
+        if !skipping && !t.starts_with("control_at") {
+            out.push(line);
+        }
+    }
+    out.join("\n") + "\n"
+}

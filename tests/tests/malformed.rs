@@ -438,7 +438,44 @@ const CASES: &[Case] = &[
     ),
     ("broken TOML", ("[plan]", "[plan"), "14:6", "", "invalid TOML"),
     ("duplicate key", ("stride_m = 10.0", "stride_m = 10.0\nstride_m = 5.0"), "17:1", "", "invalid TOML"),
+    ("empty control name", (FORMATION, CONTROL_EMPTY_NAME), "19:8", "control[0].name", "non-empty"),
+    ("duplicate control name", (FORMATION, CONTROL_DUPLICATE), "23:14", "control[1].name", "also control[0]"),
+    ("NaN control coordinate", (FORMATION, CONTROL_NAN), "20:15", "control[0].position_m[0]", "finite"),
+    ("coincident control points", (FORMATION, CONTROL_COINCIDENT), "23:14", "control[1].position_m", "≥ 1 mm apart"),
+    ("negative control σ", (FORMATION, CONTROL_NEGATIVE_SIGMA), "21:11", "control[0].sigma_m", "≥ 0"),
+    ("control σ of two numbers", (FORMATION, CONTROL_TWO_SIGMAS), "21:11", "control[0].sigma_m", "3 numbers"),
+    ("control seen from no station", (FORMATION, CONTROL_FAR), "20:14", "control[0]", "seen from no station"),
+    (
+        "unknown control_at",
+        ("stride_m = 10.0", "stride_m = 10.0\ncontrol_at = \"sometimes\""),
+        "17:14",
+        "plan.control_at",
+        "\"start-end\"",
+    ),
+    (
+        "control_at beyond the plan",
+        ("stride_m = 10.0", "stride_m = 10.0\ncontrol_at = [0, 99]"),
+        "17:14",
+        "plan.control_at",
+        "station 99 does not exist",
+    ),
 ];
+
+const FORMATION: &str = "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]";
+const CONTROL_EMPTY_NAME: &str =
+    "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]\n[[control]]\nname = \"\"\nposition_m = [10.0, 5.0, 0.0]";
+const CONTROL_DUPLICATE: &str = "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]\n[[control]]\nname = \"A\"\n\
+    position_m = [10.0, 5.0, 0.0]\n[[control]]\nname = \"A\"\nposition_m = [20.0, 5.0, 0.0]";
+const CONTROL_NAN: &str =
+    "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]\n[[control]]\nname = \"A\"\nposition_m = [nan, 5.0, 0.0]";
+const CONTROL_COINCIDENT: &str = "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]\n[[control]]\nname = \"A\"\n\
+    position_m = [10.0, 5.0, 0.0]\n[[control]]\nname = \"B\"\nposition_m = [10.0, 5.0, 0.0005]";
+const CONTROL_NEGATIVE_SIGMA: &str = "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]\n[[control]]\nname = \"A\"\n\
+    position_m = [10.0, 5.0, 0.0]\nsigma_m = -0.001";
+const CONTROL_TWO_SIGMAS: &str = "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]\n[[control]]\nname = \"A\"\n\
+    position_m = [10.0, 5.0, 0.0]\nsigma_m = [0.001, 0.002]";
+const CONTROL_FAR: &str =
+    "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]\n[[control]]\nname = \"A\"\nposition_m = [1000.0, 5.0, 0.0]";
 
 #[test]
 fn every_malformed_mission_exits_2_at_the_right_place() {

@@ -60,5 +60,5 @@ pub fn run(args: &PredictArgs, out: &mut dyn Write) -> Result<Outcome> {
             writeln!(out, "recorded the plan in {} (view it with `rerun {}`)", file.display(), file.display())?;
         }
     }
-    Ok(Outcome::passed(crate::planning::accepted(&mission, &planned.prediction)))
+    Ok(Outcome::passed(crate::planning::accepted(&mission, &planned)))
 }

@@ -48,29 +48,7 @@ pub struct Plan {
     pub control_at: ControlAt,
 }
 
-/// The stations where the parent also sights every control point within
-/// the instrument's range and in line of sight (`[plan] control_at`).
-#[derive(Debug, Clone, PartialEq, Eq, Default)]
-pub enum ControlAt {
-    /// Every station (`"every"`, the default).
-    #[default]
-    Every,
-    /// The first and the last (`"start-end"`).
-    StartEnd,
-    /// These stations (`[0, 5, 11]`).
-    Stations(Vec<usize>),
-}
-
-impl ControlAt {
-    /// Whether station `k` of `n` sights control.
-    pub fn includes(&self, k: usize, n: usize) -> bool {
-        match self {
-            ControlAt::Every => true,
-            ControlAt::StartEnd => k == 0 || k + 1 == n,
-            ControlAt::Stations(list) => list.contains(&k),
-        }
-    }
-}
+pub use planner::control::ControlAt;
 
 /// A control point (`[[control]]`): a reflector at given coordinates.
 #[derive(Debug, Clone, PartialEq)]

@@ -104,16 +104,26 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>, scene_override: Op
     // the route starts), not inside an object.
     let start = plan.route_m.first().copied().unwrap_or_else(Point3::origin);
     let free = backend.scene_model.enclosing(&start);
-    for (k, (c, span)) in control.iter().enumerate() {
-        if let Some(&o) = backend.scene_model.enclosing(&c.position_m).iter().find(|o| !free.contains(o)) {
+    // (Without a [backend] table the plan is checked in open space.)
+    for (k, (c, span)) in control.iter().enumerate().filter(|_| backend.given) {
+        let around = backend.scene_model.enclosing(&c.position_m);
+        let at = c.position_m.coords.as_slice();
+        let message = if let Some(&o) = around.iter().find(|o| !free.contains(o)) {
             let object = backend.scene_model.object_name(o);
-            let message = format!(
-                "control point \"{}\" at {:?} lies inside \"{object}\"; expected it in the free space of the route",
-                c.name,
-                c.position_m.coords.as_slice()
-            );
-            r.problem(span, &format!("control[{k}].position_m"), message);
-        }
+            format!(
+                "control point \"{}\" at {at:?} lies inside \"{object}\"; expected it in the free space of the route",
+                c.name
+            )
+        } else if let Some(&o) = free.iter().find(|o| !around.contains(o)) {
+            let object = backend.scene_model.object_name(o);
+            format!(
+                "control point \"{}\" at {at:?} lies outside \"{object}\", where the route starts; expected it in the free space of the route",
+                c.name
+            )
+        } else {
+            continue;
+        };
+        r.problem(span, &format!("control[{k}].position_m"), message);
     }
     spans.control = control.iter().map(|(_, span)| span.clone()).collect();
     Some(Mission {
@@ -791,11 +801,11 @@ fn read_control(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Vec<(Con
         }
     }
     for (k, (c, span)) in out.iter().enumerate() {
-        if let Some((_, (o, _))) = out[..k].iter().enumerate().find(|(_, (o, _))| o.name == c.name) {
+        if let Some((j, _)) = out[..k].iter().enumerate().find(|(_, (o, _))| o.name == c.name) {
             r.problem(
                 span,
                 &format!("control[{k}].name"),
-                format!("duplicate control point name \"{}\" (also {})", c.name, o.name),
+                format!("duplicate control point name \"{}\" (also control[{j}]); expected unique names", c.name),
             );
             ok = false;
         } else if let Some((o, _)) = out[..k].iter().find(|(o, _)| (o.position_m - c.position_m).norm() < 1e-3) {

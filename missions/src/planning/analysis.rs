@@ -8,12 +8,13 @@ use std::time::Instant;
 use anyhow::Result;
 use cps::Instrument;
 use planner::analysis::{FixReliability, Sensitivity, UNCHECKED_REDUNDANCY};
+use planner::control::attach;
 use planner::search::Evaluated;
 use planner::{FormationKind, Objective, SearchSpace, Strategy, Violation};
 
 use super::Planned;
 use super::constraints::{limits, violations};
-use crate::mission::Mission;
+use crate::mission::{ControlAt, Mission};
 
 /// Longest sight line `--optimize` considers when neither the mission nor
 /// the instrument sets a shorter one, metres.
@@ -38,8 +39,42 @@ pub struct PlanReport {
     pub longer_stride: Option<(f64, usize, f64)>,
     /// Redundancy numbers of every fix.
     pub reliability: Vec<FixReliability>,
+    /// Which stations see which control point.
+    pub control: Vec<ControlSeen>,
     /// With `--optimize`: the chosen plan.
     pub optimized: Option<Optimized>,
+}
+
+/// A control point and the stations that sight it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ControlSeen {
+    /// Its name.
+    pub name: String,
+    /// Whether every coordinate is held fixed.
+    pub fixed: bool,
+    /// The stations that sight it, with the slope distance (metres).
+    pub from: Vec<(usize, f64)>,
+}
+
+/// Which stations of `planned` sight each control point.
+pub fn control_seen(planned: &Planned) -> Vec<ControlSeen> {
+    let dance = &planned.dance;
+    dance
+        .control
+        .iter()
+        .enumerate()
+        .map(|(c, point)| ControlSeen {
+            name: point.name.clone(),
+            fixed: point.covariance.diagonal().iter().all(|v| *v == 0.0),
+            from: (0..dance.stations.len())
+                .filter(|&k| dance.sighted_at(k).contains(&c))
+                .map(|k| {
+                    let at = planned.dance.station_pose(k);
+                    (k, cps::observe(&at, &point.position).map_or(f64::NAN, |r| r.slope_m))
+                })
+                .collect(),
+        })
+        .collect()
 }
 
 /// The plan `--optimize` chose.
@@ -49,6 +84,9 @@ pub struct Optimized {
     pub best: Evaluated,
     /// The chosen plan, predicted with the mission's instrument.
     pub planned: Planned,
+    /// Where it sights control (the mission's unless the search chose
+    /// another).
+    pub control_at: ControlAt,
     /// Candidates predicted.
     pub predicted: usize,
     /// Candidates checked against the constraints.
@@ -78,6 +116,7 @@ pub fn analyse(mission: &Mission, written: Planned, optimize: bool) -> Result<Pl
         one_more_child_m2: None,
         longer_stride: None,
         reliability: Vec::new(),
+        control: control_seen(&written),
         optimized: None,
         written,
     };
@@ -97,9 +136,15 @@ pub fn analyse(mission: &Mission, written: Planned, optimize: bool) -> Result<Pl
     report.sensitivity = planner::analysis::sensitivity(dance, &free, &start).ok();
     report.one_more_child_m2 =
         planner::analysis::with_one_more_child(dance, &plan.formation_m, plan.strategy, &free, &start);
+    let control = super::control_points(mission);
+    let scene = report.written.checked_scene();
     report.longer_stride = planner::stations(&plan.route_m, plan.stride_m * 1.25)
         .ok()
         .and_then(|st| planner::schedule(st, &plan.formation_m, plan.strategy).ok())
+        .and_then(|d| {
+            let at = same_places(&plan.control_at, &report.written.dance, &d);
+            attach(d, &control, &at, &free, scene).ok()
+        })
         .and_then(|d| Some((d.cycles.len(), planner::predict(&d, &free, &start).ok()?.last()?.sigma_xy2_m2())))
         .map(|(n, s)| (plan.stride_m * 1.25, n, s));
     report.reliability = planner::analysis::reliability(dance, &free, &start).unwrap_or_default();
@@ -107,6 +152,26 @@ pub fn analyse(mission: &Mission, written: Planned, optimize: bool) -> Result<Pl
         report.optimized = Some(search(mission, instrument, report.written.checked_scene())?);
     }
     Ok(report)
+}
+
+/// `at` of the `written` dance for another schedule `other` of the same
+/// route: a list of stations becomes the stations of `other` nearest to the
+/// listed ones (the same places along the route).
+pub fn same_places(at: &ControlAt, written: &planner::Dance, other: &planner::Dance) -> ControlAt {
+    let ControlAt::Stations(list) = at else { return at.clone() };
+    let mut out: Vec<usize> = list
+        .iter()
+        .filter_map(|&k| {
+            let p = written.stations.get(k)?.position;
+            (0..other.stations.len()).min_by(|&a, &b| {
+                let d = |i: usize| (other.stations[i].position - p).norm();
+                d(a).total_cmp(&d(b))
+            })
+        })
+        .collect();
+    out.sort_unstable();
+    out.dedup();
+    ControlAt::Stations(out)
 }
 
 /// Runs the search of `[plan.search]`.
@@ -124,10 +189,24 @@ fn search(mission: &Mission, instrument: &Instrument, scene: Option<&cps::geom::
     let max_sight_line_m = if s.max_sight_line_m.is_finite() { s.max_sight_line_m } else { DEFAULT_MAX_SIGHT_LINE_M }
         .min(instrument.max_range_m);
     let space = SearchSpace { strategies, strides_m: s.strides_m.clone(), max_sight_line_m, up_m };
-    let objective = match mission.acceptance.max_final_sigma_xy_m {
-        Some(max_sigma_xy_m) => Objective::FewestCycles { max_sigma_xy_m },
-        None => Objective::MinVariance,
+    let a = &mission.acceptance;
+    let objective = match (a.max_station_sigma_xy_m, a.max_final_sigma_xy_m) {
+        (Some(max_sigma_xy_m), _) => Objective::FewestCyclesEveryStation { max_sigma_xy_m },
+        (None, Some(max_sigma_xy_m)) => Objective::FewestCycles { max_sigma_xy_m },
+        (None, None) => Objective::MinVariance,
     };
+    // The mission's control_at; targeting every station's σ (or when a
+    // list of stations cannot follow another stride) the search may also
+    // choose the ends only or every station.
+    let control = super::control_points(mission);
+    let mut control_at = vec![plan.control_at.clone()];
+    if a.max_station_sigma_xy_m.is_some() || matches!(plan.control_at, ControlAt::Stations(_)) {
+        for other in [ControlAt::StartEnd, ControlAt::Every] {
+            if !control_at.contains(&other) {
+                control_at.push(other);
+            }
+        }
+    }
     let scan_at = |k: usize| mission.scan.scans_at(k);
     let problem = planner::Problem {
         route_m: &plan.route_m,
@@ -137,6 +216,8 @@ fn search(mission: &Mission, instrument: &Instrument, scene: Option<&cps::geom::
         scene,
         limits: limits(mission),
         scan_at: &scan_at,
+        control: &control,
+        control_at: &control_at,
     };
     let started = Instant::now();
     let result = planner::search(&problem, &space, objective)
@@ -160,7 +241,7 @@ fn search(mission: &Mission, instrument: &Instrument, scene: Option<&cps::geom::
             ..best.candidate
         };
         let within = Instrument { max_range_m: instrument.max_range_m.min(max_sight_line_m), ..instrument.clone() };
-        if let Some(e) = problem.evaluate(&c, &within)
+        if let Some(e) = problem.evaluate(&c, &within, &objective)
             && problem.violations(&e.dance, max_sight_line_m).is_empty()
         {
             best = e;
@@ -169,7 +250,8 @@ fn search(mission: &Mission, instrument: &Instrument, scene: Option<&cps::geom::
     let seconds = started.elapsed().as_secs_f64();
     let planned = Planned::with_dance(mission, best.dance.clone())
         .map_err(|e| anyhow::anyhow!("mission {}: optimized plan: {e}", mission.source.file.display()))?;
-    Ok(Optimized { best, planned, predicted: result.predicted, checked: result.checked, seconds })
+    let control_at = control_at.get(best.candidate.control_at).cloned().unwrap_or_default();
+    Ok(Optimized { best, planned, control_at, predicted: result.predicted, checked: result.checked, seconds })
 }
 
 /// Observations whose redundancy number is below [`UNCHECKED_REDUNDANCY`]:
@@ -194,14 +276,10 @@ pub fn min_redundancy(report: &PlanReport) -> Option<f64> {
 }
 
 /// Whether the plan passes: no violations (of the chosen plan, with
-/// `--optimize`) and the acceptance tolerance met.
+/// `--optimize`) and the acceptance tolerances met.
 pub fn accepted(mission: &Mission, report: &PlanReport) -> bool {
-    let within = |s2: Option<f64>| match (mission.acceptance.max_final_sigma_xy_m, s2) {
-        (Some(max), Some(s2)) => s2.sqrt() <= max,
-        _ => true,
-    };
     match &report.optimized {
-        Some(o) => within(Some(o.best.sigma_xy2_m2)),
-        None => report.violations.is_empty() && within(report.sigma_xy2_m2),
+        Some(o) => super::accepted(mission, &o.planned),
+        None => report.violations.is_empty() && super::accepted(mission, &report.written),
     }
 }

@@ -9,11 +9,12 @@ use planner::{FormationKind, Strategy};
 use toml_edit::{Array, DocumentMut, InlineTable, Item, TableLike, Value, value};
 
 use super::analysis::Optimized;
-use crate::mission::Mission;
+use crate::mission::{ControlAt, Mission};
 
 /// Writes the mission file with the chosen plan: `stride_m`, the formation
 /// (`formation_m` as offsets, or the generated `formation` table when the
-/// mission has one), `strategy` and `hops` set, and a relative `scene_file`
+/// mission has one), `strategy`, `hops` and (when the search chose another)
+/// `control_at` set, and a relative `scene_file`
 /// made absolute when the new file lives in another directory. A header
 /// comment says where the plan came from.
 pub fn write_mission(mission: &Mission, optimized: &Optimized, path: &Path) -> Result<()> {
@@ -52,6 +53,19 @@ pub fn write_mission(mission: &Mission, optimized: &Optimized, path: &Path) -> R
             plan.remove("hops");
         }
     }
+    if !mission.control.is_empty() && optimized.control_at != mission.plan.control_at {
+        let at: Value = match &optimized.control_at {
+            ControlAt::Stations(list) => {
+                Value::Array(list.iter().map(|&k| i64::try_from(k).map(Value::from)).collect::<Result<Array, _>>()?)
+            }
+            other => other.to_string().trim_matches('"').into(),
+        };
+        set(plan, "control_at", at);
+        // The written comment described the written choice.
+        if let Some(v) = plan.get_mut("control_at").and_then(Item::as_value_mut) {
+            v.decor_mut().set_suffix(format!("  # chosen by plan --optimize (written: {})", mission.plan.control_at));
+        }
+    }
     let same_dir = path.parent().map(Path::to_path_buf).unwrap_or_default()
         == mission.source.file.parent().map(Path::to_path_buf).unwrap_or_default();
     if let (false, Some((resolved, _))) = (same_dir, &mission.backend.scene_file)
@@ -62,7 +76,7 @@ pub fn write_mission(mission: &Mission, optimized: &Optimized, path: &Path) -> R
     }
     let header = format!(
         "# Plan chosen by `cps-survey plan --optimize` from {}: {}, stride {} m, {} cycles,\n\
-         # predicted final σx² + σy² = {:.6} m².\n",
+         # predicted final σx² + σy² = {:.3e} m².\n",
         mission.source.file.display(),
         c.strategy,
         c.stride_m,

@@ -4,13 +4,15 @@
 //! command ([`Planned`]) and passed down.
 //!
 //! [`constraints`] checks a plan against the scene and the instruments;
-//! [`analysis`] is what `plan` reports (what the error is made of, what-ifs,
-//! reliability, the search); [`edit`] writes an optimized plan back into
-//! the mission file.
+//! [`preanalysis`] adjusts the planned network (every station's covariance,
+//! every reading's reliability); [`analysis`] is what `plan` reports (what
+//! the error is made of, what-ifs, reliability, the search); [`edit`]
+//! writes an optimized plan back into the mission file.
 
 pub mod analysis;
 pub mod constraints;
 pub mod edit;
+pub mod preanalysis;
 
 use std::sync::Arc;
 
@@ -22,7 +24,8 @@ use planner::ControlPoint;
 use planner::control::Unseen;
 
 use crate::mission::diagnostics::{Diagnostic, Diagnostics};
-use crate::mission::{ControlAt, Mission, MissionError};
+use crate::mission::{Mission, MissionError};
+use preanalysis::PreAnalysis;
 
 /// A mission's plan: everything the commands share, built once.
 #[derive(Debug, Clone)]
@@ -41,6 +44,8 @@ pub struct Planned {
     /// its placement, the parent after each fix and at each scan station
     /// ([`planner::step_estimates`]).
     pub estimates: Vec<StepEstimate>,
+    /// The planned network adjusted (none for a robot alone).
+    pub adjusted: Option<PreAnalysis>,
 }
 
 impl Planned {
@@ -94,10 +99,40 @@ impl Planned {
                 planner::predict_odometry(&dance, &noise, start)
             }
         };
+        let adjusted = match &instrument {
+            Some(instrument) => Some(PreAnalysis::of(mission, &dance, instrument, start).map_err(|e| {
+                let message = format!("the planned network cannot be adjusted: {e}");
+                MissionError::invalid(
+                    mission,
+                    Diagnostics(vec![mission.diagnostic(&mission.spans.plan, "plan", message)]),
+                )
+            })?),
+            None => None,
+        };
         let steps = dance.steps(|k| mission.scan.scans_at(k));
         let estimates = planner::step_estimates(&dance, &prediction, &steps);
         let scene = mission.backend.given.then(|| Arc::clone(mission.scene()));
-        Ok(Self { scene, dance, steps, prediction, estimates })
+        Ok(Self { scene, dance, steps, prediction, estimates, adjusted })
+    }
+
+    /// The filter's covariance of station `k` (the start's, or the cycle's
+    /// that ends there).
+    pub fn filter_covariance(&self, k: usize) -> Option<nalgebra::Matrix4<f64>> {
+        if k == 0 {
+            return Some(self.prediction.start);
+        }
+        let i = self.dance.cycles.iter().position(|c| c.to == k)?;
+        self.prediction.cycles.get(i).map(|c| c.covariance)
+    }
+
+    /// The control points station `k` sights (their names).
+    pub fn control_sighted_at(&self, k: usize) -> Vec<&str> {
+        self.dance.sighted_at(k).iter().filter_map(|&c| self.dance.control.get(c)).map(|c| c.name.as_str()).collect()
+    }
+
+    /// The worst station's adjusted √(σx² + σy²) (its index, metres).
+    pub fn worst_station(&self) -> Option<(usize, f64)> {
+        self.adjusted.as_ref()?.worst().map(|s| (s.index, s.sigma_xy_m()))
     }
 
     /// The number of parent stations.
@@ -130,12 +165,19 @@ fn schedule(mission: &Mission) -> Result<Dance, Diagnostics> {
     {
         return Err(Diagnostics(vec![mission.diagnostic(span, "scan.stations", exist(k))]));
     }
-    if let (ControlAt::Stations(list), Some(span)) = (&mission.plan.control_at, &mission.spans.control_at)
-        && let Some(k) = missing(list)
-    {
+    if let (Some(k), Some(span)) = (mission.plan.control_at.missing(n), &mission.spans.control_at) {
         return Err(Diagnostics(vec![mission.diagnostic(span, "plan.control_at", exist(k))]));
     }
     with_control(mission, dance)
+}
+
+/// The mission's control points, for the planner.
+pub fn control_points(mission: &Mission) -> Vec<ControlPoint> {
+    mission
+        .control
+        .iter()
+        .map(|c| ControlPoint { name: c.name.clone(), position: c.position_m, covariance: c.covariance })
+        .collect()
 }
 
 /// The dance with the mission's control points and the stations that see
@@ -146,21 +188,18 @@ fn with_control(mission: &Mission, dance: Dance) -> Result<Dance, Diagnostics> {
     let Some(instrument) = mission.total_station.as_ref().filter(|_| !mission.control.is_empty()) else {
         return Ok(dance);
     };
-    let control: Vec<ControlPoint> = mission
-        .control
-        .iter()
-        .map(|c| ControlPoint { name: c.name.clone(), position: c.position_m, covariance: c.covariance })
-        .collect();
+    let control = control_points(mission);
     let scene = mission.backend.given.then(|| mission.scene().as_ref());
+    let at = &mission.plan.control_at;
+    let unseen = match planner::control::attach(dance.clone(), &control, at, instrument, scene) {
+        Ok(dance) => return Ok(dance),
+        Err(unseen) => unseen,
+    };
     let n = dance.stations.len();
-    let at = |k: usize| mission.plan.control_at.includes(k, n);
-    let sightings = planner::control::sightings(&dance, &control, &at, instrument, scene);
     let mut problems = Vec::new();
-    for (c, point) in control.iter().enumerate() {
-        if sightings.iter().any(|s| s.contains(&c)) {
-            continue;
-        }
-        let nearest = (0..n).filter(|&k| at(k)).min_by(|&a, &b| {
+    for c in unseen {
+        let point = &control[c];
+        let nearest = (0..n).filter(|&k| at.includes(k, n)).min_by(|&a, &b| {
             let d = |k: usize| (dance.stations[k].position - point.position).norm();
             d(a).total_cmp(&d(b))
         });
@@ -184,10 +223,7 @@ fn with_control(mission: &Mission, dance: Dance) -> Result<Dance, Diagnostics> {
         let message = format!("control point \"{}\" is seen from no station: {why}", point.name);
         problems.push(mission.diagnostic(&span, &format!("control[{c}]"), message));
     }
-    if !problems.is_empty() {
-        return Err(Diagnostics(problems));
-    }
-    Ok(dance.with_control(control, sightings))
+    Err(Diagnostics(problems))
 }
 
 /// Turns planner errors into diagnostics at the responsible field. Range
@@ -231,11 +267,16 @@ fn plan_diagnostics(mission: &Mission, errors: Vec<PlanError>) -> Diagnostics {
     Diagnostics(out)
 }
 
-/// Whether the prediction's last station meets `[acceptance]
-/// max_final_sigma_xy_m`.
-pub fn accepted(mission: &Mission, prediction: &Prediction) -> bool {
-    match (mission.acceptance.max_final_sigma_xy_m, prediction.last()) {
-        (Some(max), Some(last)) => last.sigma_xy2_m2().sqrt() <= max,
+/// Whether the plan meets `[acceptance]`: the prediction's last station
+/// `max_final_sigma_xy_m` (the filter's), every station
+/// `max_station_sigma_xy_m` (the adjustment's).
+pub fn accepted(mission: &Mission, planned: &Planned) -> bool {
+    let a = &mission.acceptance;
+    let last = planned.prediction.last().map(|l| l.sigma_xy2_m2().sqrt());
+    let worst = planned.worst_station().map(|w| w.1);
+    let within = |max: Option<f64>, value: Option<f64>| match (max, value) {
+        (Some(max), Some(v)) => v <= max,
         _ => true,
-    }
+    };
+    within(a.max_final_sigma_xy_m, last) && within(a.max_station_sigma_xy_m, worst)
 }

@@ -4,13 +4,14 @@
 //! control points, and the typed report (`adjust --json`, `report.json`'s
 //! `adjustment`).
 //!
-//! **Misclosures.** Before the adjustment ties the route to every control
-//! point, the survey alone says where each one is: the network adjusted
-//! with only its datum — the start's prior, or the control points the start
-//! was resected from — and every other control point free. The misclosure
-//! of a control point is that position minus its given coordinates, with
-//! the covariance of the difference (the free position's and the given
-//! coordinates').
+//! **Misclosures.** Before the adjustment ties the route to a control
+//! point, the survey and the other control points say where it is: the
+//! network adjusted without that point's given coordinates (its sightings
+//! kept). The misclosure of a control point is that position minus its
+//! given coordinates, with the covariance of the difference (the surveyed
+//! position's and the given coordinates' with the prism's centring). A
+//! point without which the rest cannot hold the network (one of the two a
+//! start is resected on, sighted nowhere else) has none.
 
 use anyhow::{Context, Result, bail};
 use cps::batch::{AdjustOptions, Adjustment, ScalarStats, Source};
@@ -22,6 +23,7 @@ use serde::{Deserialize, Serialize};
 use super::journal::{self, Event, Phase};
 use crate::mission::Mission;
 use crate::planning::Planned;
+use crate::planning::preanalysis::{KINDS, point_name};
 
 /// The version of the adjustment report's shape.
 pub const SCHEMA_VERSION: u32 = 1;
@@ -99,16 +101,6 @@ pub fn network(
         .context("the journal's network")
 }
 
-/// What a network point is called in the report.
-pub fn point_name(mission: &Mission, planned: &Planned, id: &PointId) -> String {
-    match *id {
-        PointId::Placement { child, cycle } => {
-            format!("{}@{cycle}", mission.children.get(child).map_or("?", String::as_str))
-        }
-        PointId::Control(k) => planned.dance.control.get(k).map_or_else(|| format!("control {k}"), |c| c.name.clone()),
-    }
-}
-
 /// The report of an adjustment (`adjust --json`, `report.json`'s
 /// `adjustment`). Covariances and w use the a-priori variance factor.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -141,7 +133,7 @@ pub struct AdjustmentReport {
     pub removed: Vec<usize>,
     /// Why snooping stopped early, if it did.
     pub snooping_stopped: Option<String>,
-    /// The misclosure at each control point outside the datum.
+    /// The misclosure at each control point the others can check (module docs).
     pub misclosures: Vec<Misclosure>,
     /// The largest MDB's effect: the observation and the station it moves most.
     pub worst_mdb: Option<WorstMdb>,
@@ -323,8 +315,6 @@ pub struct WorstMdb {
     pub shift_m: f64,
 }
 
-const KINDS: [&str; 3] = ["slope_distance", "azimuth", "elevation"];
-
 fn rows<const R: usize>(m: &nalgebra::SMatrix<f64, R, R>) -> [[f64; R]; R] {
     std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)]))
 }
@@ -338,7 +328,8 @@ pub fn adjust(
     options: &AdjustOptions,
 ) -> Result<AdjustmentReport> {
     let a = cps::batch::adjust(&net.network, options).context("adjusting the network")?;
-    let name = |p: usize| net.points.get(p).map_or_else(|| format!("point {p}"), |id| point_name(mission, planned, id));
+    let name =
+        |p: usize| net.points.get(p).map_or_else(|| format!("point {p}"), |id| point_name(mission, &planned.dance, id));
     let lambda0 = cps::stats::noncentrality(options.alpha0, options.beta0);
     let stations = (0..a.stations.len())
         .map(|k| {
@@ -427,7 +418,7 @@ pub fn adjust(
         coordinate_observations,
         removed,
         snooping_stopped: a.snooping_stopped.clone(),
-        misclosures: misclosures(planned, net, &name)?,
+        misclosures: misclosures(net, &name),
         worst_mdb,
     })
 }
@@ -497,32 +488,23 @@ fn observation_reports(
 }
 
 /// The misclosures at the control points outside the datum (module docs).
-fn misclosures(planned: &Planned, net: &DanceNetwork, name: &dyn Fn(usize) -> String) -> Result<Vec<Misclosure>> {
-    let dance = &planned.dance;
-    let datum: Vec<usize> = if dance.resects_start() { dance.sighted_at(0).to_vec() } else { Vec::new() };
-    let mut free = net.network.clone();
-    let mut tested = Vec::new();
-    for (p, id) in net.points.iter().enumerate() {
-        if let PointId::Control(k) = id
-            && !datum.contains(k)
-        {
-            free.points[p].prior = None;
-            tested.push(p);
-        }
-    }
-    if tested.is_empty() {
-        return Ok(Vec::new());
-    }
+fn misclosures(net: &DanceNetwork, name: &dyn Fn(usize) -> String) -> Vec<Misclosure> {
     let options = AdjustOptions { snooping: false, ..AdjustOptions::default() };
-    let a = cps::batch::adjust(&free, &options).context("the survey alone (the datum only), for the misclosures")?;
-    Ok(tested
-        .into_iter()
-        .map(|p| {
+    net.points
+        .iter()
+        .enumerate()
+        .filter(|(_, id)| matches!(id, PointId::Control(_)))
+        .filter_map(|(p, _)| {
+            let mut without = net.network.clone();
+            let given_cov = without.points[p].prior.take().unwrap_or_else(Matrix3::zeros);
+            // Without this point's coordinates the rest may not hold the
+            // network (a start resected on two points): no misclosure then.
+            let a = cps::batch::adjust(&without, &options).ok()?;
             let given = net.network.points[p].position;
             let d: Point3<f64> = Point3::from(a.points[p] - given);
-            let cov: Matrix3<f64> = a.point_covariance(p) + net.network.points[p].prior.unwrap_or_else(Matrix3::zeros);
+            let cov: Matrix3<f64> = a.point_covariance(p) + given_cov;
             let xy = cov.fixed_view::<2, 2>(0, 0).into_owned();
-            Misclosure {
+            Some(Misclosure {
                 control: name(p),
                 dx_m: d.x,
                 dy_m: d.y,
@@ -531,9 +513,9 @@ fn misclosures(planned: &Planned, net: &DanceNetwork, name: &dyn Fn(usize) -> St
                 sigma_horizontal_m: xy.trace().sqrt(),
                 sigma_z_m: cov[(2, 2)].sqrt(),
                 chi2_horizontal: xy.try_inverse().map(|inv| (d.coords.xy().transpose() * inv * d.coords.xy())[(0, 0)]),
-            }
+            })
         })
-        .collect())
+        .collect()
 }
 
 /// The adjustment at the end of a run, as `report.json` has it: the report,

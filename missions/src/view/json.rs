@@ -113,6 +113,98 @@ struct PredictionJson {
     scans: Vec<ScanJson>,
     #[serde(rename = "final")]
     final_: Option<FinalJson>,
+    adjusted: Option<AdjustedJson>,
+}
+
+#[derive(Serialize)]
+struct AdjustedStationJson {
+    index: usize,
+    x_m: f64,
+    y_m: f64,
+    z_m: f64,
+    heading_rad: f64,
+    covariance: [[f64; 4]; 4],
+    sigma_xy_m: f64,
+    filter_sigma_xy_m: Option<f64>,
+    ellipse_95_m: EllipseJson,
+    control: Vec<String>,
+}
+
+#[derive(Serialize)]
+struct PlannedObservationJson {
+    station: usize,
+    target: String,
+    kind: &'static str,
+    sigma: f64,
+    redundancy: f64,
+    mdb: Option<f64>,
+    station_shift_m: Option<f64>,
+}
+
+/// The pre-analysis: the planned network adjusted.
+#[derive(Serialize)]
+struct AdjustedJson {
+    stations: Vec<AdjustedStationJson>,
+    worst_station: Option<usize>,
+    worst_sigma_xy_m: Option<f64>,
+    redundancy: usize,
+    unchecked: usize,
+    observations: Vec<PlannedObservationJson>,
+    max_station_sigma_xy_m: Option<f64>,
+    accepted: bool,
+}
+
+fn adjusted_json(mission: &Mission, planned: &Planned) -> Option<AdjustedJson> {
+    let pre = planned.adjusted.as_ref()?;
+    let worst = planned.worst_station();
+    let stations = pre
+        .stations
+        .iter()
+        .map(|s| {
+            let p = &s.pose;
+            AdjustedStationJson {
+                index: s.index,
+                x_m: p.position.x,
+                y_m: p.position.y,
+                z_m: p.position.z,
+                heading_rad: p.heading_rad,
+                covariance: std::array::from_fn(|i| std::array::from_fn(|j| s.covariance[(i, j)])),
+                sigma_xy_m: s.sigma_xy_m(),
+                filter_sigma_xy_m: planned.filter_covariance(s.index).map(|c| cps::sigma_xy2(&c).sqrt()),
+                ellipse_95_m: ErrorEllipse::from_covariance(&s.covariance.fixed_view::<2, 2>(0, 0).into_owned())
+                    .scaled(CHI2_2D_95_SQRT)
+                    .into(),
+                control: planned.control_sighted_at(s.index).into_iter().map(String::from).collect(),
+            }
+        })
+        .collect();
+    let observations = pre
+        .observations
+        .iter()
+        .map(|o| PlannedObservationJson {
+            station: o.station,
+            target: o.target.clone(),
+            kind: o.kind,
+            sigma: o.sigma,
+            redundancy: o.redundancy,
+            mdb: o.mdb,
+            station_shift_m: o.station_shift_m,
+        })
+        .collect();
+    let max = mission.acceptance.max_station_sigma_xy_m;
+    Some(AdjustedJson {
+        stations,
+        worst_station: worst.map(|w| w.0),
+        worst_sigma_xy_m: worst.map(|w| w.1),
+        redundancy: pre.redundancy,
+        unchecked: pre.unchecked().count(),
+        observations,
+        max_station_sigma_xy_m: max,
+        accepted: match (max, worst) {
+            (Some(max), Some((_, s))) => s <= max,
+            _ => true,
+        },
+    })
 }
 
 fn nested(m: &nalgebra::DMatrix<f64>) -> Vec<Vec<f64>> {
@@ -208,7 +300,7 @@ pub fn prediction(out: &mut dyn Write, mission: &Mission, planned: &Planned) -> 
         drift_percent: l.drift_percent(),
         ellipse_95_m: l.ellipse_1sigma().scaled(CHI2_2D_95_SQRT).into(),
         max_final_sigma_xy_m: mission.acceptance.max_final_sigma_xy_m,
-        accepted: crate::planning::accepted(mission, prediction),
+        accepted: crate::planning::accepted(mission, planned),
     });
     let doc = PredictionJson {
         mission: mission.name.clone(),
@@ -217,6 +309,7 @@ pub fn prediction(out: &mut dyn Write, mission: &Mission, planned: &Planned) -> 
         steps: step_rows,
         scans,
         final_,
+        adjusted: adjusted_json(mission, planned),
     };
     write_line(out, &doc)
 }
@@ -267,6 +360,8 @@ struct OptimizedJson {
     candidates_predicted: usize,
     candidates_checked: usize,
     seconds: f64,
+    control_at: Option<String>,
+    worst_station_sigma_xy_m: Option<f64>,
 }
 
 #[derive(Serialize)]
@@ -329,8 +424,24 @@ struct PlanJson {
     sensitivity: Option<SensitivityJson>,
     what_if: WhatIfJson,
     reliability: ReliabilityJson,
+    control_at: String,
+    control: Vec<ControlSeenJson>,
+    adjusted: Option<AdjustedJson>,
     optimized: Option<OptimizedJson>,
     accepted: bool,
+}
+
+#[derive(Serialize)]
+struct ControlSightingJson {
+    station: usize,
+    slope_distance_m: f64,
+}
+
+#[derive(Serialize)]
+struct ControlSeenJson {
+    name: String,
+    fixed: bool,
+    seen_from: Vec<ControlSightingJson>,
 }
 
 /// `plan --json`: the plan as written (its violations, the analysis) and
@@ -367,6 +478,8 @@ pub fn plan(out: &mut dyn Write, mission: &Mission, report: &PlanReport) -> std:
             candidates_predicted: o.predicted,
             candidates_checked: o.checked,
             seconds: o.seconds,
+            control_at: (!mission.control.is_empty()).then(|| o.control_at.to_string()),
+            worst_station_sigma_xy_m: o.planned.worst_station().map(|w| w.1),
         }
     });
     let doc = PlanJson {
@@ -413,6 +526,21 @@ pub fn plan(out: &mut dyn Write, mission: &Mission, report: &PlanReport) -> std:
                 })
                 .collect(),
         },
+        control_at: plan.control_at.to_string(),
+        control: report
+            .control
+            .iter()
+            .map(|c| ControlSeenJson {
+                name: c.name.clone(),
+                fixed: c.fixed,
+                seen_from: c
+                    .from
+                    .iter()
+                    .map(|&(station, slope_distance_m)| ControlSightingJson { station, slope_distance_m })
+                    .collect(),
+            })
+            .collect(),
+        adjusted: adjusted_json(mission, written),
         optimized,
         accepted: analysis::accepted(mission, report),
     };
@@ -440,6 +568,8 @@ struct MonteCarloJson {
     nees_interval: [f64; 2],
     consistent: bool,
     stations: Vec<McStationJson>,
+    adjusted: Vec<McStationJson>,
+    adjusted_interval: Option<[f64; 2]>,
 }
 
 /// `montecarlo --json`: the final station's figures and every station's.
@@ -466,6 +596,18 @@ pub fn montecarlo(out: &mut dyn Write, mission: &Mission, mc: &MonteCarlo) -> an
                 nees_mean: s.nees_mean,
             })
             .collect(),
+        adjusted: mc
+            .adjusted
+            .iter()
+            .map(|s| McStationJson {
+                index: s.cycle,
+                predicted_sigma_xy2_m2: cps::sigma_xy2(&s.predicted),
+                empirical_sigma_xy2_m2: cps::sigma_xy2(&s.empirical),
+                ratio: s.ratio_xy(),
+                nees_mean: s.nees_mean,
+            })
+            .collect(),
+        adjusted_interval: (!mc.adjusted.is_empty()).then_some([mc.adjusted_interval.0, mc.adjusted_interval.1]),
     };
     Ok(write_line(out, &doc)?)
 }
