@@ -109,10 +109,15 @@ pub struct Adjustment {
     pub unknowns: usize,
     /// Observations in the adjustment minus unknowns.
     pub redundancy: usize,
-    /// vᵀPv / redundancy (0 without redundancy).
+    /// vᵀPv / redundancy (0 without redundancy), after snooping's removals.
     pub sigma0_squared: f64,
-    /// The global test.
+    /// The global test of every observation, before data snooping removes
+    /// any (the detection step of Teunissen's DIA procedure).
     pub global_test: GlobalTest,
+    /// The same test of the adjustment after snooping's removals (none
+    /// when nothing was removed). Removing the largest residuals biases it
+    /// low: only its upper bound means something.
+    pub after_snooping: Option<GlobalTest>,
     /// Every scalar observation still in the adjustment.
     pub observations: Vec<ScalarStats>,
     /// What data snooping removed, in order.
@@ -127,6 +132,16 @@ pub struct Adjustment {
 }
 
 impl Adjustment {
+    /// Whether the model holds: the global test passes, or it fails and
+    /// data snooping found the cause — what is left passes the test's
+    /// upper bound.
+    pub fn model_accepted(&self) -> bool {
+        match &self.after_snooping {
+            None => self.global_test.passed,
+            Some(after) => after.upper.is_none_or(|hi| after.statistic <= hi),
+        }
+    }
+
     /// Covariance of station `k` (x, y, z, θ); zero rows for fixed coordinates.
     pub fn station_covariance(&self, k: usize) -> Matrix4<f64> {
         self.station_covariances.get(k).copied().unwrap_or_else(Matrix4::zeros)
@@ -182,6 +197,20 @@ pub fn adjust(network: &Network, options: &AdjustOptions) -> Result<Adjustment> 
     let station_of = station_of(network);
     let mut removed: Vec<Removal> = Vec::new();
     let mut snooping_stopped = None;
+    let test = |vtpv: f64, redundancy: usize| {
+        let (lower, upper) = if redundancy > 0 {
+            let dof = redundancy as f64;
+            (Some(chi2_quantile(options.alpha / 2.0, dof)), Some(chi2_quantile(1.0 - options.alpha / 2.0, dof)))
+        } else {
+            (None, None)
+        };
+        let passed = match (lower, upper) {
+            (Some(lo), Some(hi)) => (lo..=hi).contains(&vtpv),
+            _ => true,
+        };
+        GlobalTest { statistic: vtpv, dof: redundancy, alpha: options.alpha, lower, upper, passed }
+    };
+    let mut detection = None;
     loop {
         let scalars: usize = groups.iter().map(|g| g.active.iter().filter(|a| **a).count()).sum();
         if scalars < layout.len() {
@@ -194,6 +223,8 @@ pub fn adjust(network: &Network, options: &AdjustOptions) -> Result<Adjustment> 
         let inverse = solution.factor.selected_inverse();
         let (observations, vtpv) = testing::statistics(&groups, &layout, &station_of, &solution, &inverse, lambda0);
         let redundancy = scalars - layout.len();
+        // The model test of every observation, before snooping removes any.
+        let detection = *detection.get_or_insert_with(|| test(vtpv, redundancy));
         let worst =
             observations.iter().filter_map(|o| o.w.map(|w| (o, w))).max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()));
         if options.snooping
@@ -222,16 +253,6 @@ pub fn adjust(network: &Network, options: &AdjustOptions) -> Result<Adjustment> 
         let point_covariances = layout.points.iter().map(|p| testing::block::<3, 3>(&inverse, p, p)).collect();
         let neighbour_covariances =
             layout.stations.windows(2).map(|w| testing::block::<4, 4>(&inverse, &w[0], &w[1])).collect();
-        let (lower, upper) = if redundancy > 0 {
-            let dof = redundancy as f64;
-            (Some(chi2_quantile(options.alpha / 2.0, dof)), Some(chi2_quantile(1.0 - options.alpha / 2.0, dof)))
-        } else {
-            (None, None)
-        };
-        let passed = match (lower, upper) {
-            (Some(lo), Some(hi)) => (lo..=hi).contains(&vtpv),
-            _ => true,
-        };
         let factor_nnz = solution.factor.nnz();
         drop(inverse);
         return Ok(Adjustment {
@@ -245,7 +266,8 @@ pub fn adjust(network: &Network, options: &AdjustOptions) -> Result<Adjustment> 
             unknowns: layout.len(),
             redundancy,
             sigma0_squared: if redundancy > 0 { vtpv / redundancy as f64 } else { 0.0 },
-            global_test: GlobalTest { statistic: vtpv, dof: redundancy, alpha: options.alpha, lower, upper, passed },
+            global_test: detection,
+            after_snooping: (!removed.is_empty()).then(|| test(vtpv, redundancy)),
             observations,
             removed,
             snooping_stopped,

@@ -117,8 +117,16 @@ pub struct AdjustmentReport {
     pub iterations: usize,
     /// Whether they converged.
     pub converged: bool,
-    /// The global model test.
+    /// The global model test of every observation, before data snooping.
     pub global_test: GlobalTestReport,
+    /// The same test after snooping's removals (none when nothing was
+    /// removed; only its upper bound means something).
+    #[serde(default)]
+    pub global_test_after_snooping: Option<GlobalTestReport>,
+    /// Whether the model holds: the global test passes, or snooping found
+    /// the cause and what is left stays below the upper bound.
+    #[serde(default)]
+    pub model_accepted: bool,
     /// The tests' settings.
     pub testing: TestingReport,
     /// Every station.
@@ -154,6 +162,12 @@ pub struct GlobalTestReport {
     pub upper: Option<f64>,
     /// lower ≤ statistic ≤ upper.
     pub passed: bool,
+}
+
+impl From<&cps::batch::GlobalTest> for GlobalTestReport {
+    fn from(g: &cps::batch::GlobalTest) -> Self {
+        Self { statistic: g.statistic, dof: g.dof, alpha: g.alpha, lower: g.lower, upper: g.upper, passed: g.passed }
+    }
 }
 
 /// The tests' settings.
@@ -396,14 +410,9 @@ pub fn adjust(
         unknowns: a.unknowns,
         iterations: a.iterations,
         converged: a.converged,
-        global_test: GlobalTestReport {
-            statistic: a.global_test.statistic,
-            dof: a.global_test.dof,
-            alpha: a.global_test.alpha,
-            lower: a.global_test.lower,
-            upper: a.global_test.upper,
-            passed: a.global_test.passed,
-        },
+        global_test: (&a.global_test).into(),
+        global_test_after_snooping: a.after_snooping.as_ref().map(Into::into),
+        model_accepted: a.model_accepted(),
         testing: TestingReport {
             alpha: options.alpha,
             alpha0: options.alpha0,

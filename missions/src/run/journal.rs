@@ -499,33 +499,78 @@ impl Read {
 /// (as its byte offset) so a resume can drop it; any other line that is not
 /// an event of a known version is an error naming it.
 pub fn read(path: &Path) -> Result<Read> {
-    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    read_lines(path, true)
+}
+
+/// Reads a journal as [`read`] does, without the fixes'
+/// `scan_cross_covariances` (only the fusion's joint prior needs them, and
+/// they are most of a long journal's bytes): their arrays are skipped
+/// unparsed and read as absent.
+pub fn read_without_cross_covariances(path: &Path) -> Result<Read> {
+    read_lines(path, false)
+}
+
+/// A line with its `scan_cross_covariances` array replaced by `null` (the
+/// array holds numbers only, so its brackets balance).
+fn without_cross_covariances(text: &str) -> std::borrow::Cow<'_, str> {
+    const KEY: &str = "\"scan_cross_covariances\":";
+    let Some(at) = text.find(KEY) else { return text.into() };
+    let from = at + KEY.len();
+    let mut depth = 0usize;
+    for (i, b) in text.as_bytes()[from..].iter().enumerate() {
+        match b {
+            b'[' => depth += 1,
+            b']' if depth > 1 => depth -= 1,
+            b']' => return format!("{}null{}", &text[..from], &text[from + i + 1..]).into(),
+            _ if depth == 0 => break,
+            _ => {}
+        }
+    }
+    // Not an array: left for the parser to judge.
+    text.into()
+}
+
+fn read_lines(path: &Path, cross_covariances: bool) -> Result<Read> {
+    use std::io::BufRead;
+    let file = File::open(path).with_context(|| format!("reading {}", path.display()))?;
+    // Line by line: a long journal is never held whole.
+    let mut reader = std::io::BufReader::with_capacity(1 << 20, file);
     let mut events = Vec::new();
     let mut offset = 0u64;
     let mut torn = None;
-    for (i, raw) in bytes.split_inclusive(|b| *b == b'\n').enumerate() {
+    let mut raw = Vec::new();
+    for i in 0.. {
+        raw.clear();
+        let n = reader.read_until(b'\n', &mut raw).with_context(|| format!("reading {}", path.display()))?;
+        if n == 0 {
+            break;
+        }
         if raw.last() != Some(&b'\n') {
             torn = Some(offset);
             break;
         }
-        let text = std::str::from_utf8(raw)
+        let text = std::str::from_utf8(&raw)
             .with_context(|| format!("{}:{}: not UTF-8 text: not a journal line", path.display(), i + 1))?;
-        let version: Option<u32> = serde_json::from_str::<serde_json::Value>(text)
-            .with_context(|| format!("{}:{}: not a JSON journal event", path.display(), i + 1))?
-            .get("v")
-            .and_then(serde_json::Value::as_u64)
+        // Parsed once (its numbers are most of the work), then typed.
+        let text = if cross_covariances { text.into() } else { without_cross_covariances(text) };
+        let mut value: serde_json::Value = serde_json::from_str(&text)
+            .with_context(|| format!("{}:{}: not a JSON journal event", path.display(), i + 1))?;
+        let version: Option<u32> = value
+            .as_object_mut()
+            .and_then(|o| o.remove("v"))
+            .and_then(|v| v.as_u64())
             .and_then(|v| u32::try_from(v).ok());
-        match version {
-            Some(v) if READS.contains(&v) => {}
+        let version = match version {
+            Some(v) if READS.contains(&v) => v,
             _ => bail!(
                 "{}:{}: journal schema version {version:?}; this build reads versions {READS:?}",
                 path.display(),
                 i + 1
             ),
-        }
-        let line: Line = serde_json::from_str(text)
+        };
+        let event: Event = serde_json::from_value(value)
             .with_context(|| format!("{}:{}: not a journal event of version {}", path.display(), i + 1, VERSION))?;
-        events.push(Numbered { line: i + 1, event: line.event, version: line.v });
+        events.push(Numbered { line: i + 1, event, version });
         offset += raw.len() as u64;
     }
     Ok(Read { events, torn })

@@ -36,7 +36,8 @@ pub fn open(
 ) -> Result<Journal> {
     let journal_path = dir.join("journal.jsonl");
     let mission_copy = dir.join("mission.toml");
-    if !resume && journal_path.exists() && finished(&journal::read(&journal_path)?).is_some() {
+    if !resume && journal_path.exists() && finished(&journal::read_without_cross_covariances(&journal_path)?).is_some()
+    {
         bail!(
             "{} holds a finished run (its outputs are there; a run is never overwritten): \
              choose another --out directory",
@@ -109,8 +110,16 @@ pub struct RunDir {
 }
 
 /// Reads the run in `dir` without its scans: its mission (`mission.toml`,
-/// with `scene.toml` for its scene file), its plan and its journal.
+/// with `scene.toml` for its scene file), its plan and its journal (without
+/// the fixes' cross-covariances, which only [`load`] needs).
 pub fn load_journal(dir: &Path) -> Result<RunDir> {
+    let (mission, planned) = mission_of(dir)?;
+    let journal = journal::read_without_cross_covariances(&dir.join("journal.jsonl"))?;
+    Ok(RunDir { mission, planned, journal, views: Vec::new() })
+}
+
+/// The run's mission and its plan.
+fn mission_of(dir: &Path) -> Result<(Mission, Planned)> {
     let mission_path = dir.join("mission.toml");
     if !mission_path.exists() {
         bail!("{} is not a run directory: {} is missing", dir.display(), mission_path.display());
@@ -122,8 +131,7 @@ pub fn load_journal(dir: &Path) -> Result<RunDir> {
         Mission::load(&mission_path)?
     };
     let planned = Planned::new(&mission)?;
-    let journal = journal::read(&dir.join("journal.jsonl"))?;
-    Ok(RunDir { mission, planned, journal, views: Vec::new() })
+    Ok((mission, planned))
 }
 
 /// Reads the run in `dir`: its mission, its plan, its journal and the
@@ -133,8 +141,9 @@ pub fn load_journal(dir: &Path) -> Result<RunDir> {
 /// with the earlier scan stations), and the team's state (the truth and the
 /// drive's believed pose).
 pub fn load(dir: &Path) -> Result<RunDir> {
-    let RunDir { mission, planned, journal, .. } = load_journal(dir)?;
+    let (mission, planned) = mission_of(dir)?;
     let journal_path = dir.join("journal.jsonl");
+    let journal = journal::read(&journal_path)?;
     let dance = &planned.dance;
     let mut pose = (dance.station_pose(0), mission.plan.start_covariance);
     let mut cross: Vec<Matrix4<f64>> = Vec::new();

@@ -599,7 +599,7 @@ impl Run<'_> {
             return Ok(None);
         }
         let path = self.dir.join("journal.jsonl");
-        let read = super::journal::read(&path)?;
+        let read = super::journal::read_without_cross_covariances(&path)?;
         let report = super::adjust::network(self.mission, self.planned, &read, &path).and_then(|net| {
             super::adjust::adjust(self.mission, self.planned, &net, &cps::batch::AdjustOptions::default())
         });

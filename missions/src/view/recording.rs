@@ -815,13 +815,14 @@ impl Recorder {
             ))?;
         }
         let g = &report.global_test;
-        let level = if g.passed { rerun::TextLogLevel::INFO } else { rerun::TextLogLevel::WARN };
+        let level = if report.model_accepted { rerun::TextLogLevel::INFO } else { rerun::TextLogLevel::WARN };
         let text = format!(
-            "network adjustment: σ0² = {:.3}, redundancy {}, global test {}; {} observation(s) removed by data snooping",
+            "network adjustment: σ0² = {:.3}, redundancy {}, global test {}; {} observation(s) removed by data snooping; model {}",
             report.sigma0_squared,
             report.redundancy,
             if g.passed { "passed" } else { "FAILED" },
-            report.removed.len()
+            report.removed.len(),
+            if report.model_accepted { "accepted" } else { "NOT accepted" }
         );
         self.event(level, text)?;
         for o in report.observations.iter().filter(|o| o.removed) {
