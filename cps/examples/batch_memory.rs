@@ -3,6 +3,8 @@
 //! peak resident set (Linux `VmHWM`) before and after —
 //! `cargo run --release -p cps --example batch_memory -- 1000`.
 
+#![allow(clippy::print_stdout)] // a program whose output is the measurement
+
 #[path = "../benches/common/chain.rs"]
 mod chain;
 
