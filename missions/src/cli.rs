@@ -26,25 +26,32 @@ pub enum Command {
     /// ports with [backend] kind = "serial": the dance, a scan at every
     /// scan station, the fused cloud, the reports and mission.rrd.
     Run(commands::run::RunArgs),
-    /// Predict the pose covariance after every dance cycle of a mission's plan.
+    /// Predict the pose covariance after every dance cycle of a mission's
+    /// plan, and adjust the planned network: every station's covariance,
+    /// every planned reading's reliability (exit 1 when the plan misses the
+    /// acceptance tolerances).
     Predict(commands::predict::PredictArgs),
     /// Check a mission's plan step by step (ranges, line of sight, tracking,
     /// clearance, slope, scan range), analyse its accuracy, and with
-    /// --optimize search formation, stride and strategy (exit 1 when the
-    /// plan breaks a constraint or misses the acceptance tolerance).
+    /// --optimize search formation, stride, strategy and control_at (exit 1
+    /// when the plan breaks a constraint or misses the acceptance
+    /// tolerances).
     Plan(commands::plan::PlanArgs),
     /// Check a mission file and report every problem with file:line:column.
     Validate(commands::validate::ValidateArgs),
     /// Simulate a mission's positioning N times and compare the spread with
-    /// the prediction (exit 1 when the final NEES is outside its interval).
+    /// the prediction — the filter's, and with control the adjusted
+    /// network's at every station (exit 1 when a NEES is outside its
+    /// interval).
     Montecarlo(commands::montecarlo::MontecarloArgs),
     /// Re-fuse a finished (or interrupted) run's scans from its journal into
     /// RUN_DIR/fusion/<mode>/, without re-running it.
     Fuse(commands::fuse::FuseArgs),
     /// Adjust a run's whole network from its journal (every station, child
     /// placement and control point from every reading): the global test,
-    /// data snooping, reliability; writes RUN_DIR/adjustment.txt (exit 1
-    /// when the global test fails).
+    /// data snooping, reliability, misclosures; writes
+    /// RUN_DIR/adjustment.txt (exit 1 when the model fails: the global test
+    /// fails and data snooping does not find the cause).
     Adjust(commands::adjust::AdjustArgs),
     /// Align one scan file to another with ICP.
     Register(commands::register::RegisterArgs),

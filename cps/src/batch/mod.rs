@@ -225,8 +225,12 @@ pub fn adjust(network: &Network, options: &AdjustOptions) -> Result<Adjustment> 
         let redundancy = scalars - layout.len();
         // The model test of every observation, before snooping removes any.
         let detection = *detection.get_or_insert_with(|| test(vtpv, redundancy));
-        let worst =
-            observations.iter().filter_map(|o| o.w.map(|w| (o, w))).max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()));
+        // Snooping acts only on observations others check.
+        let worst = observations
+            .iter()
+            .filter(|o| o.redundancy >= testing::WEAKLY_CHECKED)
+            .filter_map(|o| o.w.map(|w| (o, w)))
+            .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()));
         if options.snooping
             && redundancy > 1
             && snooping_stopped.is_none()

@@ -24,6 +24,12 @@ use super::sparse::SelectedInverse;
 /// MDB are not defined (a blunder there leaves no trace).
 pub const UNCHECKED: f64 = 1e-9;
 
+/// Below this redundancy number an observation is checked by (almost)
+/// nothing: reported as such, its w shown but never acted on — data
+/// snooping does not remove it, for the network would lose what only it
+/// determines, and its MDB is too large to mean anything.
+pub const WEAKLY_CHECKED: f64 = 0.01;
+
 /// One scalar observation's statistics.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ScalarStats {

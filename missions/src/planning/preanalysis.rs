@@ -110,11 +110,12 @@ impl PreAnalysis {
         self.observations.iter().filter(|o| o.redundancy < UNCHECKED_REDUNDANCY)
     }
 
-    /// The observation whose undetected MDB would move its station most.
+    /// Of the observations others check, the one whose undetected MDB
+    /// would move its station most.
     pub fn worst_mdb(&self) -> Option<&PlannedObservation> {
         self.observations
             .iter()
-            .filter(|o| o.station_shift_m.is_some())
+            .filter(|o| o.redundancy >= UNCHECKED_REDUNDANCY && o.station_shift_m.is_some())
             .max_by(|a, b| a.station_shift_m.unwrap_or(0.0).total_cmp(&b.station_shift_m.unwrap_or(0.0)))
     }
 }

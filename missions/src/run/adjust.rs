@@ -400,7 +400,8 @@ pub fn adjust(
         .collect();
     let worst_mdb = observations
         .iter()
-        .filter_map(|o: &ObservationReport| o.station_shift_m.map(|s| (o.index, o.station, s)))
+        .filter(|o: &&ObservationReport| o.redundancy >= cps::batch::testing::WEAKLY_CHECKED)
+        .filter_map(|o| o.station_shift_m.map(|s| (o.index, o.station, s)))
         .max_by(|x, y| x.2.total_cmp(&y.2))
         .map(|(observation, station, shift_m)| WorstMdb { observation, station, shift_m });
     Ok(AdjustmentReport {
