@@ -1,10 +1,15 @@
-//! The examples in README.md are real: they parse and mean what it says.
+//! The examples in README.md and docs/ are real: they parse and mean what
+//! they say.
 
 use cps::geom::{Ray, parse_scene_toml};
 use nalgebra::{Point3, Vector3};
 
 fn readme() -> String {
     std::fs::read_to_string(tests::workspace().join("README.md")).expect("README.md")
+}
+
+fn simulator_doc() -> String {
+    std::fs::read_to_string(tests::workspace().join("docs/simulator.md")).expect("docs/simulator.md")
 }
 
 /// The first ```toml block after `marker`.
@@ -18,7 +23,7 @@ fn toml_block_after(text: &str, marker: &str) -> String {
 
 #[test]
 fn scene_file_example_parses() {
-    let text = toml_block_after(&readme(), "A scene file (TOML)");
+    let text = toml_block_after(&simulator_doc(), "A scene file (TOML)");
     let scene = parse_scene_toml(&text).unwrap_or_else(|e| panic!("README scene example: {e}"));
     assert_eq!(scene.name(), "lab");
     // On top of the hall: the crate is there, and so is pillar 1.
@@ -28,4 +33,35 @@ fn scene_file_example_parses() {
         !scene.line_of_sight(&Point3::new(8.0, 6.0, 1.0), &Point3::new(12.0, 6.0, 1.0)),
         "pillar 1 of the base hall"
     );
+}
+
+#[test]
+fn every_key_of_the_mission_reference_is_read() {
+    // The reference shows every key at once, including two that exclude
+    // each other's settings (`hops` without parent hops, `[backend.serial]`
+    // with the simulator): without those, the reader accepts every key and
+    // only the plan (a 1 km route in the hall) breaks constraints.
+    let text = toml_block_after(&readme(), "## Mission file reference");
+    let mut skipping = false;
+    let kept: Vec<&str> = text
+        .lines()
+        .filter(|l| {
+            if l.starts_with('[') {
+                skipping = l.starts_with("[backend.serial]");
+            }
+            !skipping && !l.starts_with("hops =")
+        })
+        .collect();
+    let mission = tests::temp_mission(&kept.join("\n"));
+    let run = tests::cps_survey(["validate".into(), mission.path.clone().into_os_string()]);
+    assert_eq!(run.code, 2);
+    let problems: Vec<&str> =
+        run.stderr.lines().filter(|l| l.trim_start().starts_with(&*mission.path.to_string_lossy())).collect();
+    assert!(!problems.is_empty());
+    for p in problems {
+        assert!(
+            p.contains(": plan: step ") || p.contains(": plan: … and "),
+            "the reference has a key the reader refuses: {p}"
+        );
+    }
 }
