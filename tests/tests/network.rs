@@ -399,3 +399,38 @@ fn a_global_test_that_fails_exits_1() {
     assert_eq!(adjusted.code, 1, "{}\n{}", adjusted.stdout, adjusted.stderr);
     assert!(adjusted.stdout.contains("FAIL"), "{}", adjusted.stdout);
 }
+
+#[test]
+fn an_angle_blunder_strikes_one_horizontal_direction() {
+    // `blunder-angle=N:ARCSEC` turns the N-th horizontal direction (Hz,
+    // clockwise) by ARCSEC: the adjustment's azimuth (counter-clockwise)
+    // of that reading moves by −ARCSEC, and nothing before it moves.
+    let dir = tempfile::tempdir().expect("tempdir");
+    let hall = example("hall.toml");
+    let run = |name: &str, fault: Option<&str>| -> Value {
+        let mut args: Vec<std::ffi::OsString> = vec!["run".into(), hall.clone().into_os_string(), "--out".into()];
+        args.extend([dir.path().join(name).into_os_string(), "--quiet".into()]);
+        if let Some(f) = fault {
+            args.extend(["--sim-fault".into(), f.into()]);
+        }
+        let r = cps_survey(args);
+        assert!(r.code <= 1, "{}", r.stderr);
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join(name).join("report.json")).expect("report"))
+            .expect("JSON")
+    };
+    let clean = run("clean", None);
+    let turned = run("turned", Some("total-station:blunder-angle=7:30"));
+    let azimuth = |r: &Value, i: usize| r["adjustment"]["observations"][3 * i + 1]["value"].as_f64().expect("value");
+    for i in 0..6 {
+        let d = azimuth(&turned, i) - azimuth(&clean, i);
+        assert!(d.abs() < 1e-12, "reading {i}: {d}");
+    }
+    let d = cps::wrap_angle(azimuth(&turned, 6) - azimuth(&clean, 6));
+    assert!((d + 30.0 * cps::RAD_PER_ARCSEC).abs() < 1e-9, "the 7th reading turned by {} ″", d / cps::RAD_PER_ARCSEC);
+    let slope = |r: &Value| r["adjustment"]["observations"][18]["value"].as_f64().expect("value");
+    assert!((slope(&turned) - slope(&clean)).abs() < 1e-12, "its distance is untouched");
+    // Bad fault specifications name what is expected.
+    let bad = cps_survey(["run", hall.to_str().expect("utf-8"), "--sim-fault", "tilt:blunder=3:0.02"]);
+    assert_eq!(bad.code, 2);
+    assert!(bad.stderr.contains("blunders are the total station's"), "{}", bad.stderr);
+}
