@@ -434,3 +434,23 @@ fn an_angle_blunder_strikes_one_horizontal_direction() {
     assert_eq!(bad.code, 2);
     assert!(bad.stderr.contains("blunders are the total station's"), "{}", bad.stderr);
 }
+
+#[test]
+fn a_plan_the_adjustment_cannot_take_keeps_its_prediction() {
+    // 500 km of the paper's traverse: its far end is known to kilometres,
+    // beyond what double precision tells from undetermined. The filter's
+    // prediction stands, the pre-analysis says why it is missing, and a
+    // tolerance on every station cannot pass unchecked.
+    let text = std::fs::read_to_string(example("paper-1km.toml")).expect("paper-1km.toml");
+    let text = text
+        .replace("[1000.0, 0.0, 0.0]]", "[500000.0, 0.0, 0.0]]")
+        .replace("max_final_sigma_xy_m = 0.25", "max_final_sigma_xy_m = 1000000.0\nmax_station_sigma_xy_m = 1000000.0");
+    let mission = temp_mission(&text);
+    let run = cps_survey(["predict", "--json", mission.path.to_str().expect("utf-8")]);
+    assert_eq!(run.code, 1, "{}", run.stderr);
+    let p: Value = serde_json::from_str(&run.stdout).expect("JSON");
+    assert_eq!(p["cycles"].as_array().map(Vec::len), Some(50_000));
+    assert!(p["adjusted"].is_null());
+    assert!(p["adjusted_error"].as_str().is_some_and(|e| e.contains("cannot be adjusted")), "{}", p["adjusted_error"]);
+    assert_eq!(p["final"]["accepted"], false);
+}

@@ -44,8 +44,12 @@ pub struct Planned {
     /// its placement, the parent after each fix and at each scan station
     /// ([`planner::step_estimates`]).
     pub estimates: Vec<StepEstimate>,
-    /// The planned network adjusted (none for a robot alone).
+    /// The planned network adjusted (none for a robot alone, or when it
+    /// cannot be adjusted: then `adjusted_error` says why).
     pub adjusted: Option<PreAnalysis>,
+    /// Why the planned network could not be adjusted (the filter's
+    /// prediction stands; a run reports its own network's adjustment).
+    pub adjusted_error: Option<String>,
 }
 
 impl Planned {
@@ -99,20 +103,20 @@ impl Planned {
                 planner::predict_odometry(&dance, &noise, start)
             }
         };
-        let adjusted = match &instrument {
-            Some(instrument) => Some(PreAnalysis::of(mission, &dance, instrument, start).map_err(|e| {
-                let message = format!("the planned network cannot be adjusted: {e}");
-                MissionError::invalid(
-                    mission,
-                    Diagnostics(vec![mission.diagnostic(&mission.spans.plan, "plan", message)]),
-                )
-            })?),
-            None => None,
+        // A network the batch adjustment cannot take (e.g. a traverse so
+        // long that its far end is known to kilometres, beyond what double
+        // precision separates from undetermined) keeps its prediction.
+        let (adjusted, adjusted_error) = match &instrument {
+            Some(instrument) => match PreAnalysis::of(mission, &dance, instrument, start) {
+                Ok(a) => (Some(a), None),
+                Err(e) => (None, Some(format!("the planned network cannot be adjusted: {e}"))),
+            },
+            None => (None, None),
         };
         let steps = dance.steps(|k| mission.scan.scans_at(k));
         let estimates = planner::step_estimates(&dance, &prediction, &steps);
         let scene = mission.backend.given.then(|| Arc::clone(mission.scene()));
-        Ok(Self { scene, dance, steps, prediction, estimates, adjusted })
+        Ok(Self { scene, dance, steps, prediction, estimates, adjusted, adjusted_error })
     }
 
     /// The filter's covariance of station `k` (the start's, or the cycle's
@@ -121,7 +125,8 @@ impl Planned {
         if k == 0 {
             return Some(self.prediction.start);
         }
-        let i = self.dance.cycles.iter().position(|c| c.to == k)?;
+        // Cycles reach the stations in order.
+        let i = self.dance.cycles.binary_search_by_key(&k, |c| c.to).ok()?;
         self.prediction.cycles.get(i).map(|c| c.covariance)
     }
 
@@ -278,5 +283,7 @@ pub fn accepted(mission: &Mission, planned: &Planned) -> bool {
         (Some(max), Some(v)) => v <= max,
         _ => true,
     };
-    within(a.max_final_sigma_xy_m, last) && within(a.max_station_sigma_xy_m, worst)
+    // Every station's σ cannot be vouched for without the adjustment.
+    let stations_known = a.max_station_sigma_xy_m.is_none() || planned.adjusted_error.is_none();
+    within(a.max_final_sigma_xy_m, last) && within(a.max_station_sigma_xy_m, worst) && stations_known
 }

@@ -114,6 +114,7 @@ struct PredictionJson {
     #[serde(rename = "final")]
     final_: Option<FinalJson>,
     adjusted: Option<AdjustedJson>,
+    adjusted_error: Option<String>,
 }
 
 #[derive(Serialize)]
@@ -310,6 +311,7 @@ pub fn prediction(out: &mut dyn Write, mission: &Mission, planned: &Planned) -> 
         scans,
         final_,
         adjusted: adjusted_json(mission, planned),
+        adjusted_error: planned.adjusted_error.clone(),
     };
     write_line(out, &doc)
 }

@@ -33,12 +33,14 @@ fn write_children(
         write!(out, " {name:>12}")?;
     }
     writeln!(out)?;
+    // The children's estimates by cycle, in one pass (a long route has
+    // hundreds of thousands).
+    let mut by_cycle: std::collections::BTreeMap<usize, Vec<&StepEstimate>> = std::collections::BTreeMap::new();
+    for e in estimates.iter().filter(|e| matches!(e.robot, Robot::Child(_))) {
+        by_cycle.entry(e.cycle).or_default().push(e);
+    }
     for c in &prediction.cycles {
-        let placed: Vec<&StepEstimate> =
-            estimates.iter().filter(|e| e.cycle == c.cycle && matches!(e.robot, Robot::Child(_))).collect();
-        if placed.is_empty() {
-            continue;
-        }
+        let Some(placed) = by_cycle.get(&c.cycle) else { continue };
         write!(out, "{:>6}", c.cycle)?;
         for j in 0..mission.children.len() {
             match placed.iter().find(|e| e.robot == Robot::Child(j)) {
@@ -78,6 +80,13 @@ fn write_scans(out: &mut dyn Write, estimates: &[StepEstimate]) -> std::io::Resu
 /// control each sights, the planned reliability and the every-station
 /// acceptance.
 pub fn write_adjusted(out: &mut dyn Write, mission: &Mission, planned: &Planned) -> std::io::Result<()> {
+    if let Some(error) = &planned.adjusted_error {
+        writeln!(out)?;
+        writeln!(out, "adjusted network: not computed — {error}")?;
+        if mission.acceptance.max_station_sigma_xy_m.is_some() {
+            writeln!(out, "  acceptance     FAIL: max_station_sigma_xy_m cannot be checked without it")?;
+        }
+    }
     let Some(pre) = &planned.adjusted else { return Ok(()) };
     writeln!(out)?;
     writeln!(
