@@ -31,6 +31,40 @@ impl Outcome {
     }
 }
 
+/// `predict`'s and `plan`'s views of a plan.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct PlanViews {
+    /// Also draw σ_xy and σ_θ versus distance and a top view with the 95 %
+    /// ellipses (with `plan`: the violations, and the optimized plan) (SVG).
+    #[arg(long, value_name = "FILE.svg")]
+    pub plot: Option<std::path::PathBuf>,
+    /// Also write the plan to a Rerun recording: route, stations, moves and
+    /// sight lines (red where they break a constraint), predicted ellipsoids
+    /// per step (with `plan`: the violations, and the optimized plan).
+    #[arg(long, value_name = "FILE.rrd")]
+    pub rrd: Option<std::path::PathBuf>,
+}
+
+impl PlanViews {
+    /// Checks both files before anything is computed (and that this build
+    /// can record).
+    pub fn check(&self) -> anyhow::Result<()> {
+        if let Some(file) = &self.plot {
+            check_output("--plot", file, "svg", crate::view::plot::SVG_HINT)?;
+        }
+        if let Some(file) = &self.rrd {
+            check_output("--rrd", file, "rrd", "")?;
+            crate::view::recording::available()?;
+        }
+        Ok(())
+    }
+}
+
+/// Says where a plan recording went.
+pub fn recorded_plan(out: &mut dyn std::io::Write, file: &Path) -> std::io::Result<()> {
+    writeln!(out, "recorded the plan in {} (view it with `rerun {}`)", file.display(), file.display())
+}
+
 /// Checks, before anything is computed or printed, that an output file
 /// `path` given to `flag` ends in `.extension` and that its directory
 /// exists.

@@ -27,27 +27,16 @@ pub struct PlanArgs {
     /// Print one JSON object instead of the text report.
     #[arg(long)]
     pub json: bool,
-    /// Also draw σ_xy and σ_θ versus distance (as written and optimized)
-    /// and a top view with the 95 % ellipses and violations (SVG).
-    #[arg(long, value_name = "FILE.svg")]
-    pub plot: Option<PathBuf>,
-    /// Also write the plan (and the optimized one) to a Rerun recording:
-    /// route, stations, moves and sight lines green or red, predicted
-    /// ellipsoids per step, violations.
-    #[arg(long, value_name = "FILE.rrd")]
-    pub rrd: Option<PathBuf>,
+    /// The plot and the plan recording (with the violations, and the
+    /// optimized plan beside the written one).
+    #[command(flatten)]
+    pub views: super::PlanViews,
 }
 
 /// Runs `plan`: exit 1 when the plan (the chosen one with `--optimize`)
-/// breaks a constraint or misses `max_final_sigma_xy_m`.
+/// breaks a constraint or misses `[acceptance]`.
 pub fn run(args: &PlanArgs, out: &mut dyn Write) -> Result<Outcome> {
-    if let Some(file) = &args.plot {
-        check_output("--plot", file, "svg", crate::view::plot::SVG_HINT)?;
-    }
-    if let Some(file) = &args.rrd {
-        check_output("--rrd", file, "rrd", "")?;
-        crate::view::recording::available()?;
-    }
+    args.views.check()?;
     if let Some(file) = &args.out {
         check_output("--out", file, "toml", "")?;
     }
@@ -59,20 +48,20 @@ pub fn run(args: &PlanArgs, out: &mut dyn Write) -> Result<Outcome> {
     } else {
         crate::view::tables::plan(out, &mission, &report)?;
     }
-    if let Some(file) = &args.plot {
+    if let Some(file) = &args.views.plot {
         let summary = plot(&mission, &report, file)?;
         if !args.json {
             crate::view::plot::plotted(out, file, &summary)?;
         }
     }
-    if let Some(file) = &args.rrd {
+    if let Some(file) = &args.views.rrd {
         let mut plans = vec![("plan", &report.written, report.violations.as_slice())];
         if let Some(o) = &report.optimized {
             plans.push(("plan_optimized", &o.planned, &[]));
         }
         crate::view::recording::write_plan_rrd(&mission, file, &plans)?;
         if !args.json {
-            writeln!(out, "recorded the plan in {} (view it with `rerun {}`)", file.display(), file.display())?;
+            super::recorded_plan(out, file)?;
         }
     }
     if let (Some(file), Some(o)) = (&args.out, &report.optimized) {

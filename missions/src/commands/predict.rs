@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 
-use super::{Outcome, check_output};
+use super::Outcome;
 use crate::mission::Mission;
 use crate::planning::Planned;
 
@@ -19,26 +19,14 @@ pub struct PredictArgs {
     /// Print one JSON object instead of the table.
     #[arg(long)]
     pub json: bool,
-    /// Also draw σ_xy and σ_θ versus distance and a top view with the 95 %
-    /// ellipses (SVG).
-    #[arg(long, value_name = "FILE.svg")]
-    pub plot: Option<PathBuf>,
-    /// Also write the plan to a Rerun recording (route, stations, moves,
-    /// sight lines, predicted ellipsoids per step).
-    #[arg(long, value_name = "FILE.rrd")]
-    pub rrd: Option<PathBuf>,
+    /// The plot and the plan recording.
+    #[command(flatten)]
+    pub views: super::PlanViews,
 }
 
-/// Runs `predict`: exit 1 when the prediction misses
-/// `max_final_sigma_xy_m`.
+/// Runs `predict`: exit 1 when the plan misses `[acceptance]`.
 pub fn run(args: &PredictArgs, out: &mut dyn Write) -> Result<Outcome> {
-    if let Some(file) = &args.plot {
-        check_output("--plot", file, "svg", crate::view::plot::SVG_HINT)?;
-    }
-    if let Some(file) = &args.rrd {
-        check_output("--rrd", file, "rrd", "")?;
-        crate::view::recording::available()?;
-    }
+    args.views.check()?;
     let mission = Mission::load(&args.mission)?;
     let planned = Planned::new(&mission)?;
     if args.json {
@@ -46,7 +34,7 @@ pub fn run(args: &PredictArgs, out: &mut dyn Write) -> Result<Outcome> {
     } else {
         crate::view::tables::prediction(out, &mission, &planned)?;
     }
-    if let Some(file) = &args.plot {
+    if let Some(file) = &args.views.plot {
         let plan = crate::view::plot::PlotPlan::of("as written", &planned, &[]);
         let title = format!("cps-survey predict — mission {}", mission.name);
         let summary = crate::view::plot::write_svg(file, &title, &[plan], planned.checked_scene())?;
@@ -54,10 +42,10 @@ pub fn run(args: &PredictArgs, out: &mut dyn Write) -> Result<Outcome> {
             crate::view::plot::plotted(out, file, &summary)?;
         }
     }
-    if let Some(file) = &args.rrd {
+    if let Some(file) = &args.views.rrd {
         crate::view::recording::write_plan_rrd(&mission, file, &[("plan", &planned, &[])])?;
         if !args.json {
-            writeln!(out, "recorded the plan in {} (view it with `rerun {}`)", file.display(), file.display())?;
+            super::recorded_plan(out, file)?;
         }
     }
     Ok(Outcome::passed(crate::planning::accepted(&mission, &planned)))

@@ -558,6 +558,18 @@ struct McStationJson {
     nees_mean: f64,
 }
 
+impl McStationJson {
+    fn of(s: &planner::montecarlo::CycleStatistics) -> Self {
+        Self {
+            index: s.cycle,
+            predicted_sigma_xy2_m2: cps::sigma_xy2(&s.predicted),
+            empirical_sigma_xy2_m2: cps::sigma_xy2(&s.empirical),
+            ratio: s.ratio_xy(),
+            nees_mean: s.nees_mean,
+        }
+    }
+}
+
 #[derive(Serialize)]
 struct MonteCarloJson {
     mission: String,
@@ -587,28 +599,8 @@ pub fn montecarlo(out: &mut dyn Write, mission: &Mission, mc: &MonteCarlo) -> an
         nees_mean: last.nees_mean,
         nees_interval: [mc.nees_interval.0, mc.nees_interval.1],
         consistent: mc.consistent(),
-        stations: mc
-            .stations
-            .iter()
-            .map(|s| McStationJson {
-                index: s.cycle,
-                predicted_sigma_xy2_m2: cps::sigma_xy2(&s.predicted),
-                empirical_sigma_xy2_m2: cps::sigma_xy2(&s.empirical),
-                ratio: s.ratio_xy(),
-                nees_mean: s.nees_mean,
-            })
-            .collect(),
-        adjusted: mc
-            .adjusted
-            .iter()
-            .map(|s| McStationJson {
-                index: s.cycle,
-                predicted_sigma_xy2_m2: cps::sigma_xy2(&s.predicted),
-                empirical_sigma_xy2_m2: cps::sigma_xy2(&s.empirical),
-                ratio: s.ratio_xy(),
-                nees_mean: s.nees_mean,
-            })
-            .collect(),
+        stations: mc.stations.iter().map(McStationJson::of).collect(),
+        adjusted: mc.adjusted.iter().map(McStationJson::of).collect(),
         adjusted_interval: (!mc.adjusted.is_empty()).then_some([mc.adjusted_interval.0, mc.adjusted_interval.1]),
     };
     Ok(write_line(out, &doc)?)

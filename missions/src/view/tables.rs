@@ -529,41 +529,42 @@ pub fn pipe_summary(out: &mut dyn Write, pipe: &PipeReport) -> std::io::Result<(
     Ok(())
 }
 
-/// `montecarlo`: one row per station, then the verdict.
-pub fn montecarlo(out: &mut dyn Write, mission: &Mission, mc: &MonteCarlo) -> std::io::Result<()> {
-    writeln!(out, "mission \"{}\": {} trials (seed {}), positioning only", mission.name, mc.trials, mc.seed)?;
+/// Monte Carlo rows: per station the predicted and empirical σxy, their
+/// ratio and the mean NEES (flagged outside `interval`, when given).
+fn write_mc_rows(
+    out: &mut dyn Write,
+    rows: &[planner::montecarlo::CycleStatistics],
+    interval: Option<(f64, f64)>,
+) -> std::io::Result<()> {
     writeln!(out, "{:>7} {:>13} {:>13} {:>7} {:>9}", "station", "pred σxy_mm", "emp σxy_mm", "ratio", "NEES")?;
-    for s in &mc.stations {
+    for s in rows {
+        let outside = interval.is_some_and(|(lo, hi)| !(lo..=hi).contains(&s.nees_mean));
         writeln!(
             out,
-            "{:>7} {:>13.3} {:>13.3} {:>7.3} {:>9.3}",
+            "{:>7} {:>13.3} {:>13.3} {:>7.3} {:>9.3}{}",
             s.cycle,
             1e3 * cps::sigma_xy2(&s.predicted).sqrt(),
             1e3 * cps::sigma_xy2(&s.empirical).sqrt(),
             s.ratio_xy(),
-            s.nees_mean
+            s.nees_mean,
+            if outside { "  outside" } else { "" }
         )?;
     }
+    Ok(())
+}
+
+/// `montecarlo`: one row per station, then the verdict.
+pub fn montecarlo(out: &mut dyn Write, mission: &Mission, mc: &MonteCarlo) -> std::io::Result<()> {
+    writeln!(out, "mission \"{}\": {} trials (seed {}), positioning only", mission.name, mc.trials, mc.seed)?;
+    write_mc_rows(out, &mc.stations, None)?;
     let (lo, hi) = mc.nees_interval;
     let last = mc.last().map_or(f64::NAN, |s| s.nees_mean);
     writeln!(out, "final mean NEES {last:.3} (the filter), 95 % interval [{lo:.3}, {hi:.3}] for {} trials", mc.trials)?;
     if !mc.adjusted.is_empty() {
         writeln!(out)?;
         writeln!(out, "the network adjustment of every trial, per station, against the pre-analysis:")?;
-        writeln!(out, "{:>7} {:>13} {:>13} {:>7} {:>9}", "station", "pred σxy_mm", "emp σxy_mm", "ratio", "NEES")?;
         let (alo, ahi) = mc.adjusted_interval;
-        for s in &mc.adjusted {
-            let flag = if (alo..=ahi).contains(&s.nees_mean) { "" } else { "  outside" };
-            writeln!(
-                out,
-                "{:>7} {:>13.3} {:>13.3} {:>7.3} {:>9.3}{flag}",
-                s.cycle,
-                1e3 * cps::sigma_xy2(&s.predicted).sqrt(),
-                1e3 * cps::sigma_xy2(&s.empirical).sqrt(),
-                s.ratio_xy(),
-                s.nees_mean
-            )?;
-        }
+        write_mc_rows(out, &mc.adjusted, Some(mc.adjusted_interval))?;
         let inside = mc.adjusted.iter().filter(|s| (alo..=ahi).contains(&s.nees_mean)).count();
         writeln!(
             out,
