@@ -36,6 +36,26 @@ pub enum PlanError {
         /// Index of the second waypoint of the segment.
         waypoint: usize,
     },
+    /// A segment that only rises or falls: robots drive on the ground.
+    #[error(
+        "the route's segment to waypoint {waypoint} is vertical (it rises {rise_m} m in place); expected a segment the robots can drive along"
+    )]
+    VerticalSegment {
+        /// Index of the second waypoint of the segment.
+        waypoint: usize,
+        /// Its rise, metres.
+        rise_m: f64,
+    },
+    /// More stations than a plan may have.
+    #[error(
+        "the route and stride give {count} stations; expected at most {limit} (a longer stride, or a shorter route)"
+    )]
+    TooManyStations {
+        /// Stations the route and stride would give.
+        count: f64,
+        /// The limit.
+        limit: usize,
+    },
     /// The stride must be a positive, finite length.
     #[error("stride_m = {value}; expected a finite value > 0")]
     BadStride {

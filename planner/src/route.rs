@@ -17,6 +17,9 @@ pub struct Station {
     pub distance_m: f64,
 }
 
+/// The most stations a route may have (a 1,000 km traverse at 10 m strides).
+pub const MAX_STATIONS: usize = 100_001;
+
 /// Places stations every `stride_m` along each segment, starting at its first
 /// point; every corner is a station; a segment whose length is not a multiple
 /// of the stride ends with one shorter step.
@@ -27,15 +30,29 @@ pub fn stations(route_m: &[Point3<f64>], stride_m: f64) -> Result<Vec<Station>, 
     if route_m.len() < 2 {
         return Err(PlanError::RouteTooShort { got: route_m.len() });
     }
-    let mut positions = Vec::new();
-    let mut distances = Vec::new();
-    let mut travelled = 0.0;
+    // Count before placing: a route is refused, not allocated, beyond the
+    // limit.
+    let mut count = 1.0;
     for (k, pair) in route_m.windows(2).enumerate() {
         let (a, b) = (pair[0], pair[1]);
         let length = (b - a).norm();
         if length.is_nan() || length <= 1e-9 {
             return Err(PlanError::ZeroLengthSegment { waypoint: k + 1 });
         }
+        if (b - a).xy().norm() < 1e-3 {
+            return Err(PlanError::VerticalSegment { waypoint: k + 1, rise_m: b.z - a.z });
+        }
+        count += (length / stride_m * (1.0 - 1e-12)).ceil();
+    }
+    if !(count <= MAX_STATIONS as f64) {
+        return Err(PlanError::TooManyStations { count, limit: MAX_STATIONS });
+    }
+    let mut positions = Vec::new();
+    let mut distances = Vec::new();
+    let mut travelled = 0.0;
+    for pair in route_m.windows(2) {
+        let (a, b) = (pair[0], pair[1]);
+        let length = (b - a).norm();
         let dir = (b - a) / length;
         let steps = (length / stride_m * (1.0 - 1e-12)).ceil() as usize;
         for s in 0..steps {

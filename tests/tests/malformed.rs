@@ -459,7 +459,21 @@ const CASES: &[Case] = &[
         "plan.control_at",
         "station 99 does not exist",
     ),
+    ("mission name a path", ("name = \"ok\"", "name = \"..\""), "2:8", "mission.name", "not a path"),
+    (
+        "mission name with a separator",
+        ("name = \"ok\"", "name = \"../../x\""),
+        "2:8",
+        "mission.name",
+        "path separators",
+    ),
+    ("mission name too long", ("name = \"ok\"", LONG_NAME), "2:8", "mission.name", "at most 100"),
+    ("vertical route segment", ("[100.0, 0.0, 0.0]]", "[0.0, 0.0, 50.0]]"), "15:29", "plan.route_m[1]", "is vertical"),
+    ("too many stations", ("stride_m = 10.0", "stride_m = 0.000001"), "16:12", "plan.stride_m", "at most 100001"),
 ];
+
+const LONG_NAME: &str =
+    "name = \"xxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx\"";
 
 const FORMATION: &str = "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]";
 const CONTROL_EMPTY_NAME: &str =

@@ -143,6 +143,9 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>, scene_override: Op
     })
 }
 
+/// The longest mission name, bytes (it names the run directory).
+pub const MAX_NAME_BYTES: usize = 100;
+
 /// `[mission]`.
 fn read_name(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<String> {
     let mut t = root.table(r, "mission");
@@ -150,6 +153,25 @@ fn read_name(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<String> {
         let s = r.string(v, f)?;
         if s.get_ref().trim().is_empty() {
             r.problem(&s.span(), f, "expected a non-empty name");
+            return None;
+        }
+        // The name is the default run directory's (`runs/<name>/`): a name,
+        // never a path.
+        let n = s.get_ref();
+        let problem = if n.len() > MAX_NAME_BYTES {
+            Some(format!("{} bytes long; expected at most {MAX_NAME_BYTES}", n.len()))
+        } else if let Some(c) = n.chars().find(|c| matches!(c, '/' | '\\') || c.is_control()) {
+            Some(format!(
+                "\"{}\" holds {c:?}; expected a name without path separators or control characters",
+                n.escape_debug()
+            ))
+        } else if n == "." || n == ".." || n != n.trim() {
+            Some(format!("\"{n}\"; expected a name, not a path (no \".\" or \"..\", no leading or trailing spaces)"))
+        } else {
+            None
+        };
+        if let Some(message) = problem {
+            r.problem(&s.span(), f, message);
             return None;
         }
         Some(s.into_inner())

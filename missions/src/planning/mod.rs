@@ -256,11 +256,13 @@ fn plan_diagnostics(mission: &Mission, errors: Vec<PlanError>) -> Diagnostics {
                 out.push(mission.diagnostic(&span, &format!("plan.formation_m[{child}]"), format!("{name}{e}{more}")));
                 continue;
             }
-            PlanError::ZeroLengthSegment { waypoint } => (
+            PlanError::ZeroLengthSegment { waypoint } | PlanError::VerticalSegment { waypoint, .. } => (
                 spans.route_m.get(*waypoint).cloned().unwrap_or(spans.plan.clone()),
                 format!("plan.route_m[{waypoint}]"),
             ),
-            PlanError::BadStride { .. } => (spans.stride_m.clone(), "plan.stride_m".to_string()),
+            PlanError::BadStride { .. } | PlanError::TooManyStations { .. } => {
+                (spans.stride_m.clone(), "plan.stride_m".to_string())
+            }
             PlanError::BadHops { .. } => (spans.hops.clone().unwrap_or(spans.plan.clone()), "plan.hops".to_string()),
             PlanError::FormationSize { .. } | PlanError::TooFewChildren { .. } => {
                 (spans.formation_m.first().cloned().unwrap_or(spans.plan.clone()), "plan.formation_m".to_string())

@@ -7,20 +7,61 @@ use las::{Builder, Point, Reader, Transform, Vector, Writer};
 use nalgebra::Point3;
 
 use super::PointCloud;
-use crate::error::{Result, ScannerError};
+use crate::error::{Location, Result, ScannerError};
 
 /// Coordinate resolution of the LAS files we write, metres.
 pub const LAS_SCALE_M: f64 = 1e-4;
 
+/// Points read per batch (the header's count is a claim, never a buffer
+/// size).
+const BATCH: u64 = 1 << 16;
+
 pub(super) fn read(path: &Path) -> Result<PointCloud> {
     let mut reader = Reader::from_path(path).map_err(|e| ScannerError::whole_file(path, e))?;
+    let header = reader.header();
+    let count = header.number_of_points();
+    let record = u64::from(header.point_format().len());
+    let len = std::fs::metadata(path).map_err(|e| ScannerError::io(path, e))?.len();
+    if count.checked_mul(record).is_none_or(|bytes| bytes > len) {
+        return Err(ScannerError::file(
+            path,
+            Location::File,
+            format!("the header says {count} points of {record} bytes; the file has {len} bytes in all"),
+        ));
+    }
+    let t = header.transforms();
+    for (axis, tr) in [("x", t.x), ("y", t.y), ("z", t.z)] {
+        if !(tr.scale.is_finite() && tr.scale != 0.0 && tr.offset.is_finite()) {
+            return Err(ScannerError::file(
+                path,
+                Location::File,
+                format!(
+                    "{axis} scale {} and offset {}: expected a finite, non-zero scale and a finite offset",
+                    tr.scale, tr.offset
+                ),
+            ));
+        }
+    }
     let mut cloud = PointCloud::default();
     let mut intensity = Vec::new();
-    let data = reader.read_all().map_err(|e| ScannerError::whole_file(path, e))?;
-    for (i, p) in data.points().enumerate() {
-        let p = p.map_err(|e| ScannerError::whole_file(path, format!("point {i}: {e}")))?;
-        cloud.points.push(Point3::new(p.x as f32, p.y as f32, p.z as f32));
-        intensity.push(f32::from(p.intensity));
+    let mut data = las::PointDataBuilder::new().for_header(reader.header()).build();
+    let mut read = 0u64;
+    while read < count {
+        let n =
+            reader.fill_points(BATCH.min(count - read), &mut data).map_err(|e| ScannerError::whole_file(path, e))?;
+        if n == 0 {
+            return Err(ScannerError::file(
+                path,
+                Location::File,
+                format!("truncated: {read} points of the {count} the header says"),
+            ));
+        }
+        for (i, p) in data.points().enumerate() {
+            let p = p.map_err(|e| ScannerError::whole_file(path, format!("point {}: {e}", read + i as u64)))?;
+            cloud.points.push(Point3::new(p.x as f32, p.y as f32, p.z as f32));
+            intensity.push(f32::from(p.intensity));
+        }
+        read += n;
     }
     cloud.intensity = Some(intensity);
     Ok(cloud)

@@ -160,9 +160,16 @@ fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header> {
                     .zip(counts)
                     .map(|(((name, size), kind), count)| Field { name, size, kind, count })
                     .collect();
-                let points = points
-                    .or(width.zip(height).map(|(w, h)| w * h))
-                    .ok_or_else(|| err(line_no, "no POINTS (or WIDTH and HEIGHT) before DATA".into()))?;
+                let points = match (points, width, height) {
+                    (Some(n), ..) => n,
+                    (None, Some(w), Some(h)) => w.checked_mul(h).ok_or_else(|| {
+                        err(
+                            line_no,
+                            format!("WIDTH {w} × HEIGHT {h} overflows: expected a point count a file can hold"),
+                        )
+                    })?,
+                    _ => return Err(err(line_no, "no POINTS (or WIDTH and HEIGHT) before DATA".into())),
+                };
                 return Ok(Header { fields, points, data, offset: pos });
             }
             other => return Err(err(line_no, format!("unknown header key '{other}'"))),
@@ -191,9 +198,18 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
     }
     let record: usize = h.fields.iter().map(Field::bytes).sum();
     let n = h.points;
-    // values[k][i]: wanted field k of point i.
-    let mut values: Vec<Vec<f64>> = vec![Vec::with_capacity(n); wanted.len()];
     let data = &bytes[h.offset..];
+    // The header's count is a claim, never a buffer size: the data bytes
+    // bound what is reserved (an ASCII point takes at least two bytes, a
+    // binary one its record, compressed data at most ~90 times its bytes),
+    // and the counts are checked against the data below.
+    let room = match h.data {
+        PcdData::Ascii => data.len() / 2 + 1,
+        PcdData::Binary => data.len() / record.max(1),
+        PcdData::BinaryCompressed => data.len().saturating_mul(100) / record.max(1),
+    };
+    // values[k][i]: wanted field k of point i.
+    let mut values: Vec<Vec<f64>> = vec![Vec::with_capacity(n.min(room)); wanted.len()];
     match h.data {
         PcdData::Ascii => {
             let text = std::str::from_utf8(data).map_err(|e| {
@@ -243,13 +259,13 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
             }
         }
         PcdData::Binary => {
-            if data.len() < n * record {
+            if n.checked_mul(record).is_none_or(|need| data.len() < need) {
                 return Err(ScannerError::file(
                     path,
                     Location::Byte(bytes.len() as u64),
                     format!(
                         "truncated: {n} points of {record} bytes need {} data bytes, found {}",
-                        n * record,
+                        n as u128 * record as u128,
                         data.len()
                     ),
                 ));
@@ -273,11 +289,21 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
                 })
             };
             let (compressed, raw) = (word(0)?, word(4)?);
-            if raw != n * record {
+            if n.checked_mul(record) != Some(raw) {
                 return Err(ScannerError::file(
                     path,
                     Location::Byte((h.offset + 4) as u64),
-                    format!("uncompressed size {raw}: expected {} ({n} points × {record} bytes)", n * record),
+                    format!(
+                        "uncompressed size {raw}: expected {} ({n} points × {record} bytes)",
+                        n as u128 * record as u128
+                    ),
+                ));
+            }
+            if raw > room.saturating_mul(record) {
+                return Err(ScannerError::file(
+                    path,
+                    Location::Byte((h.offset + 4) as u64),
+                    format!("uncompressed size {raw}: more than LZF can expand {} bytes to", data.len()),
                 ));
             }
             let stream = data.get(8..8 + compressed).ok_or_else(|| {

@@ -72,11 +72,63 @@ fn ply_error(path: &Path, e: &ply_rs_bw::parser::ParseError) -> ScannerError {
     ScannerError::file(path, location, e.to_string())
 }
 
+/// Bytes of one scalar.
+fn scalar_bytes(t: &ScalarType) -> u64 {
+    match t {
+        ScalarType::Char | ScalarType::UChar => 1,
+        ScalarType::Short | ScalarType::UShort => 2,
+        ScalarType::Int | ScalarType::UInt | ScalarType::Float => 4,
+        ScalarType::Double => 8,
+    }
+}
+
+/// The header's element counts are claims: an element without properties
+/// holds nothing, and all items together need at least so many bytes (a
+/// binary scalar its size, a list its count; an ASCII value a character and
+/// a separator) — more than the file has is refused before anything is read.
+fn check_counts(path: &Path, header: &ply_rs_bw::ply::Header) -> Result<()> {
+    let len = std::fs::metadata(path).map_err(|e| ScannerError::io(path, e))?.len();
+    let mut need = 0u64;
+    for element in header.elements.values() {
+        if element.count > 0 && element.properties.is_empty() {
+            return Err(ScannerError::file(
+                path,
+                Location::File,
+                format!(
+                    "element '{}' has {} items and no properties: expected properties",
+                    element.name, element.count
+                ),
+            ));
+        }
+        let per_item: u64 = match header.encoding {
+            Encoding::Ascii => 2 * element.properties.len() as u64,
+            _ => element
+                .properties
+                .values()
+                .map(|p| match &p.data_type {
+                    PropertyType::Scalar(t) => scalar_bytes(t),
+                    PropertyType::List(count, _) => scalar_bytes(count),
+                })
+                .sum(),
+        };
+        need = need.saturating_add(per_item.saturating_mul(element.count as u64));
+    }
+    if need > len {
+        return Err(ScannerError::file(
+            path,
+            Location::File,
+            format!("the header announces at least {need} bytes of items; the file has {len} bytes in all"),
+        ));
+    }
+    Ok(())
+}
+
 pub(super) fn read(path: &Path) -> Result<PointCloud> {
     let file = std::fs::File::open(path).map_err(|e| ScannerError::io(path, e))?;
     let mut reader = Reader::new(BufReader::with_capacity(1 << 20, file));
     let parser = Parser::<Vertex>::new();
     let header = parser.read_header(&mut reader).map_err(|e| ply_error(path, &e))?;
+    check_counts(path, &header)?;
     let mut cloud = PointCloud::default();
     let mut found = false;
     for element in header.elements.values() {

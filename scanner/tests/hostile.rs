@@ -1,0 +1,99 @@
+//! Scan files whose headers lie: counts far beyond the bytes, overflowing
+//! products, NaN scales. Each is refused with an error naming the file —
+//! no panic, no allocation sized from the claim. The files are made here.
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::Point3;
+use scanner::ScannerError;
+use scanner::io::{Format, PointCloud, read, write};
+
+fn file(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, bytes).expect("write");
+    path
+}
+
+fn refused(path: &Path, words: &str) {
+    match read(path) {
+        Err(e @ ScannerError::File { .. }) => {
+            let text = e.to_string();
+            assert!(text.contains(&path.display().to_string()), "{text}");
+            assert!(text.contains(words), "'{text}' lacks '{words}'");
+        }
+        other => panic!("{}: expected a file error with '{words}', got {other:?}", path.display()),
+    }
+}
+
+const PCD_HEAD: &str = "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n";
+
+#[test]
+fn pcd_counts_are_claims() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    // 2^62 binary points in 24 bytes.
+    let mut b = format!("{PCD_HEAD}WIDTH 4611686018427387904\nHEIGHT 1\nPOINTS 4611686018427387904\nDATA binary\n")
+        .into_bytes();
+    b.extend_from_slice(&[0u8; 24]);
+    refused(&file(d, "huge-binary.pcd", &b), "truncated");
+    // 10^12 ASCII points, one row.
+    let a = format!("{PCD_HEAD}WIDTH 1000000000000\nHEIGHT 1\nPOINTS 1000000000000\nDATA ascii\n1 2 3\n");
+    refused(&file(d, "huge-ascii.pcd", a.as_bytes()), "the header says 1000000000000");
+    // WIDTH × HEIGHT overflows (no POINTS).
+    let w = format!("{PCD_HEAD}WIDTH 4294967296\nHEIGHT 4294967296\nDATA ascii\n1 2 3\n");
+    refused(&file(d, "overflow.pcd", w.as_bytes()), "overflows");
+    // Compressed: the sizes claim 4 GB from 8 bytes.
+    let mut c = format!("{PCD_HEAD}WIDTH 357913941\nHEIGHT 1\nPOINTS 357913941\nDATA binary_compressed\n").into_bytes();
+    c.extend_from_slice(&8u32.to_le_bytes());
+    c.extend_from_slice(&4_294_967_292u32.to_le_bytes());
+    c.extend_from_slice(&[0u8; 8]);
+    refused(&file(d, "huge-compressed.pcd", &c), "more than LZF can expand");
+}
+
+#[test]
+fn ply_counts_are_claims() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    // An element of 10^12 items and no properties before the vertices.
+    let empty = "ply\nformat binary_little_endian 1.0\nelement junk 1000000000000\nelement vertex 0\nproperty float x\nproperty float y\nproperty float z\nend_header\n";
+    refused(&file(d, "empty-element.ply", empty.as_bytes()), "no properties");
+    // 10^12 vertices of 12 bytes in a 100-byte file.
+    let many = "ply\nformat binary_little_endian 1.0\nelement vertex 1000000000000\nproperty float x\nproperty float y\nproperty float z\nend_header\n";
+    refused(&file(d, "many.ply", many.as_bytes()), "the file has");
+    let ascii = "ply\nformat ascii 1.0\nelement vertex 1000000000000\nproperty float x\nproperty float y\nproperty float z\nend_header\n1 2 3\n";
+    refused(&file(d, "many-ascii.ply", ascii.as_bytes()), "the file has");
+}
+
+/// A valid LAS of three points, as we write it.
+fn las_bytes(dir: &Path) -> Vec<u8> {
+    let cloud = PointCloud {
+        points: vec![Point3::new(1.0, 2.0, 3.0), Point3::new(4.0, 5.0, 6.0), Point3::new(7.0, 8.0, 9.0)],
+        intensity: None,
+    };
+    let path = dir.join("good.las");
+    write(&path, &cloud, Format::Las).expect("write LAS");
+    std::fs::read(&path).expect("read back")
+}
+
+#[test]
+fn las_counts_and_scales_are_claims() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let good = las_bytes(d);
+    assert_eq!(read(&d.join("good.las")).expect("the good file reads").len(), 3);
+    // LAS 1.4: the legacy count (u32 at 107) and the count (u64 at 247).
+    let mut legacy = good.clone();
+    legacy[107..111].copy_from_slice(&u32::MAX.to_le_bytes());
+    legacy[247..255].copy_from_slice(&u64::from(u32::MAX).to_le_bytes());
+    refused(&file(d, "legacy.las", &legacy), "the header says 4294967295 points");
+    // 2^63 points in the 64-bit count, the legacy one 0 (as LAS 1.4 writes
+    // counts beyond u32).
+    let mut huge = good.clone();
+    huge[107..111].copy_from_slice(&0u32.to_le_bytes());
+    huge[247..255].copy_from_slice(&(1u64 << 63).to_le_bytes());
+    refused(&file(d, "huge.las", &huge), "points of");
+    // A NaN x scale (f64 at 131).
+    let mut nan = good;
+    nan[131..139].copy_from_slice(&f64::NAN.to_le_bytes());
+    refused(&file(d, "nan-scale.las", &nan), "scale");
+}
