@@ -44,7 +44,7 @@ pub fn stations(route_m: &[Point3<f64>], stride_m: f64) -> Result<Vec<Station>, 
         }
         count += (length / stride_m * (1.0 - 1e-12)).ceil();
     }
-    if !(count <= MAX_STATIONS as f64) {
+    if count.is_nan() || count > MAX_STATIONS as f64 {
         return Err(PlanError::TooManyStations { count, limit: MAX_STATIONS });
     }
     let mut positions = Vec::new();
