@@ -18,7 +18,7 @@ use crate::planning::Planned;
 pub struct MontecarloArgs {
     /// The mission file (TOML).
     pub mission: PathBuf,
-    /// Number of seeded trials (≥ 2).
+    /// Number of seeded trials (2 to 100,000).
     #[arg(long, default_value_t = 1000)]
     pub trials: usize,
     /// Print one JSON object instead of the table.
@@ -38,6 +38,9 @@ pub fn run(args: &MontecarloArgs, out: &mut dyn Write) -> Result<Outcome> {
     }
     Ok(Outcome::passed(mc.consistent()))
 }
+
+/// The most trials `montecarlo` runs.
+pub const MAX_TRIALS: usize = 100_000;
 
 /// Degrees of freedom of the NEES (x, y, z, θ).
 const NEES_DIM: usize = 4;
@@ -80,6 +83,11 @@ impl MonteCarlo {
 pub fn simulate(mission: &Mission, planned: &Planned, trials: usize) -> Result<MonteCarlo> {
     if trials < 2 {
         anyhow::bail!("--trials {trials}: expected at least 2 (an empirical covariance needs several trials)");
+    }
+    if trials > MAX_TRIALS {
+        anyhow::bail!(
+            "--trials {trials}: expected at most {MAX_TRIALS} (1000 pin the NEES to ±4 %; the time grows with the trials)"
+        );
     }
     let seed = mission.backend.seed;
     let Some(instrument) = &mission.total_station else {

@@ -143,6 +143,10 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>, scene_override: Op
     })
 }
 
+/// The most children a team may have (each adds three unknowns to every
+/// fix's state).
+pub const MAX_CHILDREN: usize = 32;
+
 /// The longest mission name, bytes (it names the run directory).
 pub const MAX_NAME_BYTES: usize = 100;
 
@@ -515,6 +519,11 @@ fn read_pipe(r: &mut Reader<'_>, t: &mut Table<'_, '_>) -> Option<PipePlan> {
 
 fn read_children(r: &mut Reader<'_>, v: &Raw<'_>, field: &str) -> Option<Vec<String>> {
     let names = r.array(v, field, |r, e, f| r.string(e, f))?;
+    if names.len() > MAX_CHILDREN {
+        let message = format!("{} children; expected at most {MAX_CHILDREN}", names.len());
+        r.problem(&v.span(), field, message);
+        return None;
+    }
     if names.len() == 1 {
         let message = "the team has 1 child; a parent fix needs at least 2 (or none: a robot alone, by odometry)";
         r.problem(&v.span(), field, message);

@@ -494,6 +494,35 @@ impl Read {
     }
 }
 
+/// CRC-32 (IEEE) of bytes, 8 lower-case hex digits (as journaled).
+pub fn crc32_hex(bytes: &[u8]) -> String {
+    format!("{:08x}", crc32fast::hash(bytes))
+}
+
+/// CRC-32 of a file's bytes (see [`crc32_hex`]).
+pub fn file_crc32(path: &Path) -> Result<String> {
+    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    Ok(crc32_hex(&bytes))
+}
+
+/// Checks that a scan file in `dir` is the one `scanned` records: its
+/// checksum (journals of version 2), else it is left to the point count.
+pub fn check_scan_file(dir: &Path, scanned: &Scanned) -> Result<()> {
+    let path = dir.join(&scanned.file);
+    if let Some(recorded) = &scanned.crc32 {
+        let found = file_crc32(&path)?;
+        if &found != recorded {
+            bail!(
+                "{} has changed since the run wrote it: CRC-32 {found}, the journal recorded {recorded} ({} points); \
+                 a scan is never rewritten — restore the file",
+                path.display(),
+                scanned.points
+            );
+        }
+    }
+    Ok(())
+}
+
 /// Reads a journal. A last line without its newline is a write cut short by
 /// a kill (even inside a multi-byte character): it is returned separately
 /// (as its byte offset) so a resume can drop it; any other line that is not

@@ -162,7 +162,15 @@ pub fn load(dir: &Path) -> Result<RunDir> {
                 let station = s.key.station;
                 let file = s.data.file.clone();
                 let tilt = tilt.take().with_context(|| at("a scan without a tilt reading before it"))?;
+                journal::check_scan_file(dir, &s.data).with_context(|| at(&format!("checking {file}")))?;
                 let cloud = scanner::io::read(&dir.join(&file)).with_context(|| at(&format!("reading {file}")))?;
+                if cloud.len() != s.data.points {
+                    bail!(at(&format!(
+                        "{file} holds {} points; the journal recorded {}: the file changed since the run wrote it",
+                        cloud.len(),
+                        s.data.points
+                    )));
+                }
                 let truth = s.sim.as_ref().and_then(|c| c.truth.as_ref()).map(|t| {
                     let p = ParentPose::new(t.parent[0], t.parent[1], t.parent[2], t.parent[3]);
                     Tilt { roll_rad: t.tilt[0], pitch_rad: t.tilt[1] }.world_from_body(&p)

@@ -501,14 +501,28 @@ impl Run<'_> {
                 })?;
                 let points = cloud.len();
                 taken = Some(cloud);
-                Ok(Scanned { file: format!("{name}.3d"), points, crc32: None })
+                let file = dir.join(format!("{name}.3d"));
+                let bytes =
+                    std::fs::read(&file).map_err(|source| scanner::ScannerError::Io { path: file.clone(), source })?;
+                let crc32 = Some(crate::run::journal::crc32_hex(&bytes));
+                Ok(Scanned { file: format!("{name}.3d"), points, crc32 })
             })?;
         self.progress.slices_done += slices as u64;
         self.progress.scans.set_position(self.progress.slices_done);
         self.progress.steps.inc(1);
         let cloud = match taken {
             Some(cloud) => cloud,
-            None => timed(&mut self.timings.scan_files_s, || scanner::io::read(&self.dir.join(&scanned.file)))?,
+            None => {
+                // Replayed: the file must be the one the journal names, and
+                // its pose file (derived from the journal) is rewritten if
+                // it went missing.
+                crate::run::journal::check_scan_file(&self.dir, &scanned)?;
+                let pose = self.dir.join(format!("{name}.pose"));
+                if !pose.exists() {
+                    scanner::io::write_3dtk_pose(&pose, &world_from_body)?;
+                }
+                timed(&mut self.timings.scan_files_s, || scanner::io::read(&self.dir.join(&scanned.file)))?
+            }
         };
         if cloud.len() != scanned.points {
             bail!("{}: {} points, but the journal recorded {}", scanned.file, cloud.len(), scanned.points);
