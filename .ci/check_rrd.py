@@ -1,6 +1,6 @@
 """Reads a mission.rrd with Rerun's Python reader (independent of our Rust
 code) and checks the entities the README promises, with their row counts
-for the hall example (21 cycles, 2 children, 22 stations, a scan at each)."""
+for the hall example (21 cycles, 2 children, 22 stations, a scan and a fix at each — the start is a resection on control)."""
 import sys
 from collections import defaultdict
 
@@ -24,7 +24,7 @@ expected = {
     "/world/trajectories/parent/estimate": stations,
     "/world/scans/direct/scan021": 1,
     "/metrics/sigma_xy_m": stations,
-    "/metrics/fix_sigma0_squared": cycles,
+    "/metrics/fix_sigma0_squared": stations,  # every cycle, and the start: a resection on control
     "/world/plan/route": 1,
     "/world/plan/sight_lines": 2 * cycles * children,
 }
