@@ -19,6 +19,12 @@ use crate::control::{ControlPoint, sighting_instrument};
 use crate::error::{Phase, PlanError};
 use crate::route::Station;
 
+/// How far inside the total station's range a planned sight line keeps,
+/// metres. A robot's drive errs by centimetres (the simulator's default:
+/// 0.5 % of the move plus 5 mm/√m), so a prism planned on a limit lands
+/// outside it about half of the time.
+pub const RANGE_MARGIN_M: f64 = 0.05;
+
 /// One dance cycle: children placed around station `from`, parent fixed at
 /// station `to`.
 #[derive(Debug, Clone, PartialEq)]
@@ -241,7 +247,8 @@ impl Dance {
         self.cycles.get(cycle.checked_sub(1)?)?.children.get(j).copied()
     }
 
-    /// Every sight line that leaves the instrument's range, in schedule order.
+    /// Every sight line that leaves the instrument's range or comes within
+    /// [`RANGE_MARGIN_M`] of one of its limits, in schedule order.
     pub fn range_violations(&self, instrument: &Instrument) -> Vec<PlanError> {
         let mut out = Vec::new();
         for c in &self.cycles {
@@ -251,7 +258,8 @@ impl Dance {
                         continue;
                     }
                     let range_m = (p - self.stations[station].position).norm();
-                    if instrument.check_range(child, range_m).is_err() {
+                    let inside = instrument.min_range_m + RANGE_MARGIN_M..=instrument.max_range_m - RANGE_MARGIN_M;
+                    if instrument.check_range(child, range_m).is_err() || !inside.contains(&range_m) {
                         out.push(PlanError::ChildOutOfRange {
                             cycle: c.cycle,
                             child,
