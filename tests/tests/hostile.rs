@@ -124,3 +124,92 @@ fn montecarlo_refuses_a_hundred_million_trials() {
     assert_eq!(run.code, 2, "{}", run.stderr);
     assert!(run.stderr.contains("--trials 100000000: expected at most 100000"), "{}", run.stderr);
 }
+
+/// `run MISSION --out OUT --quiet` plus `extra`.
+fn run_args(mission: &std::path::Path, out: &std::path::Path, extra: &[&str]) -> Vec<std::ffi::OsString> {
+    let mut args: Vec<std::ffi::OsString> = vec![
+        "run".into(),
+        mission.as_os_str().to_owned(),
+        "--out".into(),
+        out.as_os_str().to_owned(),
+        "--quiet".into(),
+    ];
+    args.extend(extra.iter().map(Into::into));
+    args
+}
+
+#[test]
+fn a_run_directory_has_one_writer_at_a_time() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let hall = example("hall.toml");
+    let out = dir.path().join("r");
+    let stopped = cps_survey(run_args(&hall, &out, &["--sim-fault", "total-station:after=40"]));
+    assert_eq!(stopped.code, 2, "{}", stopped.stderr);
+    // Another process holds the directory (its lock, as a run writes it).
+    let lock_path = out.join(".cps-survey.lock");
+    let lock = std::fs::OpenOptions::new().write(true).open(&lock_path).expect("the run's lock file");
+    lock.try_lock().expect("free once the run stopped");
+    std::fs::write(&lock_path, "process 4242: run elsewhere.toml").expect("holder");
+    let journal_before = std::fs::read(out.join("journal.jsonl")).expect("journal");
+    for args in [
+        run_args(&hall, &out, &["--resume"]),
+        vec!["fuse".into(), out.clone().into_os_string()],
+        vec!["adjust".into(), out.clone().into_os_string()],
+    ] {
+        let refused = cps_survey(args);
+        assert_eq!(refused.code, 2, "{}", refused.stderr);
+        assert!(
+            refused.stderr.contains("is in use by another cps-survey (process 4242: run elsewhere.toml)"),
+            "{}",
+            refused.stderr
+        );
+    }
+    assert_eq!(std::fs::read(out.join("journal.jsonl")).expect("journal"), journal_before, "nothing written");
+    drop(lock);
+    let resumed = cps_survey(run_args(&hall, &out, &["--resume"]));
+    assert_eq!(resumed.code, 0, "{}", resumed.stderr);
+}
+
+#[test]
+fn a_symbolic_link_in_the_run_directory_is_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mission = temp_mission(&std::fs::read_to_string(example("indoor-compact.toml")).expect("example"));
+    let outside = dir.path().join("outside.txt");
+    std::fs::write(&outside, "not the run's").expect("outside");
+    let elsewhere = dir.path().join("elsewhere");
+    std::fs::create_dir(&elsewhere).expect("elsewhere");
+    for (name, target) in [("report.json", &outside), ("mission.toml", &outside), ("scans", &elsewhere)] {
+        let out = dir.path().join(format!("out-{name}"));
+        std::fs::create_dir(&out).expect("out");
+        std::os::unix::fs::symlink(target, out.join(name)).expect("symlink");
+        let run = cps_survey(run_args(&mission.path, &out, &[]));
+        assert_eq!(run.code, 2, "{name}: {}", run.stderr);
+        assert!(run.stderr.contains(&format!("{name} is a symbolic link")), "{}", run.stderr);
+    }
+    assert_eq!(std::fs::read_to_string(&outside).expect("outside"), "not the run's");
+    assert_eq!(std::fs::read_dir(&elsewhere).expect("elsewhere").count(), 0, "nothing written through the link");
+}
+
+#[test]
+fn a_journal_torn_inside_a_multi_byte_character_resumes() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let text = std::fs::read_to_string(example("indoor-compact.toml"))
+        .expect("example")
+        .replace("children = [\"left\", \"right\"]", "children = [\"gauche-é\", \"droite-ü\"]");
+    assert!(text.contains("gauche-é"));
+    let mission = temp_mission(&text);
+    let out = dir.path().join("r");
+    let stopped = cps_survey(run_args(&mission.path, &out, &["--sim-fault", "total-station:after=20"]));
+    assert_eq!(stopped.code, 2, "{}", stopped.stderr);
+    // A kill in the middle of writing "é" (0xC3 0xA9): only its first byte.
+    let journal = out.join("journal.jsonl");
+    let mut bytes = std::fs::read(&journal).expect("journal");
+    let whole = bytes.len();
+    bytes.extend_from_slice(b"{\"event\":\"drive\",\"key\":{\"robot\":\"gauche-\xC3");
+    std::fs::write(&journal, &bytes).expect("torn");
+    let resumed = cps_survey(run_args(&mission.path, &out, &["--resume"]));
+    assert_eq!(resumed.code, 0, "{}", resumed.stderr);
+    let after = std::fs::read(&journal).expect("journal");
+    assert_eq!(after[..whole], bytes[..whole], "every line before the torn one kept");
+    assert!(std::str::from_utf8(&after).is_ok(), "the torn bytes cut");
+}

@@ -59,6 +59,7 @@ impl AdjustArgs {
 /// data snooping does not find the cause).
 pub fn run(args: &AdjustArgs, out: &mut dyn Write) -> Result<Outcome> {
     let dir = &args.run_dir;
+    let _lock = crate::run::directory::guard(dir, &format!("adjust {}", dir.display()))?;
     let run = crate::run::resume::load_journal(dir)?;
     let path = dir.join("journal.jsonl");
     let net = crate::run::adjust::network(&run.mission, &run.planned, &run.journal, &path)?;

@@ -35,6 +35,7 @@ fn parse_mode(s: &str) -> Result<FusionMode, String> {
 /// Runs `fuse`: exit 1 when a `[pipe]` fit of the re-fused cloud fails.
 pub fn run(args: &FuseArgs, out: &mut dyn Write) -> Result<Outcome> {
     let dir = &args.run_dir;
+    let _lock = crate::run::directory::guard(dir, &format!("fuse {}", dir.display()))?;
     let run = crate::run::resume::load(dir)?;
     let (mission, views) = (&run.mission, &run.views);
     if views.is_empty() {

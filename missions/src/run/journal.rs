@@ -18,6 +18,8 @@ use anyhow::{Context, Result, bail};
 use scanner::{TsMeasurement, TsStatus};
 use serde::{Deserialize, Serialize};
 
+use super::directory::DirLock;
+
 /// The schema version this build writes.
 pub const VERSION: u32 = 2;
 
@@ -616,6 +618,8 @@ pub struct Journal {
     replay: VecDeque<(usize, Event)>,
     written: usize,
     abort_after: Option<usize>,
+    /// The run directory's lock, held as long as the journal is written.
+    lock: Option<DirLock>,
 }
 
 impl Journal {
@@ -638,6 +642,7 @@ impl Journal {
             replay: VecDeque::new(),
             written: 0,
             abort_after: None,
+            lock: None,
         })
     }
 
@@ -655,7 +660,12 @@ impl Journal {
         file.seek(SeekFrom::End(0)).with_context(|| format!("opening {}", path.display()))?;
         let replay =
             read.events.into_iter().skip(1).filter(|n| !n.event.informational()).map(|n| (n.line, n.event)).collect();
-        Ok(Self { file, path: path.to_path_buf(), version, replay, written: 0, abort_after: None })
+        Ok(Self { file, path: path.to_path_buf(), version, replay, written: 0, abort_after: None, lock: None })
+    }
+
+    /// Holds the run directory's lock as long as this journal lives.
+    pub fn hold(&mut self, lock: DirLock) {
+        self.lock = Some(lock);
     }
 
     /// Aborts the process right after the `n`-th event this journal writes

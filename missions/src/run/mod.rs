@@ -5,6 +5,8 @@
 //! - [`steps`]: every device command replayed or given, retried, journaled;
 //! - [`backend`]: the simulator or the instruments on serial ports;
 //! - [`journal`]: the typed, versioned `journal.jsonl`;
+//! - [`directory`]: the run directory's lock and its refusal of symbolic
+//!   links;
 //! - [`resume`]: a run directory opened for a new run or a resume, and read
 //!   back by `fuse`;
 //! - [`fuse`]: the scans fused by `[fusion] mode`;
@@ -15,6 +17,7 @@
 
 pub mod adjust;
 pub mod backend;
+pub mod directory;
 pub mod fuse;
 pub mod inspection;
 pub mod journal;

@@ -10,6 +10,7 @@ use cps::ParentPose;
 use nalgebra::Matrix4;
 use scanner::Tilt;
 
+use super::directory;
 use super::fuse::ScanView;
 use super::journal::{self, EndRecord, Event, Journal, Start, matrix_of};
 use crate::mission::Mission;
@@ -48,6 +49,8 @@ pub fn open(
         if !journal_path.exists() {
             bail!("{} does not exist: there is no run to resume there", journal_path.display());
         }
+        directory::refuse_links(dir)?;
+        let lock = directory::lock(dir, &format!("run {} --resume", mission.source.file.display()))?;
         let read = journal::read(&journal_path)?;
         let start = read.start(&journal_path)?.clone();
         let as_run =
@@ -72,12 +75,16 @@ pub fn open(
             );
         }
         let mut journal = Journal::resume(&journal_path, read)?;
+        journal.hold(lock);
         journal.abort_after(abort_after);
         journal.append(Event::Resume)?;
         return Ok(journal);
     }
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    directory::refuse_links(dir)?;
+    let lock = directory::lock(dir, &format!("run {}", mission.source.file.display()))?;
     let mut journal = Journal::create(&journal_path)?;
+    journal.hold(lock);
     journal.abort_after(abort_after);
     std::fs::write(&mission_copy, &mission.source.text)
         .with_context(|| format!("writing {}", mission_copy.display()))?;

@@ -88,6 +88,8 @@ pub struct RunSummary {
     pub files: Vec<String>,
     /// Points in the merged cloud.
     pub points: usize,
+    /// Why the viewer (`--spawn`, `--connect`) did not get the recording.
+    pub viewer_warning: Option<String>,
 }
 
 /// A drive goal as journaled: x, y, heading.
@@ -651,7 +653,9 @@ impl Run<'_> {
         self.steps.rec.info(format!("mission ends: acceptance {}", if accepted { "passed" } else { "FAILED" }))?;
         let recording = std::mem::replace(&mut self.steps.rec, Recorder::disabled());
         let recorded = recording.enabled();
-        timed(&mut self.timings.recording_s, || recording.finish())?;
+        // The recording's end is not allowed to cost the reports: they are
+        // written whatever it says, and its error (a full disk) comes after.
+        let recording_end = timed(&mut self.timings.recording_s, || recording.finish());
         self.timings.wall_s = started.elapsed().as_secs_f64();
         let mut report =
             RunReport::new(self.mission, &self.stations, fusion, written.pipe.clone(), accepted, self.timings)?;
@@ -659,6 +663,11 @@ impl Run<'_> {
         super::report::write_json(&self.dir.join("report.json"), &report)?;
         let adjusted = report.adjustment.as_ref().and_then(AdjustmentOutcome::report);
         super::report::write_stations_csv(&self.dir.join("stations.csv"), &self.stations, adjusted)?;
+        let viewer_warning = recording_end.map_err(|e| {
+            anyhow::anyhow!(
+                "{e:#}; report.json and stations.csv are written, `run --resume` writes the recording again"
+            )
+        })?;
         self.steps.note(Event::End(Derived { key: EndKey {}, data: EndRecord { accepted } }))?;
         let mut files: Vec<String> =
             ["mission.toml", "journal.jsonl", "scans/", "report.json", "stations.csv"].map(String::from).to_vec();
@@ -677,6 +686,7 @@ impl Run<'_> {
             report,
             files,
             points: written.points,
+            viewer_warning,
         })
     }
 }

@@ -64,6 +64,19 @@ impl Steps {
                     self.journal.append(T::event(Recorded { key, data: data.clone(), sim }))?;
                     return Ok(data);
                 }
+                // A file that cannot be written is not a device fault:
+                // no retry (the device would measure again for nothing).
+                Err(scanner::ScannerError::Io { path, source }) => {
+                    self.rec.error(format!("writing {}: {source}: mission stopped", path.display()))?;
+                    bail!(
+                        "writing {}: {source}. A file-system error, not a {} fault: the mission stopped cleanly; \
+                         the journal keeps every reading before it. Free space (or fix the permission), then \
+                         continue with: {}",
+                        path.display(),
+                        device.name(),
+                        self.resume_hint
+                    );
+                }
                 Err(e) if attempt < self.max_retries => {
                     attempt += 1;
                     let step = to_step_key(key.clone());

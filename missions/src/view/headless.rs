@@ -185,8 +185,8 @@ impl Recorder {
     /// Does nothing.
     pub fn icp_metrics(&mut self, _at: i64, _rmse_m: f64) {}
 
-    /// Nothing to flush.
-    pub fn finish(self) -> Result<()> {
-        Ok(())
+    /// Nothing to flush, no viewer to warn about.
+    pub fn finish(self) -> Result<Option<String>> {
+        Ok(None)
     }
 }

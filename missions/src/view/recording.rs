@@ -42,7 +42,8 @@
 //! | `plan/metrics/{predicted_sigma_xy_m,predicted_sigma_heading_rad}` | `Scalars`, column-wise | each parent fix |
 
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use cps::geom::Scene;
@@ -214,7 +215,20 @@ pub struct Recorder {
     robots: Vec<String>,
     series: Series,
     trajectories: BTreeMap<&'static str, Vec<[f32; 3]>>,
+    /// The recording file, if any (named in its errors).
+    file: Option<PathBuf>,
+    /// The viewer's URL, if the recording streams to one.
+    viewer: Option<String>,
 }
+
+/// How long the end of a recording waits for a viewer to take it.
+pub const VIEWER_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// How long the end of a recording waits for a file that stopped growing.
+pub const FILE_STALL: Duration = Duration::from_secs(5);
+
+/// One wait of a flush, between looks at the file.
+const FLUSH_SLICE: Duration = Duration::from_millis(500);
 
 fn rr<T, E: std::error::Error + Send + Sync + 'static>(r: Result<T, E>) -> Result<T> {
     r.context("logging to the Rerun recording")
@@ -295,6 +309,8 @@ impl Recorder {
             robots: Vec::new(),
             series: Series::default(),
             trajectories: BTreeMap::new(),
+            file: None,
+            viewer: None,
         }
     }
 
@@ -313,12 +329,18 @@ impl Recorder {
         let url = match viewer {
             Viewer::None => None,
             Viewer::Spawn => {
-                rerun::spawn(&rerun::SpawnOptions::default())
-                    .context("starting the Rerun viewer (is `rerun` on the PATH?)")?;
+                // Bound to the loopback interface: the viewer's default
+                // (every interface) would serve the survey to the network.
+                let options = rerun::SpawnOptions {
+                    extra_args: vec!["--bind".into(), "127.0.0.1".into()],
+                    ..rerun::SpawnOptions::default()
+                };
+                rerun::spawn(&options).context("starting the Rerun viewer (is `rerun` on the PATH?)")?;
                 Some(format!("rerun+http://127.0.0.1:{}/proxy", rerun::DEFAULT_SERVER_PORT))
             }
             Viewer::Connect(url) => Some(url.clone()),
         };
+        let viewer = url.clone();
         let rec = match (file, url) {
             (None, None) => return Ok(Self::disabled()),
             (Some(path), None) => rr(builder.set_sinks((file_sink(path)?,)))?,
@@ -339,7 +361,14 @@ impl Recorder {
                 Ok(())
             })
             .context("starting the recording's scan thread")?;
-        Ok(Self { rec: Some(rec), scans: Some((send, worker)), robots, ..Self::disabled() })
+        Ok(Self {
+            rec: Some(rec),
+            scans: Some((send, worker)),
+            robots,
+            file: file.map(Path::to_path_buf),
+            viewer,
+            ..Self::disabled()
+        })
     }
 
     /// Sends the default layout (the viewer opens with it; "reset
@@ -885,13 +914,16 @@ impl Recorder {
     }
 
     /// Waits for the scans, sends the time series column-wise and flushes
-    /// the recording.
-    pub fn finish(mut self) -> Result<()> {
+    /// the recording. A viewer that does not take it within
+    /// [`VIEWER_TIMEOUT`] (gone, never there, no display) is not an error:
+    /// the warning is returned, the file is complete. A file that cannot be
+    /// written (disk full) is an error naming it.
+    pub fn finish(mut self) -> Result<Option<String>> {
         if let Some((send, worker)) = self.scans.take() {
             drop(send);
             worker.join().map_err(|_| anyhow::anyhow!("the recording's scan thread panicked"))??;
         }
-        let Some(rec) = &self.rec else { return Ok(()) };
+        let Some(rec) = &self.rec else { return Ok(None) };
         let s = &self.series;
         let columns = |path: &str, steps: &[i64], values: &[f64]| -> Result<()> {
             if steps.is_empty() {
@@ -909,9 +941,63 @@ impl Recorder {
         columns("metrics/error_xy_m", &s.error_steps, &s.error_xy_m)?;
         columns("metrics/fix_sigma0_squared", &s.fix_steps, &s.sigma0_squared)?;
         columns("metrics/icp_rmse_m", &s.icp_steps, &s.icp_rmse_m)?;
-        rr(rec.flush_blocking())?;
-        Ok(())
+        self.flush()
     }
+
+    /// Flushes the recording, never waiting without end: rerun 0.36
+    /// blocks for good on a file writer that failed (a full disk), so the
+    /// wait goes on only while `mission.rrd` grows, and a stream left in
+    /// that state is not dropped (its drop would block too).
+    fn flush(&mut self) -> Result<Option<String>> {
+        use rerun::sink::SinkFlushError;
+        let Some(rec) = &self.rec else { return Ok(None) };
+        let file = self.file.clone();
+        let name = || file.as_ref().map_or_else(|| "the recording".to_string(), |f| f.display().to_string());
+        let size = || file.as_ref().and_then(|f| std::fs::metadata(f).ok()).map(|m| m.len());
+        let started = Instant::now();
+        let (mut last_size, mut grew_at) = (size(), Instant::now());
+        let failure = loop {
+            match rec.flush_with_timeout(FLUSH_SLICE) {
+                Ok(()) => return Ok(None),
+                // The gRPC sink's failure: the viewer is gone or never
+                // came; the file sink (flushed first) is complete.
+                Err(e @ SinkFlushError::Failed { .. }) if self.viewer.is_some() && e.to_string().contains("gRPC") => {
+                    let url = self.viewer.as_deref().unwrap_or_default();
+                    return Ok(Some(viewer_warning(url, &e, file.as_deref())));
+                }
+                Err(SinkFlushError::Timeout) => {
+                    let now = size();
+                    if now != last_size {
+                        (last_size, grew_at) = (now, Instant::now());
+                    }
+                    if let Some(url) = self.viewer.as_deref()
+                        && started.elapsed() >= VIEWER_TIMEOUT
+                        && grew_at.elapsed() >= FILE_STALL
+                    {
+                        std::mem::forget(self.rec.take());
+                        let e = SinkFlushError::Timeout;
+                        return Ok(Some(viewer_warning(url, &e, None)));
+                    }
+                    if self.viewer.is_none() && grew_at.elapsed() >= FILE_STALL {
+                        break anyhow::anyhow!(
+                            "not written: it stopped growing at {} bytes for {} s (is the disk full?)",
+                            last_size.unwrap_or(0),
+                            FILE_STALL.as_secs()
+                        );
+                    }
+                }
+                Err(e) => break anyhow::Error::new(e),
+            }
+        };
+        std::mem::forget(self.rec.take());
+        Err(failure.context(format!("writing {}", name())))
+    }
+}
+
+/// What a run says when its viewer did not take the recording.
+fn viewer_warning(url: &str, e: &rerun::sink::SinkFlushError, file: Option<&Path>) -> String {
+    let kept = file.map_or_else(String::new, |f| format!("; {} is complete", f.display()));
+    format!("the viewer at {url} did not take the recording within {} s ({e}){kept}", VIEWER_TIMEOUT.as_secs())
 }
 
 /// Writes a plan recording (`plan`/`predict --rrd FILE`): the scene and
@@ -925,7 +1011,7 @@ pub fn write_plan_rrd(mission: &Mission, path: &Path, plans: &[(&str, &Planned, 
     for (root, planned, violations) in plans {
         rec.plan(mission, planned, root, violations)?;
     }
-    rec.finish()
+    rec.finish().map(|_| ())
 }
 
 #[cfg(test)]

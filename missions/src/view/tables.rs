@@ -440,6 +440,9 @@ pub fn run_summary(out: &mut dyn Write, mission: &Mission, s: &RunSummary) -> st
         writeln!(out, "resumed: {} journal events replayed", s.replayed)?;
     }
     writeln!(out, "outputs in {}: {}", s.dir.display(), s.files.join(", "))?;
+    if let Some(warning) = &s.viewer_warning {
+        writeln!(out, "warning: {warning}")?;
+    }
     if s.files.iter().any(|f| f == "mission.rrd") {
         writeln!(out, "view with: rerun {}", s.dir.join("mission.rrd").display())?;
     } else if mission.output.rerun {

@@ -1,0 +1,82 @@
+//! A full disk (a file-size limit, `ulimit -f`, stands in for it: writes
+//! past it fail with EFBIG) is a file-system error naming the file — never
+//! a device fault, never retried, never a hang — and `--resume` finishes
+//! the run once there is room.
+#![cfg(feature = "recording")]
+
+use std::path::Path;
+use std::process::Command;
+
+/// The hall's first three stations at 8 slices, without control.
+fn short_hall(dir: &Path) -> std::path::PathBuf {
+    let hall = std::fs::read_to_string(format!("{}/examples/hall.toml", env!("CARGO_MANIFEST_DIR"))).expect("hall");
+    let route = "[[1.5, 4.2, 1.5], [37.5, 4.2, 1.5], [37.5, 7.8, 1.5], [1.5, 7.8, 1.5]]";
+    assert!(hall.contains(route) && hall.contains("control_at = [0, 10, 21]"), "hall.toml changed: update this test");
+    let text = hall
+        .replace(route, "[[1.5, 4.2, 1.5], [8.7, 4.2, 1.5]]")
+        .replace("control_at = [0, 10, 21]", "")
+        .replace("slices = 180", "slices = 8");
+    let path = dir.join("m.toml");
+    std::fs::write(&path, text.split("[[control]]").next().expect("before the control")).expect("mission");
+    path
+}
+
+/// `run` under a file-size limit of `blocks` (512 or 1024 bytes each,
+/// as the shell counts them); (exit code, stderr).
+fn run_limited(blocks: u32, mission: &Path, out: &Path) -> (Option<i32>, String) {
+    let script = format!("ulimit -f {blocks}; trap '' XFSZ; exec \"$0\" run \"$1\" --out \"$2\" --quiet");
+    let output = Command::new("sh")
+        .args(["-c", &script, env!("CARGO_BIN_EXE_cps-survey")])
+        .args([mission, out])
+        .output()
+        .expect("sh runs");
+    (output.status.code(), String::from_utf8_lossy(&output.stderr).into_owned())
+}
+
+fn resume(mission: &Path, out: &Path) -> Option<i32> {
+    let mission = mission.to_str().expect("utf-8");
+    let out = out.to_str().expect("utf-8");
+    Command::new(env!("CARGO_BIN_EXE_cps-survey"))
+        .args(["run", mission, "--out", out, "--quiet", "--resume"])
+        .output()
+        .expect("the binary runs")
+        .status
+        .code()
+}
+
+#[test]
+fn a_scan_file_that_cannot_be_written_is_named_and_not_retried() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mission = short_hall(dir.path());
+    let out = dir.path().join("run");
+    // 60 blocks: 30 or 60 KB; a scan file is ~85 KB, the journal ~1 KB then.
+    let (code, stderr) = run_limited(60, &mission, &out);
+    assert_eq!(code, Some(2), "{stderr}");
+    assert!(
+        stderr.contains("scans/scan000.3d") && stderr.contains("A file-system error, not a scanner fault"),
+        "{stderr}"
+    );
+    let journal = std::fs::read_to_string(out.join("journal.jsonl")).expect("journal");
+    assert!(!journal.contains("\"retry\""), "not retried as a device fault: {journal}");
+    assert_eq!(resume(&mission, &out), Some(0));
+    assert!(out.join("report.json").exists());
+}
+
+#[test]
+fn a_recording_that_cannot_be_written_is_named_and_the_reports_are_kept() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mission = short_hall(dir.path());
+    let out = dir.path().join("run");
+    // 200 blocks: 100 or 200 KB; the scans, the cloud and the reports fit,
+    // the recording (~290 KB) does not.
+    let (code, stderr) = run_limited(200, &mission, &out);
+    assert_eq!(code, Some(2), "{stderr}");
+    assert!(stderr.contains("mission.rrd") && stderr.contains("is the disk full?"), "{stderr}");
+    for file in ["report.json", "stations.csv", "cloud.ply"] {
+        assert!(out.join(file).exists(), "{file} kept");
+    }
+    assert_eq!(resume(&mission, &out), Some(0));
+    let journal = std::fs::read_to_string(out.join("journal.jsonl")).expect("journal");
+    assert!(journal.lines().last().is_some_and(|l| l.starts_with("{\"event\":\"end\"")), "the journal ends");
+    assert!(std::fs::metadata(out.join("mission.rrd")).expect("rrd").len() > 200 * 1024, "the recording rewritten");
+}
