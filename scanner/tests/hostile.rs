@@ -97,3 +97,30 @@ fn las_counts_and_scales_are_claims() {
     nan[131..139].copy_from_slice(&f64::NAN.to_le_bytes());
     refused(&file(d, "nan-scale.las", &nan), "scale");
 }
+
+#[test]
+fn errors_name_the_place_and_say_what_was_expected() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    // A number beyond f32 on line 2 of an XYZ file: named there, not later.
+    let xyz = file(dir.path(), "big.xyz", b"0 0 0\n1e300 0 0\n");
+    refused(&xyz, "line 2: '1e300 0 0' overflows a 32-bit float");
+    // Random bytes are not a PLY file (not "stream did not contain valid UTF-8").
+    let noise: Vec<u8> = (0u32..300).map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8).collect();
+    let ply = file(dir.path(), "noise.ply", &noise);
+    refused(&ply, "not a PLY file: expected it to begin with 'ply'");
+    // Binary data has no lines: the file is named as a whole.
+    let mut short = b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n".to_vec();
+    short.extend_from_slice(&[0u8; 36]);
+    short.truncate(short.len() - 30);
+    let ply = file(dir.path(), "short.ply", &short);
+    let e = read(&ply).expect_err("truncated binary");
+    let text = e.to_string();
+    assert!(matches!(e, ScannerError::File { location: scanner::Location::File, .. }), "{text}");
+    assert!(text.contains("binary element 'vertex'") && !text.contains(": line "), "{text}");
+    // An ASCII row that does not parse: its line, the row, what was expected,
+    // and no parser dump.
+    let ascii = b"ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\nend_header\n1 2 3\n1 2 x\n";
+    let ply = file(dir.path(), "bad.ply", ascii);
+    refused(&ply, "line 9: '1 2 x' is not a row of element 'vertex': expected x y z");
+    assert!(!read(&ply).expect_err("bad row").to_string().contains("String:"));
+}

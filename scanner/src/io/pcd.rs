@@ -320,7 +320,7 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
                 Vec::new()
             } else {
                 lzf::decompress(stream, raw).map_err(|e| {
-                    ScannerError::file(path, Location::Byte((h.offset + 8) as u64), format!("corrupt LZF data: {e:?}"))
+                    ScannerError::file(path, Location::Byte((h.offset + 8) as u64), format!("corrupt LZF data: {e}"))
                 })?
             };
             if plain.len() != raw {

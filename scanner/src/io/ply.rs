@@ -67,9 +67,40 @@ impl PropertyAccess for Vertex {
     }
 }
 
-fn ply_error(path: &Path, e: &ply_rs_bw::parser::ParseError) -> ScannerError {
-    let location = e.line().map_or(Location::File, Location::Line);
-    ScannerError::file(path, location, e.to_string())
+/// A `ply-rs` error as ours: a line only where there are lines (the header,
+/// ASCII data); for a row that does not parse, the row and what the
+/// element's properties expect, else the parser's message on one line
+/// (without its own "Line N:" prefix and nested dump).
+fn ply_error(path: &Path, e: &ply_rs_bw::parser::ParseError, data: Option<(&ElementDef, Encoding)>) -> ScannerError {
+    let binary = data.is_some_and(|(_, encoding)| encoding != Encoding::Ascii);
+    let location = e.line().filter(|_| !binary).map_or(Location::File, Location::Line);
+    let text = e.to_string();
+    let row = text.split_once("String: '").and_then(|(_, rest)| rest.split_once('\'')).map(|(row, _)| row.trim());
+    if let (Some(row), Some((element, Encoding::Ascii))) = (row, data) {
+        let names: Vec<&str> = element.properties.keys().map(String::as_str).collect();
+        let message = format!("'{row}' is not a row of element '{}': expected {}", element.name, names.join(" "));
+        return ScannerError::file(path, location, message);
+    }
+    let text = match e.line() {
+        Some(n) => text.strip_prefix(&format!("Line {n}: ")).unwrap_or(&text).to_string(),
+        None => text,
+    };
+    let parts: Vec<&str> = text
+        .lines()
+        .map(|l| l.trim().trim_start_matches("Error: ").trim_end_matches('.'))
+        .filter(|l| !l.is_empty())
+        .collect();
+    ScannerError::file(path, location, parts.join(": "))
+}
+
+/// Refuses a file that does not begin as a PLY file must (`ply` and a line
+/// end), before the header parser reads it as text.
+fn check_magic(path: &Path, reader: &mut impl std::io::BufRead) -> Result<()> {
+    let head = reader.fill_buf().map_err(|e| ScannerError::io(path, e))?;
+    if !(head.starts_with(b"ply\n") || head.starts_with(b"ply\r")) {
+        return Err(ScannerError::file(path, Location::File, "not a PLY file: expected it to begin with 'ply'"));
+    }
+    Ok(())
 }
 
 /// Bytes of one scalar.
@@ -125,14 +156,18 @@ fn check_counts(path: &Path, header: &ply_rs_bw::ply::Header) -> Result<()> {
 
 pub(super) fn read(path: &Path) -> Result<PointCloud> {
     let file = std::fs::File::open(path).map_err(|e| ScannerError::io(path, e))?;
-    let mut reader = Reader::new(BufReader::with_capacity(1 << 20, file));
+    let mut buffered = BufReader::with_capacity(1 << 20, file);
+    check_magic(path, &mut buffered)?;
+    let mut reader = Reader::new(buffered);
     let parser = Parser::<Vertex>::new();
-    let header = parser.read_header(&mut reader).map_err(|e| ply_error(path, &e))?;
+    let header = parser.read_header(&mut reader).map_err(|e| ply_error(path, &e, None))?;
     check_counts(path, &header)?;
     let mut cloud = PointCloud::default();
     let mut found = false;
     for element in header.elements.values() {
-        let items = parser.read_payload_for_element(&mut reader, element, &header).map_err(|e| ply_error(path, &e))?;
+        let items = parser
+            .read_payload_for_element(&mut reader, element, &header)
+            .map_err(|e| ply_error(path, &e, Some((element, header.encoding))))?;
         if element.name != "vertex" {
             continue;
         }

@@ -58,9 +58,18 @@ fn read_columns(path: &Path, map: impl Fn(f64, f64, f64) -> Point3<f32>) -> Resu
                 ),
             ));
         }
-        cloud.points.push(map(row[0], row[1], row[2]));
-        if row.len() == 4 {
-            cloud.intensity.get_or_insert_with(Vec::new).push(row[3] as f32);
+        let p = map(row[0], row[1], row[2]);
+        let intensity = row.get(3).map(|&i| i as f32);
+        if !p.iter().chain(intensity.as_ref()).all(|v| v.is_finite()) {
+            return Err(ScannerError::file(
+                path,
+                Location::Line(k + 1),
+                format!("'{t}' overflows a 32-bit float: expected values within ±{:e}", f32::MAX),
+            ));
+        }
+        cloud.points.push(p);
+        if let Some(i) = intensity {
+            cloud.intensity.get_or_insert_with(Vec::new).push(i);
         }
     }
     Ok(cloud)
