@@ -4,22 +4,10 @@
 //! the run once there is room.
 #![cfg(feature = "recording")]
 
+mod common;
+
 use std::path::Path;
 use std::process::Command;
-
-/// The hall's first three stations at 8 slices, without control.
-fn short_hall(dir: &Path) -> std::path::PathBuf {
-    let hall = std::fs::read_to_string(format!("{}/examples/hall.toml", env!("CARGO_MANIFEST_DIR"))).expect("hall");
-    let route = "[[1.5, 4.2, 1.5], [37.5, 4.2, 1.5], [37.5, 7.8, 1.5], [1.5, 7.8, 1.5]]";
-    assert!(hall.contains(route) && hall.contains("control_at = [0, 10, 21]"), "hall.toml changed: update this test");
-    let text = hall
-        .replace(route, "[[1.5, 4.2, 1.5], [8.7, 4.2, 1.5]]")
-        .replace("control_at = [0, 10, 21]", "")
-        .replace("slices = 180", "slices = 8");
-    let path = dir.join("m.toml");
-    std::fs::write(&path, text.split("[[control]]").next().expect("before the control")).expect("mission");
-    path
-}
 
 /// `run` under a file-size limit of `blocks` (512 or 1024 bytes each,
 /// as the shell counts them); (exit code, stderr).
@@ -47,7 +35,7 @@ fn resume(mission: &Path, out: &Path) -> Option<i32> {
 #[test]
 fn a_scan_file_that_cannot_be_written_is_named_and_not_retried() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let mission = short_hall(dir.path());
+    let mission = common::short_hall(dir.path(), false);
     let out = dir.path().join("run");
     // 60 blocks: 30 or 60 KB; a scan file is ~85 KB, the journal ~1 KB then.
     let (code, stderr) = run_limited(60, &mission, &out);
@@ -65,7 +53,7 @@ fn a_scan_file_that_cannot_be_written_is_named_and_not_retried() {
 #[test]
 fn a_recording_that_cannot_be_written_is_named_and_the_reports_are_kept() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let mission = short_hall(dir.path());
+    let mission = common::short_hall(dir.path(), false);
     let out = dir.path().join("run");
     // 200 blocks: 100 or 200 KB; the scans, the cloud and the reports fit,
     // the recording (~290 KB) does not.

@@ -3,6 +3,8 @@
 //! recording explicitly is refused before anything is computed.
 #![cfg(not(feature = "recording"))]
 
+mod common;
+
 use std::process::Command;
 
 fn cps_survey(args: &[&str]) -> std::process::Output {
@@ -12,20 +14,7 @@ fn cps_survey(args: &[&str]) -> std::process::Output {
 #[test]
 fn a_headless_run_writes_everything_but_the_recording() {
     let dir = tempfile::tempdir().expect("tmp");
-    let hall = std::fs::read_to_string(format!("{}/examples/hall.toml", env!("CARGO_MANIFEST_DIR"))).expect("hall");
-    let mission = dir.path().join("m.toml");
-    let text = hall
-        .replace(
-            "[[1.5, 4.2, 1.5], [37.5, 4.2, 1.5], [37.5, 7.8, 1.5], [1.5, 7.8, 1.5]]",
-            "[[1.5, 4.2, 1.5], [8.7, 4.2, 1.5]]",
-        )
-        .replace("control_at = [0, 10, 21]", "")
-        .replace("slices = 180", "slices = 8");
-    // Without its control (the control points are the file's last tables):
-    // the short route sights only the west wall's.
-    let text = text.split("[[control]]").next().expect("the text before the control points").to_string();
-    assert!(!text.contains("control_at"), "hall.toml's control_at changed: update this test");
-    std::fs::write(&mission, text).expect("mission");
+    let mission = common::short_hall(dir.path(), false);
     let out = dir.path().join("run");
     let run = cps_survey(&["run", mission.to_str().expect("utf-8"), "--out", out.to_str().expect("utf-8"), "--quiet"]);
     assert_eq!(run.status.code(), Some(0), "{}", String::from_utf8_lossy(&run.stderr));

@@ -180,6 +180,11 @@ fn resume_refuses_another_mission_and_a_missing_run() {
     let nothing = run(&m, &out, &["--resume"]);
     assert_eq!(nothing.status.code(), Some(2));
     assert!(stderr(&nothing).contains("no run to resume"), "{}", stderr(&nothing));
+    assert!(!out.exists(), "nothing created by a resume with nothing to resume");
+    std::fs::create_dir(&out).expect("an empty directory");
+    assert_eq!(run(&m, &out, &["--resume"]).status.code(), Some(2));
+    assert_eq!(std::fs::read_dir(&out).expect("out").count(), 0, "still empty (no scans/, no lock)");
+    std::fs::remove_dir(&out).expect("remove");
 
     assert!(!run(&m, &out, &["--abort-after-events", "10"]).status.success());
     let other = mission(dir.path(), 72, 1.0);

@@ -5,23 +5,10 @@
 //! down how it was started).
 #![cfg(feature = "recording")]
 
+mod common;
+
 use std::path::Path;
 use std::process::Command;
-
-/// The hall's first three stations, with the west wall's control only.
-fn short_hall(dir: &Path) -> std::path::PathBuf {
-    let hall = std::fs::read_to_string(format!("{}/examples/hall.toml", env!("CARGO_MANIFEST_DIR"))).expect("hall");
-    let route = "[[1.5, 4.2, 1.5], [37.5, 4.2, 1.5], [37.5, 7.8, 1.5], [1.5, 7.8, 1.5]]";
-    assert!(hall.contains(route) && hall.contains("control_at = [0, 10, 21]"), "hall.toml changed: update this test");
-    let text = hall
-        .replace(route, "[[1.5, 4.2, 1.5], [8.7, 4.2, 1.5]]")
-        .replace("control_at = [0, 10, 21]", "control_at = [0]")
-        .replace("slices = 180", "slices = 8");
-    let text = text.split("[[control]]\nname = \"E1\"").next().expect("before E1");
-    let path = dir.join("m.toml");
-    std::fs::write(&path, text).expect("mission");
-    path
-}
 
 /// Runs the binary with `path` as its PATH; (exit code, stdout, stderr).
 fn run(mission: &Path, out: &Path, viewer: &[&str], path: &str) -> (Option<i32>, String, String) {
@@ -47,7 +34,7 @@ fn assert_finished(out: &Path) {
 #[test]
 fn a_viewer_that_is_not_there_costs_a_warning_not_the_run() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let mission = short_hall(dir.path());
+    let mission = common::short_hall(dir.path(), true);
     let system_path = std::env::var("PATH").unwrap_or_default();
 
     // --connect to a port nobody listens on.

@@ -133,28 +133,51 @@ impl Evaluated {
         setups(&self.dance)
     }
 
+    /// What ranks it, without its schedule.
+    fn score(&self) -> Score {
+        Score {
+            sigma_xy2_m2: self.sigma_xy2_m2,
+            worst_station_sigma_xy_m: self.worst_station_sigma_xy_m,
+            cycles: self.cycles(),
+            control_setups: self.control_setups(),
+        }
+    }
+
     fn cmp_by(&self, other: &Self, objective: &Objective) -> std::cmp::Ordering {
-        let (a, b) = (self.score(objective), other.score(objective));
+        self.score().cmp_by(&other.score(), objective)
+    }
+}
+
+/// What ranks a candidate: the grid's thousands are ranked by it, their
+/// schedules dropped (a schedule is rebuilt only for the few checked
+/// against the scene: memory stays that of one schedule per thread).
+#[derive(Debug, Clone, Copy)]
+struct Score {
+    sigma_xy2_m2: f64,
+    worst_station_sigma_xy_m: Option<f64>,
+    cycles: usize,
+    control_setups: usize,
+}
+
+impl Score {
+    fn cmp_by(&self, other: &Self, objective: &Objective) -> std::cmp::Ordering {
+        let (a, b) = (self.key(objective), other.key(objective));
         a.0.cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)).then(a.3.total_cmp(&b.3))
     }
 
-    fn score(&self, objective: &Objective) -> (u8, usize, usize, f64) {
+    fn key(&self, objective: &Objective) -> (u8, usize, usize, f64) {
         match objective {
             Objective::MinVariance => (0, 0, 0, self.sigma_xy2_m2),
             Objective::FewestCycles { max_sigma_xy_m } => {
                 if self.sigma_xy2_m2.sqrt() <= *max_sigma_xy_m {
-                    (0, self.cycles(), self.control_setups(), self.sigma_xy2_m2)
+                    (0, self.cycles, self.control_setups, self.sigma_xy2_m2)
                 } else {
                     (1, 0, 0, self.sigma_xy2_m2)
                 }
             }
             Objective::FewestCyclesEveryStation { max_sigma_xy_m } => {
                 let worst = self.worst_station_sigma_xy_m.unwrap_or(f64::INFINITY);
-                if worst <= *max_sigma_xy_m {
-                    (0, self.cycles(), self.control_setups(), worst)
-                } else {
-                    (1, 0, 0, worst)
-                }
+                if worst <= *max_sigma_xy_m { (0, self.cycles, self.control_setups, worst) } else { (1, 0, 0, worst) }
             }
         }
     }
@@ -261,18 +284,26 @@ pub fn search(problem: &Problem<'_>, space: &SearchSpace, objective: Objective) 
         }
     }
     let predicted = grid.len();
-    let mut ranked: Vec<Evaluated> =
-        grid.par_iter().filter_map(|c| problem.evaluate(c, &instrument, &objective)).collect();
-    ranked.sort_by(|a, b| a.cmp_by(b, &objective));
+    let mut ranked: Vec<(Candidate, Score)> = grid
+        .par_iter()
+        .filter_map(|c| problem.evaluate(c, &instrument, &objective).map(|e| (e.candidate, e.score())))
+        .collect();
+    ranked.sort_by(|a, b| a.1.cmp_by(&b.1, &objective));
 
-    // The best feasible candidate, checking a batch at a time in parallel.
+    // The best feasible candidate, checking a batch at a time in parallel
+    // (each schedule rebuilt, checked and dropped unless it wins).
     let mut checked = 0;
     let mut best = None;
     for batch in ranked.chunks(16) {
         checked += batch.len();
-        let ok: Vec<bool> = batch.par_iter().map(|e| problem.violations(&e.dance, reach).is_empty()).collect();
-        if let Some(i) = ok.iter().position(|&ok| ok) {
-            best = Some(batch[i].clone());
+        let feasible: Vec<Option<Evaluated>> = batch
+            .par_iter()
+            .map(|(c, _)| {
+                problem.evaluate(c, &instrument, &objective).filter(|e| problem.violations(&e.dance, reach).is_empty())
+            })
+            .collect();
+        if let Some(e) = feasible.into_iter().flatten().next() {
+            best = Some(e);
             break;
         }
     }

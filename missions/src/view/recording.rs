@@ -986,7 +986,7 @@ impl Recorder {
                         );
                     }
                 }
-                Err(e) => break anyhow::Error::new(e),
+                Err(e) => break anyhow::anyhow!("{e} (is the disk full?)"),
             }
         };
         std::mem::forget(self.rec.take());
