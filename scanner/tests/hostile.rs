@@ -93,9 +93,14 @@ fn las_counts_and_scales_are_claims() {
     huge[247..255].copy_from_slice(&(1u64 << 63).to_le_bytes());
     refused(&file(d, "huge.las", &huge), "points of");
     // A NaN x scale (f64 at 131).
-    let mut nan = good;
+    let mut nan = good.clone();
     nan[131..139].copy_from_slice(&f64::NAN.to_le_bytes());
     refused(&file(d, "nan-scale.las", &nan), "scale");
+    // A finite x scale of 1e300 makes every x overflow f32 (found by the
+    // scan_file fuzz target): refused, not an infinite point.
+    let mut vast = good;
+    vast[131..139].copy_from_slice(&1e300f64.to_le_bytes());
+    refused(&file(d, "vast-scale.las", &vast), "overflows a 32-bit float");
 }
 
 #[test]

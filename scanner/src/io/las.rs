@@ -58,7 +58,23 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
         }
         for (i, p) in data.points().enumerate() {
             let p = p.map_err(|e| ScannerError::whole_file(path, format!("point {}: {e}", read + i as u64)))?;
-            cloud.points.push(Point3::new(p.x as f32, p.y as f32, p.z as f32));
+            let point = Point3::new(p.x as f32, p.y as f32, p.z as f32);
+            if !point.iter().all(|v| v.is_finite()) {
+                return Err(ScannerError::file(
+                    path,
+                    Location::File,
+                    format!(
+                        "point {}: ({}, {}, {}) m overflows a 32-bit float: expected coordinates within ±{:e} \
+                         (the header's scales and offsets make them)",
+                        read + i as u64,
+                        p.x,
+                        p.y,
+                        p.z,
+                        f32::MAX
+                    ),
+                ));
+            }
+            cloud.points.push(point);
             intensity.push(f32::from(p.intensity));
         }
         read += n;
