@@ -68,7 +68,7 @@ fn ply_counts_are_claims() {
 fn las_bytes(dir: &Path) -> Vec<u8> {
     let cloud = PointCloud {
         points: vec![Point3::new(1.0, 2.0, 3.0), Point3::new(4.0, 5.0, 6.0), Point3::new(7.0, 8.0, 9.0)],
-        intensity: None,
+        ..PointCloud::default()
     };
     let path = dir.join("good.las");
     write(&path, &cloud, Format::Las).expect("write LAS");
@@ -98,9 +98,20 @@ fn las_counts_and_scales_are_claims() {
     refused(&file(d, "nan-scale.las", &nan), "scale");
     // A finite x scale of 1e300 makes every x overflow f32 (found by the
     // scan_file fuzz target): refused, not an infinite point.
-    let mut vast = good;
+    let mut vast = good.clone();
     vast[131..139].copy_from_slice(&1e300f64.to_le_bytes());
     refused(&file(d, "vast-scale.las", &vast), "overflows a 32-bit float");
+    // An extended VLR (LAS 1.4: start u64 at 235, count u32 at 243) whose
+    // 64-bit length is 2^62 (found by the fuzz target: 5.7 EB asked of the
+    // allocator).
+    let mut evlr = good;
+    let start = evlr.len() as u64;
+    evlr[235..243].copy_from_slice(&start.to_le_bytes());
+    evlr[243..247].copy_from_slice(&1u32.to_le_bytes());
+    let mut record = vec![0u8; 60];
+    record[20..28].copy_from_slice(&(1u64 << 62).to_le_bytes());
+    evlr.extend_from_slice(&record);
+    refused(&file(d, "evlr.las", &evlr), "extended VLR 0 of 1 claims 4611686018427387904 bytes");
 }
 
 #[test]
