@@ -16,7 +16,7 @@ fn cloud(n: usize, intensity: bool) -> PointCloud {
         })
         .collect();
     let intensity = intensity.then(|| (0..n).map(|_| rng.random_range(0.0..1000.0f32).round()).collect());
-    PointCloud { points, intensity }
+    PointCloud { points, intensity, ..PointCloud::default() }
 }
 
 fn round_trip(name: &str, format: Format, intensity: bool) -> (PointCloud, PointCloud) {

@@ -46,7 +46,7 @@ pub fn run(args: &FuseArgs, out: &mut dyn Write) -> Result<Outcome> {
     let fused = crate::run::fuse::fuse(views, mode, &mission.fusion, scanner, false, &mut |_, _| {})?;
     let target = dir.join("fusion").join(mode.name());
     std::fs::create_dir_all(&target).with_context(|| format!("creating {}", target.display()))?;
-    let cloud = crate::run::fuse::merged(views, &fused);
+    let cloud = crate::run::fuse::merged(views, &fused, &mission.cloud_origin());
     let written =
         crate::run::outputs::write(mission, &target, cloud, &mut Recorder::disabled(), &mut Timings::default())?;
     let mut report = FusionReport::new(views, &fused);

@@ -20,7 +20,7 @@ use anyhow::{Context, Result};
 use cps::ParentPose;
 use fusion::icp::{IcpConfig, Kernel};
 use fusion::multiview::{MultiviewConfig, Strategy};
-use nalgebra::{Isometry3, Matrix4, Point3};
+use nalgebra::{Isometry3, Matrix4, Point3, Translation3, Vector3};
 use scanner::Tilt;
 
 use crate::mission::{FusionMode, FusionPlan};
@@ -215,11 +215,18 @@ pub fn error_heading(a: &Isometry3<f64>, b: &Isometry3<f64>) -> f64 {
     cps::wrap_angle(xa.y.atan2(xa.x) - xb.y.atan2(xb.x))
 }
 
-/// The merged world-frame cloud of `views` at the `fused` poses.
-pub fn merged(views: &[ScanView], fused: &Fused) -> Vec<Point3<f32>> {
+/// The merged world-frame cloud of `views` at the `fused` poses, relative
+/// to `origin` (see [`crate::mission::Mission::cloud_origin`]).
+pub fn merged(views: &[ScanView], fused: &Fused, origin: &Vector3<f64>) -> Vec<Point3<f32>> {
     let mut out = Vec::with_capacity(views.iter().map(|v| v.body.len()).sum());
     for (v, f) in views.iter().zip(&fused.scans) {
-        out.extend(fusion::direct::transform(&v.body, &f.world_from_body));
+        out.extend(fusion::direct::transform(&v.body, &relative(origin, &f.world_from_body)));
     }
     out
+}
+
+/// `world_from_body` as seen from `origin`: the transform whose points are
+/// world coordinates minus the origin (exact in f64, small in f32).
+pub fn relative(origin: &Vector3<f64>, world_from_body: &Isometry3<f64>) -> Isometry3<f64> {
+    Translation3::from(-origin) * world_from_body
 }

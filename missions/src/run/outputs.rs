@@ -47,7 +47,7 @@ pub fn write(
     timings: &mut Timings,
 ) -> Result<Written> {
     let started = Instant::now();
-    let cloud = PointCloud::from_points(cloud);
+    let cloud = PointCloud { points: cloud, origin: mission.cloud_origin(), ..PointCloud::default() };
     let mut files = Vec::new();
     for format in &mission.output.formats {
         let name = format!("cloud.{format}");
@@ -60,16 +60,22 @@ pub fn write(
         None => None,
         Some(plan) => {
             let started = Instant::now();
-            let result = super::inspection::inspect(plan, &cloud.points);
+            // The inspection works in world coordinates (f32).
+            let world: std::borrow::Cow<'_, [Point3<f32>]> = if cloud.georeferenced() {
+                (0..cloud.len()).map(|i| Point3::from(cloud.coordinates(i)).cast::<f32>()).collect::<Vec<_>>().into()
+            } else {
+                cloud.points.as_slice().into()
+            };
+            let result = super::inspection::inspect(plan, &world);
             if let Ok(inspection) = &result {
-                super::inspection::write_deviation_map(dir, &cloud.points, inspection)?;
+                super::inspection::write_deviation_map(dir, &world, inspection)?;
                 files.push(DEVIATION_FILE.into());
             }
             timings.pipe_s = Some(started.elapsed().as_secs_f64());
             Some(match result {
                 Ok(inspection) => {
                     let t = Instant::now();
-                    rec.pipe(&cloud.points, &inspection, plan.threshold_m)?;
+                    rec.pipe(&world, &inspection, plan.threshold_m)?;
                     timings.recording_s += t.elapsed().as_secs_f64();
                     super::inspection::report(plan, &inspection)
                 }

@@ -529,11 +529,21 @@ impl Run<'_> {
         if cloud.len() != scanned.points {
             bail!("{}: {} points, but the journal recorded {}", scanned.file, cloud.len(), scanned.points);
         }
-        let world = timed(&mut self.timings.fusion_s, || fusion::direct::transform(&cloud.points, &world_from_body));
+        let origin = self.mission.cloud_origin();
+        let relative_from_body = super::fuse::relative(&origin, &world_from_body);
+        let world = timed(&mut self.timings.fusion_s, || fusion::direct::transform(&cloud.points, &relative_from_body));
         self.steps.rec.advance(slices as f64 / (75.0 * self.mission.scan.resolution.degrees()));
         if self.steps.rec.enabled() {
-            let rec = &mut self.steps.rec;
-            timed(&mut self.timings.recording_s, || rec.scan("direct", &format!("scan{index:03}"), world.clone()))?;
+            // The recording is in world coordinates (f32: a viewer's).
+            let (rec, points) = (&mut self.steps.rec, &cloud.points);
+            timed(&mut self.timings.recording_s, || {
+                let logged = if origin == nalgebra::Vector3::zeros() {
+                    world.clone()
+                } else {
+                    fusion::direct::transform(points, &world_from_body)
+                };
+                rec.scan("direct", &format!("scan{index:03}"), logged)
+            })?;
         }
         let truth = self.steps.team.truth();
         let believed = self.steps.team.parent_believed();
@@ -591,11 +601,18 @@ impl Run<'_> {
             timed(&mut self.timings.recording_s, || rec.icp_iterations(&fused.traces, &names, &bodies))?;
         }
         let (merged, t) = (&mut self.merged, &mut self.timings);
+        let origin = self.mission.cloud_origin();
         for ((view, at), f) in views.iter().zip(&self.scan_times).zip(&fused.scans) {
-            let world = timed(&mut t.fusion_s, || fusion::direct::transform(&view.body, &f.world_from_body));
+            let relative_from_body = super::fuse::relative(&origin, &f.world_from_body);
+            let world = timed(&mut t.fusion_s, || fusion::direct::transform(&view.body, &relative_from_body));
             if rec.enabled() {
                 timed(&mut t.recording_s, || -> Result<()> {
-                    rec.scan_at("icp", &format!("scan{:03}", view.station), world.clone(), *at)?;
+                    let logged = if origin == nalgebra::Vector3::zeros() {
+                        world.clone()
+                    } else {
+                        fusion::direct::transform(&view.body, &f.world_from_body)
+                    };
+                    rec.scan_at("icp", &format!("scan{:03}", view.station), logged, *at)?;
                     if let Some(rmse) = f.rmse_m {
                         rec.icp_metrics(at.0, rmse);
                     }

@@ -1,6 +1,7 @@
 //! E57 through the `e57` crate: one point cloud of f32 Cartesian
-//! coordinates (+ intensity as a unit float when present); reading takes
-//! every point cloud in the file with its pose applied.
+//! coordinates (f64 for a georeferenced cloud; + intensity as a unit float
+//! when present); reading takes every point cloud in the file with its pose
+//! applied.
 
 use std::path::Path;
 
@@ -21,7 +22,14 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
         for (i, p) in points.enumerate() {
             let p = p.map_err(|e| ScannerError::whole_file(path, format!("point {i}: {e}")))?;
             if let CartesianCoordinate::Valid { x, y, z } = p.cartesian {
-                cloud.points.push(Point3::new(x as f32, y as f32, z as f32));
+                let point = Point3::new(x as f32, y as f32, z as f32);
+                if !point.iter().all(|v| v.is_finite()) {
+                    return Err(ScannerError::whole_file(
+                        path,
+                        format!("point {i}: ({x}, {y}, {z}) m: expected coordinates within ±{:e}", f32::MAX),
+                    ));
+                }
+                cloud.points.push(point);
                 match p.intensity {
                     Some(v) => intensity.push(v),
                     None => all_have_intensity = false,
@@ -37,7 +45,13 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
 
 pub(super) fn write(path: &Path, cloud: &PointCloud) -> Result<()> {
     let mut writer = E57Writer::from_file(path, "cps-survey-e57").map_err(|e| ScannerError::whole_file(path, e))?;
-    let mut prototype = vec![Record::CARTESIAN_X_F32, Record::CARTESIAN_Y_F32, Record::CARTESIAN_Z_F32];
+    // Georeferenced: 64-bit coordinates (origin + p).
+    let georeferenced = cloud.georeferenced();
+    let mut prototype = if georeferenced {
+        vec![Record::CARTESIAN_X_F64, Record::CARTESIAN_Y_F64, Record::CARTESIAN_Z_F64]
+    } else {
+        vec![Record::CARTESIAN_X_F32, Record::CARTESIAN_Y_F32, Record::CARTESIAN_Z_F32]
+    };
     if cloud.intensity.is_some() {
         prototype.push(Record::INTENSITY_UNIT_F32);
     }
@@ -45,7 +59,11 @@ pub(super) fn write(path: &Path, cloud: &PointCloud) -> Result<()> {
         let mut pc =
             writer.add_pointcloud("cps-survey-cloud", prototype).map_err(|e| ScannerError::whole_file(path, e))?;
         for (i, p) in cloud.points.iter().enumerate() {
-            let mut values = vec![RecordValue::Single(p.x), RecordValue::Single(p.y), RecordValue::Single(p.z)];
+            let mut values = if georeferenced {
+                cloud.coordinates(i).map(RecordValue::Double).to_vec()
+            } else {
+                vec![RecordValue::Single(p.x), RecordValue::Single(p.y), RecordValue::Single(p.z)]
+            };
             if let Some(v) = &cloud.intensity {
                 values.push(RecordValue::Single(v[i]));
             }

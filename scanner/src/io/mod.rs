@@ -22,7 +22,7 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
-use nalgebra::Point3;
+use nalgebra::{Point3, Vector3};
 
 pub use pcd::PcdData;
 pub use ply::PlyEncoding;
@@ -30,19 +30,38 @@ pub use text::{from_3dtk_axes, read_3dtk_pose, read_matrix4, to_3dtk_axes, write
 
 use crate::error::{Location, Result, ScannerError};
 
-/// A point cloud: points (metres, f32) and optional per-point intensity.
+/// A point cloud: points (metres, f32) and optional per-point intensity,
+/// relative to an `origin` (f64; zero unless georeferenced). A point's
+/// coordinates are `origin + p`: f32 holds a point to a few micrometres
+/// within a kilometre of the origin, where national-grid coordinates
+/// (E 500 000, N 5 500 000) would be quantised to 0.5 m.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct PointCloud {
-    /// Points.
+    /// Points, relative to `origin`.
     pub points: Vec<Point3<f32>>,
     /// Intensity per point (file units), if the file has it.
     pub intensity: Option<Vec<f32>>,
+    /// What the points are relative to (the readers give zero; writers
+    /// add it in f64).
+    pub origin: Vector3<f64>,
 }
 
 impl PointCloud {
-    /// A cloud of points without intensity.
+    /// A cloud of points without intensity, at the zero origin.
     pub fn from_points(points: Vec<Point3<f32>>) -> Self {
-        Self { points, intensity: None }
+        Self { points, intensity: None, origin: Vector3::zeros() }
+    }
+
+    /// Whether the points are relative to a non-zero origin (the writers
+    /// then write 64-bit coordinates).
+    pub fn georeferenced(&self) -> bool {
+        self.origin != Vector3::zeros()
+    }
+
+    /// Point `i`'s coordinates, `origin + p`, in f64.
+    pub fn coordinates(&self, i: usize) -> [f64; 3] {
+        let p = &self.points[i];
+        [self.origin.x + f64::from(p.x), self.origin.y + f64::from(p.y), self.origin.z + f64::from(p.z)]
     }
 
     /// Number of points.
@@ -143,6 +162,13 @@ pub fn write(path: &Path, cloud: &PointCloud, format: Format) -> Result<()> {
             path,
             Location::File,
             format!("{} intensities for {} points: expected one per point", i.len(), cloud.points.len()),
+        ));
+    }
+    if !cloud.origin.iter().all(|v| v.is_finite()) {
+        return Err(ScannerError::file(
+            path,
+            Location::File,
+            format!("origin {:?}: expected finite coordinates", cloud.origin.as_slice()),
         ));
     }
     let tmp = temporary(path);

@@ -339,7 +339,11 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
             }
         }
     }
-    let mut cloud = PointCloud { points: Vec::with_capacity(n), intensity: ii.map(|_| Vec::with_capacity(n)) };
+    let mut cloud = PointCloud {
+        points: Vec::with_capacity(n),
+        intensity: ii.map(|_| Vec::with_capacity(n)),
+        ..PointCloud::default()
+    };
     for (i, ((x, y), z)) in values[0].iter().zip(&values[1]).zip(&values[2]).enumerate() {
         if !(x.is_finite() && y.is_finite() && z.is_finite()) {
             continue;
@@ -355,10 +359,12 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
 pub(super) fn write(w: &mut impl Write, cloud: &PointCloud, data: PcdData) -> std::io::Result<()> {
     let n = cloud.points.len();
     let with_i = cloud.intensity.is_some();
+    // Georeferenced: x, y, z as 8-byte doubles (origin + p).
+    let xyz_size = if cloud.georeferenced() { 8 } else { 4 };
     let (fields, sizes, types, counts) = if with_i {
-        ("x y z intensity", "4 4 4 4", "F F F F", "1 1 1 1")
+        ("x y z intensity", format!("{xyz_size} {xyz_size} {xyz_size} 4"), "F F F F", "1 1 1 1")
     } else {
-        ("x y z", "4 4 4", "F F F", "1 1 1")
+        ("x y z", format!("{xyz_size} {xyz_size} {xyz_size}"), "F F F", "1 1 1")
     };
     let encoding = match data {
         PcdData::Ascii => "ascii",
@@ -369,34 +375,47 @@ pub(super) fn write(w: &mut impl Write, cloud: &PointCloud, data: PcdData) -> st
         w,
         "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS {fields}\nSIZE {sizes}\nTYPE {types}\nCOUNT {counts}\nWIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA {encoding}\n"
     )?;
-    let value = |i: usize, f: usize| -> f32 {
-        match f {
-            0 => cloud.points[i].x,
-            1 => cloud.points[i].y,
-            2 => cloud.points[i].z,
-            _ => cloud.intensity.as_ref().map_or(0.0, |v| v[i]),
+    let georeferenced = cloud.georeferenced();
+    // Field f of point i: its little-endian bytes and its text.
+    let value = |i: usize, f: usize, bytes: &mut Vec<u8>| -> String {
+        if f < 3 && georeferenced {
+            let v = cloud.coordinates(i)[f];
+            bytes.extend_from_slice(&v.to_le_bytes());
+            format!("{v:.4}")
+        } else {
+            let v = match f {
+                0 => cloud.points[i].x,
+                1 => cloud.points[i].y,
+                2 => cloud.points[i].z,
+                _ => cloud.intensity.as_ref().map_or(0.0, |v| v[i]),
+            };
+            bytes.extend_from_slice(&v.to_le_bytes());
+            v.to_string()
         }
     };
     let nf = if with_i { 4 } else { 3 };
+    let mut scratch = Vec::with_capacity(8);
     match data {
         PcdData::Ascii => {
             for i in 0..n {
-                let row: Vec<String> = (0..nf).map(|f| value(i, f).to_string()).collect();
+                let row: Vec<String> = (0..nf).map(|f| value(i, f, &mut scratch)).collect();
                 writeln!(w, "{}", row.join(" "))?;
             }
         }
         PcdData::Binary => {
             for i in 0..n {
                 for f in 0..nf {
-                    w.write_all(&value(i, f).to_le_bytes())?;
+                    scratch.clear();
+                    value(i, f, &mut scratch);
+                    w.write_all(&scratch)?;
                 }
             }
         }
         PcdData::BinaryCompressed => {
-            let mut plain = Vec::with_capacity(n * nf * 4);
+            let mut plain = Vec::with_capacity(n * (nf * 4 + if georeferenced { 12 } else { 0 }));
             for f in 0..nf {
                 for i in 0..n {
-                    plain.extend_from_slice(&value(i, f).to_le_bytes());
+                    value(i, f, &mut plain);
                 }
             }
             let packed = if plain.is_empty() {

@@ -32,6 +32,8 @@ const INTENSITY_NAMES: [&str; 3] = ["intensity", "scalar_intensity", "scalar_Int
 struct Vertex {
     p: [f32; 3],
     intensity: f32,
+    /// Written as double x, y, z (a georeferenced cloud: origin + p).
+    coordinates: [f64; 3],
 }
 
 impl PropertyAccess for Vertex {
@@ -53,6 +55,15 @@ impl PropertyAccess for Vertex {
                 PropertyAccessResult::Set
             }
             None => PropertyAccessResult::Ignored,
+        }
+    }
+
+    fn get_double(&self, name: &str) -> Option<f64> {
+        match name {
+            "x" => Some(self.coordinates[0]),
+            "y" => Some(self.coordinates[1]),
+            "z" => Some(self.coordinates[2]),
+            _ => None,
         }
     }
 
@@ -201,13 +212,26 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
 }
 
 pub(super) fn write(w: &mut impl Write, cloud: &PointCloud, encoding: PlyEncoding) -> std::io::Result<()> {
-    write_scalar(w, &cloud.points, cloud.intensity.as_deref().map(|v| ("intensity", v)), encoding)
+    let scalar = cloud.intensity.as_deref().map(|v| ("intensity", v));
+    write_with(w, &cloud.points, cloud.georeferenced().then_some(cloud), scalar, encoding)
 }
 
 /// Float x, y, z and, when given, one float scalar field per vertex.
 pub(super) fn write_scalar(
     w: &mut impl Write,
     points: &[Point3<f32>],
+    scalar: Option<(&str, &[f32])>,
+    encoding: PlyEncoding,
+) -> std::io::Result<()> {
+    write_with(w, points, None, scalar, encoding)
+}
+
+/// x, y, z — double from `georeferenced`'s coordinates (origin + p), else
+/// float — and, when given, one float scalar field per vertex.
+fn write_with(
+    w: &mut impl Write,
+    points: &[Point3<f32>],
+    georeferenced: Option<&PointCloud>,
     scalar: Option<(&str, &[f32])>,
     encoding: PlyEncoding,
 ) -> std::io::Result<()> {
@@ -218,18 +242,26 @@ pub(super) fn write_scalar(
     };
     ply.header.comments.push("written by cps-survey; metres, x forward, y left, z up".into());
     let mut vertex = ElementDef::new("vertex".into());
-    let mut names = vec!["x", "y", "z"];
-    if let Some((name, _)) = scalar {
-        names.push(name);
+    let xyz = if georeferenced.is_some() { ScalarType::Double } else { ScalarType::Float };
+    for n in ["x", "y", "z"] {
+        vertex.properties.add(PropertyDef::new(n.into(), PropertyType::Scalar(xyz.clone())));
     }
-    for n in &names {
-        vertex.properties.add(PropertyDef::new((*n).into(), PropertyType::Scalar(ScalarType::Float)));
+    if let Some((name, _)) = scalar {
+        vertex.properties.add(PropertyDef::new(name.into(), PropertyType::Scalar(ScalarType::Float)));
+    }
+    if let Some(cloud) = georeferenced {
+        let o = cloud.origin;
+        ply.header.comments.push(format!("georeferenced: x, y, z are coordinates (origin {} {} {})", o.x, o.y, o.z));
     }
     ply.header.elements.add(vertex);
     let items = points
         .iter()
         .enumerate()
-        .map(|(i, p)| Vertex { p: [p.x, p.y, p.z], intensity: scalar.map_or(0.0, |(_, v)| v[i]) })
+        .map(|(i, p)| Vertex {
+            p: [p.x, p.y, p.z],
+            intensity: scalar.map_or(0.0, |(_, v)| v[i]),
+            coordinates: georeferenced.map_or([0.0; 3], |c| c.coordinates(i)),
+        })
         .collect();
     ply.payload.insert("vertex".into(), items);
     Writer::new().write_ply(w, &mut ply).map(|_| ()).map_err(|e| std::io::Error::other(e.to_string()))

@@ -95,6 +95,17 @@ pub(super) fn read_xyz(path: &Path) -> Result<PointCloud> {
 }
 
 pub(super) fn write_xyz(w: &mut impl Write, cloud: &PointCloud) -> std::io::Result<()> {
+    if cloud.georeferenced() {
+        // origin + p in f64, to 0.1 mm.
+        for i in 0..cloud.points.len() {
+            let [x, y, z] = cloud.coordinates(i);
+            match &cloud.intensity {
+                Some(v) => writeln!(w, "{x:.4} {y:.4} {z:.4} {}", v[i])?,
+                None => writeln!(w, "{x:.4} {y:.4} {z:.4}")?,
+            }
+        }
+        return Ok(());
+    }
     // f32 → f64 is exact, and Display prints the shortest string that reads back exactly.
     write_columns(w, cloud, |p| [f64::from(p.x), f64::from(p.y), f64::from(p.z)])
 }
@@ -105,7 +116,10 @@ pub(super) fn read_3dtk(path: &Path) -> Result<PointCloud> {
 
 pub(super) fn write_3dtk(w: &mut impl Write, cloud: &PointCloud) -> std::io::Result<()> {
     // 100·f32 is exact in f64, so reading divides back to the same f32.
-    write_columns(w, cloud, |p| [-f64::from(p.y) * 100.0, f64::from(p.z) * 100.0, f64::from(p.x) * 100.0])
+    let o = cloud.origin;
+    write_columns(w, cloud, |p| {
+        [-(o.y + f64::from(p.y)) * 100.0, (o.z + f64::from(p.z)) * 100.0, (o.x + f64::from(p.x)) * 100.0]
+    })
 }
 
 /// C: 3DTK axes → ours, (x, y, z)_ours = C · (x, y, z)_3dtk.
