@@ -150,3 +150,35 @@ fn bad_files_name_the_file_and_where() {
     }
     expect_file_error(&p("k.obj", b""), Location::File, "unknown scan file extension");
 }
+
+#[test]
+fn frames_files_hold_the_transform_slam6d_reads() {
+    use nalgebra::{Isometry3, Matrix4, Vector3};
+    let dir = tempfile::tempdir().expect("tempdir");
+    let iso = Isometry3::new(Vector3::new(12.5, -3.25, 1.5), Vector3::new(0.02, -0.01, 1.1));
+    let frames = dir.path().join("scan007.frames");
+    scanner::io::write_3dtk_frames(&frames, &iso).expect("frames");
+    // By hand: 16 column-major values in 3DTK axes (x = −y, y = z, z = x of
+    // ours), translation in cm, then the type; applied to a point in 3DTK cm.
+    let text = std::fs::read_to_string(&frames).expect("text");
+    let v: Vec<f64> = text.split_whitespace().map(|t| t.parse().expect("number")).collect();
+    assert_eq!(v.len(), 17, "{text}");
+    let m = Matrix4::from_column_slice(&v[..16]);
+    let p = nalgebra::Point3::new(0.7, 2.0, -0.4);
+    let to_3dtk_cm = |q: &nalgebra::Point3<f64>| nalgebra::Vector4::new(-q.y * 100.0, q.z * 100.0, q.x * 100.0, 1.0);
+    let got = m * to_3dtk_cm(&p);
+    let want = to_3dtk_cm(&(iso * p));
+    assert!((got - want).norm() < 1e-9, "{got} vs {want}");
+    // Read back (the last line wins, as in slam6d), and the .pose agrees.
+    std::fs::write(&frames, format!("1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1 2\n{text}")).expect("two frames");
+    let back = scanner::io::read_3dtk_frames(&frames).expect("read");
+    assert!((back.to_homogeneous() - iso.to_homogeneous()).norm() < 1e-12);
+    let pose = dir.path().join("scan007.pose");
+    scanner::io::write_3dtk_pose(&pose, &iso).expect("pose");
+    let from_pose = scanner::io::read_3dtk_pose(&pose).expect("pose back");
+    assert!((from_pose.to_homogeneous() - back.to_homogeneous()).norm() < 1e-9);
+    // A line that is not a frame is named.
+    std::fs::write(&frames, "1 2 3\n").expect("bad");
+    let e = scanner::io::read_3dtk_frames(&frames).expect_err("bad frame").to_string();
+    assert!(e.contains("line 1") && e.contains("expected 16"), "{e}");
+}

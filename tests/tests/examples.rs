@@ -47,6 +47,17 @@ fn hall_fusion_modes_compare() {
     let scans = fusion["scans"].as_array().expect("scans");
     assert_eq!(scans.len(), 22);
     assert!(scans.iter().skip(1).all(|s| f(&s["rmse_m"]) < 0.02), "every scan matched: {fusion}");
+    // Each fused pose also as a 3DTK .frames beside its scan (slam6d's
+    // `show` places the scans with them): the report's pose, to the µm.
+    for s in scans {
+        let file = dir.path().join(s["file"].as_str().expect("file")).with_extension("frames");
+        let frame = scanner::io::read_3dtk_frames(&file).expect("the scan's .frames");
+        let t = frame.translation.vector;
+        let pose = &s["pose"];
+        for (k, key) in ["x_m", "y_m", "z_m"].iter().enumerate() {
+            assert!((t[k] - f(&pose[key])).abs() < 1e-6, "{}: {key}", file.display());
+        }
+    }
     let cps_icp = f(&fusion["rms_error_xy_m"]);
     let direct = f(&fusion["direct_rms_error_xy_m"]);
 
@@ -57,6 +68,7 @@ fn hall_fusion_modes_compare() {
         let j = fuse_json(dir.path(), mode);
         assert_eq!(j, json_file(&dir.path().join(format!("fusion/{mode}/fusion.json"))));
         assert!(dir.path().join(format!("fusion/{mode}/cloud.ply")).exists());
+        assert!(dir.path().join(format!("fusion/{mode}/frames/scan021.frames")).exists());
         rms.insert(mode, f(&j["rms_error_xy_m"]));
         worst.insert(
             mode,

@@ -46,6 +46,9 @@ pub fn run(args: &FuseArgs, out: &mut dyn Write) -> Result<Outcome> {
     let fused = crate::run::fuse::fuse(views, mode, &mission.fusion, scanner, false, &mut |_, _| {})?;
     let target = dir.join("fusion").join(mode.name());
     std::fs::create_dir_all(&target).with_context(|| format!("creating {}", target.display()))?;
+    let frames = target.join("frames");
+    std::fs::create_dir_all(&frames).with_context(|| format!("creating {}", frames.display()))?;
+    crate::run::fuse::write_frames(&frames, views, &fused)?;
     let cloud = crate::run::fuse::merged(views, &fused, &mission.cloud_origin());
     let written =
         crate::run::outputs::write(mission, &target, cloud, &mut Recorder::disabled(), &mut Timings::default())?;
@@ -61,7 +64,7 @@ pub fn run(args: &FuseArgs, out: &mut dyn Write) -> Result<Outcome> {
         if let Some(pipe) = &report.pipe {
             crate::view::tables::pipe_summary(out, pipe)?;
         }
-        writeln!(out, "outputs in {}: {}, fusion.json", target.display(), written.files.join(", "))?;
+        writeln!(out, "outputs in {}: {}, fusion.json, frames/", target.display(), written.files.join(", "))?;
     }
     Ok(Outcome::passed(written.complete()))
 }

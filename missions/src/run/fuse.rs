@@ -225,6 +225,21 @@ pub fn merged(views: &[ScanView], fused: &Fused, origin: &Vector3<f64>) -> Vec<P
     out
 }
 
+/// Writes each scan's fused pose into `dir` as a 3DTK `.frames` file named
+/// after its scan file (`scan003.3d` → `scan003.frames`): beside the scans,
+/// slam6d's `show` places them as fused. Returns the names written.
+pub fn write_frames(dir: &std::path::Path, views: &[ScanView], fused: &Fused) -> Result<Vec<String>> {
+    let mut names = Vec::with_capacity(views.len());
+    for (v, f) in views.iter().zip(&fused.scans) {
+        let stem = std::path::Path::new(&v.file).file_stem().map(|s| s.to_string_lossy().into_owned());
+        let name = format!("{}.frames", stem.unwrap_or_else(|| format!("scan{:03}", v.station)));
+        scanner::io::write_3dtk_frames(&dir.join(&name), &f.world_from_body)
+            .with_context(|| format!("writing {}", dir.join(&name).display()))?;
+        names.push(name);
+    }
+    Ok(names)
+}
+
 /// `world_from_body` as seen from `origin`: the transform whose points are
 /// world coordinates minus the origin (exact in f64, small in f32).
 pub fn relative(origin: &Vector3<f64>, world_from_body: &Isometry3<f64>) -> Isometry3<f64> {

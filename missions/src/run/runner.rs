@@ -657,6 +657,7 @@ impl Run<'_> {
     fn finish(mut self, started: Instant) -> Result<RunSummary> {
         self.progress.steps.finish_and_clear();
         let fused = self.fuse()?;
+        super::fuse::write_frames(&self.dir.join("scans"), &self.views, &fused)?;
         self.progress.scans.finish_and_clear();
         let fusion = FusionReport::new(&self.views, &fused);
         let merged = std::mem::take(&mut self.merged);

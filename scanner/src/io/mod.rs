@@ -26,7 +26,9 @@ use nalgebra::{Point3, Vector3};
 
 pub use pcd::PcdData;
 pub use ply::PlyEncoding;
-pub use text::{from_3dtk_axes, read_3dtk_pose, read_matrix4, to_3dtk_axes, write_3dtk_pose};
+pub use text::{
+    from_3dtk_axes, read_3dtk_frames, read_3dtk_pose, read_matrix4, to_3dtk_axes, write_3dtk_frames, write_3dtk_pose,
+};
 
 use crate::error::{Location, Result, ScannerError};
 

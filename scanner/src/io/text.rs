@@ -192,6 +192,52 @@ pub fn write_3dtk_pose(path: &Path, world_from_scan: &Isometry3<f64>) -> Result<
     std::fs::write(&tmp, text).and_then(|()| std::fs::rename(&tmp, path)).map_err(|e| ScannerError::io(path, e))
 }
 
+/// Writes `world_from_scan` (our axes, metres) as a 3DTK `.frames` file:
+/// one line of the 4×4 transform in 3DTK axes, column-major (OpenGL
+/// order), translation in cm, then the algorithm type (1: ICP) — the line
+/// slam6d's `show` takes (the last of the file) to place the scan.
+pub fn write_3dtk_frames(path: &Path, world_from_scan: &Isometry3<f64>) -> Result<()> {
+    let mut m = to_3dtk_axes(world_from_scan);
+    for r in 0..3 {
+        m[(r, 3)] *= 100.0;
+    }
+    let values: Vec<String> =
+        (0..4).flat_map(|c| (0..4).map(move |r| (r, c))).map(|(r, c)| m[(r, c)].to_string()).collect();
+    let text = format!("{} 1\n", values.join(" "));
+    let tmp = super::temporary(path);
+    std::fs::write(&tmp, text).and_then(|()| std::fs::rename(&tmp, path)).map_err(|e| ScannerError::io(path, e))
+}
+
+/// Reads a 3DTK `.frames` file: the transform of its last line (16
+/// column-major values in 3DTK axes, cm; a 17th, the algorithm type, is
+/// ignored) in our axes, metres.
+pub fn read_3dtk_frames(path: &Path) -> Result<Isometry3<f64>> {
+    let text = read_text(path)?;
+    let mut row = Vec::new();
+    let mut last = None;
+    for (k, line) in text.lines().enumerate() {
+        if line.trim().is_empty() {
+            continue;
+        }
+        numbers(path, k + 1, line.trim(), &mut row)?;
+        if !(16..=17).contains(&row.len()) {
+            let message = format!("{} values: expected 16 (a 4×4 transform, column-major) and a type", row.len());
+            return Err(ScannerError::file(path, Location::Line(k + 1), message));
+        }
+        last = Some((k + 1, Matrix4::from_column_slice(&row[..16])));
+    }
+    let Some((line, mut m)) = last else {
+        return Err(ScannerError::file(path, Location::File, "no frame: expected a line of 16 values"));
+    };
+    if (m.fixed_view::<1, 4>(3, 0) - nalgebra::RowVector4::new(0.0, 0.0, 0.0, 1.0)).norm() > 1e-9 {
+        return Err(ScannerError::file(path, Location::Line(line), "the last row is not 0 0 0 1"));
+    }
+    for r in 0..3 {
+        m[(r, 3)] /= 100.0;
+    }
+    Ok(from_3dtk_axes(&m))
+}
+
 /// Reads a 4×4 row-major matrix from text (16 numbers on 4 lines).
 pub fn read_matrix4(path: &Path) -> Result<Matrix4<f64>> {
     let text = read_text(path)?;
