@@ -156,4 +156,26 @@ fn a_survey_at_national_grid_coordinates_keeps_its_millimetres() {
     assert_shifted("PLY", &ply_points(&gr.join("cloud.ply")), &ply_points(&lr.join("cloud.ply")), 1e-4);
     assert_shifted("LAS", &las_points(&gr.join("cloud.las")), &las_points(&lr.join("cloud.las")), 1.5e-4);
     assert_shifted("XYZ", &xyz_points(&gr.join("cloud.xyz")), &xyz_points(&lr.join("cloud.xyz")), 1.5e-4);
+
+    // The LAS knows which scan each point came from (`point_source_id` =
+    // the station), as many points as the journal recorded for that scan,
+    // and says what wrote it and when.
+    let mut reader = las::Reader::from_path(gr.join("cloud.las")).expect("las");
+    let header = reader.header().clone();
+    assert_eq!(header.generating_software(), "cps-survey");
+    assert!(header.system_identifier().starts_with("cps-survey"), "{}", header.system_identifier());
+    assert!(header.date().is_some_and(|d| d.format("%Y").to_string().parse::<i32>().expect("year") >= 2026));
+    let data = reader.read_points(header.number_of_points()).expect("points");
+    let mut per_scan = std::collections::BTreeMap::new();
+    for p in data.points() {
+        *per_scan.entry(p.expect("a point").point_source_id).or_insert(0usize) += 1;
+    }
+    let journal = std::fs::read_to_string(gr.join("journal.jsonl")).expect("journal");
+    let recorded: std::collections::BTreeMap<u16, usize> = journal
+        .lines()
+        .map(|l| serde_json::from_str::<Value>(l).expect("a line"))
+        .filter(|e| e["event"] == "scan")
+        .map(|e| (e["station"].as_u64().expect("station") as u16, e["data"]["points"].as_u64().expect("n") as usize))
+        .collect();
+    assert_eq!(per_scan, recorded);
 }

@@ -22,6 +22,7 @@ use fusion::icp::{IcpConfig, Kernel};
 use fusion::multiview::{MultiviewConfig, Strategy};
 use nalgebra::{Isometry3, Matrix4, Point3, Translation3, Vector3};
 use scanner::Tilt;
+use scanner::io::PointCloud;
 
 use crate::mission::{FusionMode, FusionPlan};
 
@@ -216,13 +217,25 @@ pub fn error_heading(a: &Isometry3<f64>, b: &Isometry3<f64>) -> f64 {
 }
 
 /// The merged world-frame cloud of `views` at the `fused` poses, relative
-/// to `origin` (see [`crate::mission::Mission::cloud_origin`]).
-pub fn merged(views: &[ScanView], fused: &Fused, origin: &Vector3<f64>) -> Vec<Point3<f32>> {
-    let mut out = Vec::with_capacity(views.iter().map(|v| v.body.len()).sum());
+/// to `origin` (see [`crate::mission::Mission::cloud_origin`]), each point
+/// with its scan.
+pub fn merged(views: &[ScanView], fused: &Fused, origin: &Vector3<f64>) -> (Vec<Point3<f32>>, Vec<u16>) {
+    let n = views.iter().map(|v| v.body.len()).sum();
+    let mut out =
+        PointCloud { points: Vec::with_capacity(n), source: Some(Vec::with_capacity(n)), ..PointCloud::default() };
     for (v, f) in views.iter().zip(&fused.scans) {
-        out.extend(fusion::direct::transform(&v.body, &relative(origin, &f.world_from_body)));
+        extend(&mut out, fusion::direct::transform(&v.body, &relative(origin, &f.world_from_body)), v.station);
     }
-    out
+    (out.points, out.source.unwrap_or_default())
+}
+
+/// Appends the points of the scan at `station` to `merged`, each with the
+/// station's index as its scan (LAS `point_source_id`: 65535 for stations
+/// from 65535 on).
+pub fn extend(merged: &mut PointCloud, points: Vec<Point3<f32>>, station: usize) {
+    let id = u16::try_from(station).unwrap_or(u16::MAX);
+    merged.source.get_or_insert_with(Vec::new).extend(std::iter::repeat_n(id, points.len()));
+    merged.points.extend(points);
 }
 
 /// Writes each scan's fused pose into `dir` as a 3DTK `.frames` file named

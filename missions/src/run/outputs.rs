@@ -36,18 +36,20 @@ impl Written {
     }
 }
 
-/// Writes the merged `cloud` into `dir` as `cloud.<format>` for each of the
+/// Writes the merged `cloud` (each point's scan in `source`) into `dir` as `cloud.<format>` for each of the
 /// mission's formats and, with `[pipe]`, inspects it (logging the result to
 /// `rec`); the time each takes goes to `timings`.
 pub fn write(
     mission: &Mission,
     dir: &Path,
     cloud: Vec<Point3<f32>>,
+    source: Vec<u16>,
     rec: &mut Recorder,
     timings: &mut Timings,
 ) -> Result<Written> {
     let started = Instant::now();
-    let cloud = PointCloud { points: cloud, origin: mission.cloud_origin(), ..PointCloud::default() };
+    let cloud =
+        PointCloud { points: cloud, origin: mission.cloud_origin(), source: Some(source), ..PointCloud::default() };
     let mut files = Vec::new();
     for format in &mission.output.formats {
         let name = format!("cloud.{format}");

@@ -154,7 +154,9 @@ struct Run<'m> {
     steps: Steps,
     team: TeamState,
     progress: Progress,
-    merged: Vec<Point3<f32>>,
+    /// The merged cloud so far, relative to the mission's cloud origin,
+    /// with each point's scan.
+    merged: PointCloud,
     /// Every scan with its poses (body points kept for the ICP modes) and
     /// where it sits on the recording's timelines.
     views: Vec<ScanView>,
@@ -208,7 +210,7 @@ pub fn run(mission: &Mission, planned: &Planned, dir: &Path, options: &RunOption
         steps,
         team: state,
         progress,
-        merged: Vec::new(),
+        merged: PointCloud { origin: mission.cloud_origin(), source: Some(Vec::new()), ..PointCloud::default() },
         views: Vec::new(),
         scan_times: Vec::new(),
         stations: Vec::new(),
@@ -569,7 +571,7 @@ impl Run<'_> {
         self.views.push(view);
         self.scan_times.push(self.steps.rec.now());
         if self.mission.fusion.mode == FusionMode::Direct {
-            self.merged.extend(world);
+            super::fuse::extend(&mut self.merged, world, index);
         }
         Ok(scanned.file)
     }
@@ -619,7 +621,7 @@ impl Run<'_> {
                     Ok(())
                 })?;
             }
-            merged.extend(world);
+            super::fuse::extend(merged, world, view.station);
         }
         Ok(fused)
     }
@@ -660,9 +662,10 @@ impl Run<'_> {
         super::fuse::write_frames(&self.dir.join("scans"), &self.views, &fused)?;
         self.progress.scans.finish_and_clear();
         let fusion = FusionReport::new(&self.views, &fused);
-        let merged = std::mem::take(&mut self.merged);
+        let merged = std::mem::take(&mut self.merged.points);
+        let source = self.merged.source.take().unwrap_or_default();
         let written: Written =
-            super::outputs::write(self.mission, &self.dir, merged, &mut self.steps.rec, &mut self.timings)?;
+            super::outputs::write(self.mission, &self.dir, merged, source, &mut self.steps.rec, &mut self.timings)?;
         let adjustment = self.adjust()?;
         let adjusted = adjustment.as_ref().and_then(AdjustmentOutcome::report);
         let accepted = mission_accepted(self.mission, &self.stations, &self.views, &fused, adjusted)

@@ -144,13 +144,24 @@ pub(super) fn write(path: &Path, cloud: &PointCloud) -> Result<()> {
         z: Transform { scale: LAS_SCALE_M, offset: offset[2] },
     };
     builder.generating_software = "cps-survey".into();
+    builder.system_identifier = "cps-survey CPS team".into(); // at most 32 bytes
+    builder.date = Some(today());
     let header = builder.into_header().map_err(|e| ScannerError::whole_file(path, e))?;
     let mut writer = Writer::from_path(path, header).map_err(|e| ScannerError::whole_file(path, e))?;
     for i in 0..cloud.points.len() {
         let intensity = cloud.intensity.as_ref().map_or(0, |v| v[i].clamp(0.0, 65535.0).round() as u16);
         let [x, y, z] = cloud.coordinates(i);
-        let point = Point { x, y, z, intensity, ..Default::default() };
+        let point_source_id = cloud.source.as_ref().map_or(0, |s| s[i]);
+        let point =
+            Point { x, y, z, intensity, point_source_id, return_number: 1, number_of_returns: 1, ..Default::default() };
         writer.write_point(point).map_err(|e| ScannerError::whole_file(path, format!("point {i}: {e}")))?;
     }
     writer.close().map_err(|e| ScannerError::whole_file(path, e))
+}
+
+/// Today's date (UTC), the file's creation date.
+fn today() -> chrono::NaiveDate {
+    let days = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs() / 86_400);
+    // 719,163 days from 0001-01-01 (day 1 of the common era) to 1970-01-01.
+    i32::try_from(days).ok().and_then(|d| chrono::NaiveDate::from_num_days_from_ce_opt(719_163 + d)).unwrap_or_default()
 }

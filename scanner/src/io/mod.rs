@@ -46,12 +46,15 @@ pub struct PointCloud {
     /// What the points are relative to (the readers give zero; writers
     /// add it in f64).
     pub origin: Vector3<f64>,
+    /// The scan each point came from (its station's index), if known:
+    /// LAS `point_source_id`.
+    pub source: Option<Vec<u16>>,
 }
 
 impl PointCloud {
     /// A cloud of points without intensity, at the zero origin.
     pub fn from_points(points: Vec<Point3<f32>>) -> Self {
-        Self { points, intensity: None, origin: Vector3::zeros() }
+        Self { points, intensity: None, origin: Vector3::zeros(), source: None }
     }
 
     /// Whether the points are relative to a non-zero origin (the writers
@@ -166,6 +169,15 @@ pub fn write(path: &Path, cloud: &PointCloud, format: Format) -> Result<()> {
             format!("{} intensities for {} points: expected one per point", i.len(), cloud.points.len()),
         ));
     }
+    if let Some(s) = &cloud.source
+        && s.len() != cloud.points.len()
+    {
+        return Err(ScannerError::file(
+            path,
+            Location::File,
+            format!("{} scan indices for {} points: expected one per point", s.len(), cloud.points.len()),
+        ));
+    }
     if !cloud.origin.iter().all(|v| v.is_finite()) {
         return Err(ScannerError::file(
             path,
@@ -194,6 +206,7 @@ fn finish_write(path: &Path, tmp: &Path, result: Result<()>) -> Result<()> {
             let _ = std::fs::remove_file(tmp);
             Err(match e {
                 ScannerError::Io { source, .. } => ScannerError::io(path, source),
+                ScannerError::File { location, message, .. } => ScannerError::file(path, location, message),
                 other => other,
             })
         }
