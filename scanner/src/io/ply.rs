@@ -32,8 +32,33 @@ const INTENSITY_NAMES: [&str; 3] = ["intensity", "scalar_intensity", "scalar_Int
 struct Vertex {
     p: [f32; 3],
     intensity: f32,
-    /// Written as double x, y, z (a georeferenced cloud: origin + p).
-    coordinates: [f64; 3],
+}
+
+/// A vertex of a georeferenced cloud: double x, y, z (origin + p).
+#[derive(Debug, Clone, Copy, Default)]
+struct GeoVertex {
+    c: [f64; 3],
+    intensity: f32,
+}
+
+impl PropertyAccess for GeoVertex {
+    fn new() -> Self {
+        Self::default()
+    }
+
+    fn get_double(&self, name: &str) -> Option<f64> {
+        match name {
+            "x" => Some(self.c[0]),
+            "y" => Some(self.c[1]),
+            "z" => Some(self.c[2]),
+            _ => None,
+        }
+    }
+
+    fn get_float(&self, _name: &str) -> Option<f32> {
+        // The one float field, under whatever name the header gives it.
+        Some(self.intensity)
+    }
 }
 
 impl PropertyAccess for Vertex {
@@ -55,15 +80,6 @@ impl PropertyAccess for Vertex {
                 PropertyAccessResult::Set
             }
             None => PropertyAccessResult::Ignored,
-        }
-    }
-
-    fn get_double(&self, name: &str) -> Option<f64> {
-        match name {
-            "x" => Some(self.coordinates[0]),
-            "y" => Some(self.coordinates[1]),
-            "z" => Some(self.coordinates[2]),
-            _ => None,
         }
     }
 
@@ -235,34 +251,46 @@ fn write_with(
     scalar: Option<(&str, &[f32])>,
     encoding: PlyEncoding,
 ) -> std::io::Result<()> {
-    let mut ply = Ply::<Vertex>::new();
+    let scalar_at = |i: usize| scalar.map_or(0.0, |(_, v)| v[i]);
+    match georeferenced {
+        Some(cloud) => {
+            let o = cloud.origin;
+            let comment = format!("georeferenced: x, y, z are coordinates (origin {} {} {})", o.x, o.y, o.z);
+            let items = (0..points.len()).map(|i| GeoVertex { c: cloud.coordinates(i), intensity: scalar_at(i) });
+            write_items(w, ScalarType::Double, Some(comment), scalar, encoding, items.collect())
+        }
+        None => {
+            let items = points.iter().enumerate().map(|(i, p)| Vertex { p: [p.x, p.y, p.z], intensity: scalar_at(i) });
+            write_items(w, ScalarType::Float, None, scalar, encoding, items.collect())
+        }
+    }
+}
+
+/// The PLY of `items`: x, y, z of type `xyz`, the scalar field's name if
+/// any, a comment besides ours.
+fn write_items<V: PropertyAccess>(
+    w: &mut impl Write,
+    xyz: ScalarType,
+    comment: Option<String>,
+    scalar: Option<(&str, &[f32])>,
+    encoding: PlyEncoding,
+    items: Vec<V>,
+) -> std::io::Result<()> {
+    let mut ply = Ply::<V>::new();
     ply.header.encoding = match encoding {
         PlyEncoding::Ascii => Encoding::Ascii,
         PlyEncoding::BinaryLittleEndian => Encoding::BinaryLittleEndian,
     };
     ply.header.comments.push("written by cps-survey; metres, x forward, y left, z up".into());
+    ply.header.comments.extend(comment);
     let mut vertex = ElementDef::new("vertex".into());
-    let xyz = if georeferenced.is_some() { ScalarType::Double } else { ScalarType::Float };
     for n in ["x", "y", "z"] {
         vertex.properties.add(PropertyDef::new(n.into(), PropertyType::Scalar(xyz.clone())));
     }
     if let Some((name, _)) = scalar {
         vertex.properties.add(PropertyDef::new(name.into(), PropertyType::Scalar(ScalarType::Float)));
     }
-    if let Some(cloud) = georeferenced {
-        let o = cloud.origin;
-        ply.header.comments.push(format!("georeferenced: x, y, z are coordinates (origin {} {} {})", o.x, o.y, o.z));
-    }
     ply.header.elements.add(vertex);
-    let items = points
-        .iter()
-        .enumerate()
-        .map(|(i, p)| Vertex {
-            p: [p.x, p.y, p.z],
-            intensity: scalar.map_or(0.0, |(_, v)| v[i]),
-            coordinates: georeferenced.map_or([0.0; 3], |c| c.coordinates(i)),
-        })
-        .collect();
     ply.payload.insert("vertex".into(), items);
     Writer::new().write_ply(w, &mut ply).map(|_| ()).map_err(|e| std::io::Error::other(e.to_string()))
 }
