@@ -253,6 +253,18 @@ pub fn write_frames(dir: &std::path::Path, views: &[ScanView], fused: &Fused) ->
     Ok(names)
 }
 
+/// The world points of a scan for the recording (f32 world coordinates,
+/// a viewer's): the merged cloud's own points when its origin is zero,
+/// else `body` moved by `world_from_body` anew.
+pub fn recorded_world(
+    relative: &[Point3<f32>],
+    origin: &Vector3<f64>,
+    body: &[Point3<f32>],
+    world_from_body: &Isometry3<f64>,
+) -> Vec<Point3<f32>> {
+    if *origin == Vector3::zeros() { relative.to_vec() } else { fusion::direct::transform(body, world_from_body) }
+}
+
 /// `world_from_body` as seen from `origin`: the transform whose points are
 /// world coordinates minus the origin (exact in f64, small in f32).
 pub fn relative(origin: &Vector3<f64>, world_from_body: &Isometry3<f64>) -> Isometry3<f64> {

@@ -531,19 +531,14 @@ impl Run<'_> {
         if cloud.len() != scanned.points {
             bail!("{}: {} points, but the journal recorded {}", scanned.file, cloud.len(), scanned.points);
         }
-        let origin = self.mission.cloud_origin();
+        let origin = self.merged.origin;
         let relative_from_body = super::fuse::relative(&origin, &world_from_body);
         let world = timed(&mut self.timings.fusion_s, || fusion::direct::transform(&cloud.points, &relative_from_body));
         self.steps.rec.advance(slices as f64 / (75.0 * self.mission.scan.resolution.degrees()));
         if self.steps.rec.enabled() {
-            // The recording is in world coordinates (f32: a viewer's).
             let (rec, points) = (&mut self.steps.rec, &cloud.points);
             timed(&mut self.timings.recording_s, || {
-                let logged = if origin == nalgebra::Vector3::zeros() {
-                    world.clone()
-                } else {
-                    fusion::direct::transform(points, &world_from_body)
-                };
+                let logged = super::fuse::recorded_world(&world, &origin, points, &world_from_body);
                 rec.scan("direct", &format!("scan{index:03}"), logged)
             })?;
         }
@@ -603,17 +598,13 @@ impl Run<'_> {
             timed(&mut self.timings.recording_s, || rec.icp_iterations(&fused.traces, &names, &bodies))?;
         }
         let (merged, t) = (&mut self.merged, &mut self.timings);
-        let origin = self.mission.cloud_origin();
+        let origin = merged.origin;
         for ((view, at), f) in views.iter().zip(&self.scan_times).zip(&fused.scans) {
             let relative_from_body = super::fuse::relative(&origin, &f.world_from_body);
             let world = timed(&mut t.fusion_s, || fusion::direct::transform(&view.body, &relative_from_body));
             if rec.enabled() {
                 timed(&mut t.recording_s, || -> Result<()> {
-                    let logged = if origin == nalgebra::Vector3::zeros() {
-                        world.clone()
-                    } else {
-                        fusion::direct::transform(&view.body, &f.world_from_body)
-                    };
+                    let logged = super::fuse::recorded_world(&world, &origin, &view.body, &f.world_from_body);
                     rec.scan_at("icp", &format!("scan{:03}", view.station), logged, *at)?;
                     if let Some(rmse) = f.rmse_m {
                         rec.icp_metrics(at.0, rmse);
