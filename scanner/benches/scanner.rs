@@ -53,6 +53,8 @@ fn files(c: &mut Criterion) {
         ("scan.pcd", Format::Pcd(PcdData::Binary)),
         ("scanc.pcd", Format::Pcd(PcdData::BinaryCompressed)),
         ("scan.las", Format::Las),
+        ("scan.laz", Format::Laz),
+        ("scan.copc.laz", Format::Copc),
         ("scan.e57", Format::E57),
     ] {
         let path = dir.path().join(name);

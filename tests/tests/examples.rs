@@ -279,8 +279,10 @@ fn a_robot_alone_refuses_what_needs_the_cps() {
     assert!(mc.stderr.contains("has no children"), "{}", mc.stderr);
 }
 
-/// The x, y, z and one float field of a binary little-endian PLY written
-/// as `x y z <field>` floats — read by hand, independently of the writer.
+/// The x, y, z and deviation of each vertex of a binary little-endian PLY
+/// written as `x y z <field> scalar_<field>` floats (the deviation twice:
+/// ours, and the name CloudCompare loads; checked equal) — read by hand,
+/// independently of the writer.
 fn ply_with_field(path: &std::path::Path, field: &str) -> Vec<[f32; 4]> {
     let bytes = std::fs::read(path).expect("ply");
     let end = b"end_header\n";
@@ -288,16 +290,22 @@ fn ply_with_field(path: &std::path::Path, field: &str) -> Vec<[f32; 4]> {
     let header = std::str::from_utf8(&bytes[..at]).expect("ASCII header");
     assert!(header.contains("format binary_little_endian 1.0"), "{header}");
     let properties: Vec<&str> = header.lines().filter_map(|l| l.strip_prefix("property float ")).collect();
-    assert_eq!(properties, ["x", "y", "z", field], "{header}");
+    let scalar = format!("scalar_{field}");
+    assert_eq!(properties, ["x", "y", "z", field, scalar.as_str()], "{header}");
     let count: usize = header
         .lines()
         .find_map(|l| l.strip_prefix("element vertex "))
         .and_then(|n| n.trim().parse().ok())
         .expect("vertex count");
     let body = &bytes[at..];
-    assert_eq!(body.len(), count * 16, "{count} vertices of 4 floats");
-    body.chunks_exact(16)
-        .map(|c| std::array::from_fn(|k| f32::from_le_bytes(c[4 * k..4 * k + 4].try_into().expect("4 bytes"))))
+    assert_eq!(body.len(), count * 20, "{count} vertices of 5 floats");
+    body.chunks_exact(20)
+        .map(|c| {
+            let v: [f32; 5] =
+                std::array::from_fn(|k| f32::from_le_bytes(c[4 * k..4 * k + 4].try_into().expect("4 bytes")));
+            assert_eq!(v[3].to_bits(), v[4].to_bits(), "{field} and {scalar}");
+            [v[0], v[1], v[2], v[3]]
+        })
         .collect()
 }
 

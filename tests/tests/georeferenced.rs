@@ -2,7 +2,10 @@
 //! the same room, route and seed as at the local origin, so every estimate
 //! and every point must be the local run's shifted by the offset. The cloud
 //! files keep 0.1 mm (read back in f64: LAS by the `las` crate, PLY and XYZ
-//! by hand), where f32 world coordinates would be quantised to 0.5 m.
+//! by hand), where f32 world coordinates would be quantised to 0.5 m. The
+//! georeferenced run names its CRS (`[site] crs = "EPSG:25832"`) in the
+//! report, LAS/LAZ/COPC and E57, and its LAS and E57 say which scan each
+//! point came from, when, and (E57) from where.
 
 use std::path::Path;
 
@@ -10,6 +13,9 @@ use serde_json::Value;
 use tests::{example, run_mission};
 
 const OFFSET: [f64; 3] = [500_000.0, 5_500_000.0, 300.0];
+
+const LOCAL_FORMATS: &str = r#"["ply", "las", "xyz"]"#;
+const GEO_FORMATS: &str = r#"["ply", "las", "laz", "copc", "e57", "xyz"]"#;
 
 /// A 20 × 12 × 3 m room with a few objects, shifted by `o`.
 fn scene(o: [f64; 3]) -> String {
@@ -42,8 +48,9 @@ fn scene(o: [f64; 3]) -> String {
     )
 }
 
-/// The hall's team and instruments in the room, at `o`, without control.
-fn mission(dir: &Path, o: [f64; 3]) -> std::path::PathBuf {
+/// The hall's team and instruments in the room, at `o`, without control;
+/// `extra` appended (a `[site]` table).
+fn mission(dir: &Path, o: [f64; 3], formats: &str, extra: &str) -> std::path::PathBuf {
     std::fs::write(dir.join("room.toml"), scene(o)).expect("scene");
     let hall = std::fs::read_to_string(example("hall.toml")).expect("hall");
     let route = "[[1.5, 4.2, 1.5], [37.5, 4.2, 1.5], [37.5, 7.8, 1.5], [1.5, 7.8, 1.5]]";
@@ -64,10 +71,10 @@ fn mission(dir: &Path, o: [f64; 3]) -> std::path::PathBuf {
         .replace("control_at = [0, 10, 21]", "")
         .replace("scene = \"hall\"", "scene_file = \"room.toml\"")
         .replace("slices = 180", "slices = 12")
-        .replace("formats = [\"ply\"]", "formats = [\"ply\", \"las\", \"xyz\"]");
+        .replace("formats = [\"ply\"]", &format!("formats = {formats}"));
     let text = text.split("[[control]]").next().expect("before the control");
     let path = dir.join("m.toml");
-    std::fs::write(&path, text).expect("mission");
+    std::fs::write(&path, format!("{text}\n{extra}")).expect("mission");
     path
 }
 
@@ -134,9 +141,10 @@ fn a_survey_at_national_grid_coordinates_keeps_its_millimetres() {
     let (local_dir, geo_dir) = (dir.path().join("local"), dir.path().join("geo"));
     std::fs::create_dir_all(&local_dir).expect("local");
     std::fs::create_dir_all(&geo_dir).expect("geo");
-    let local = run_mission(&mission(&local_dir, [0.0; 3]), &local_dir.join("run"));
+    let local = run_mission(&mission(&local_dir, [0.0; 3], LOCAL_FORMATS, ""), &local_dir.join("run"));
     assert_eq!(local.code, 0, "{}", local.stderr);
-    let geo = run_mission(&mission(&geo_dir, OFFSET), &geo_dir.join("run"));
+    let site = "[site]\ncrs = \"EPSG:25832\"\n";
+    let geo = run_mission(&mission(&geo_dir, OFFSET, GEO_FORMATS, site), &geo_dir.join("run"));
     assert_eq!(geo.code, 0, "{}", geo.stderr);
 
     // The estimates: the local run's, shifted.
@@ -178,4 +186,92 @@ fn a_survey_at_national_grid_coordinates_keeps_its_millimetres() {
         .map(|e| (e["station"].as_u64().expect("station") as u16, e["data"]["points"].as_u64().expect("n") as usize))
         .collect();
     assert_eq!(per_scan, recorded);
+
+    deliverables(&gr, &g);
+    // Without `[site]`, a local frame named after the mission.
+    let crs = &l["crs"];
+    assert_eq!((crs["local"].as_bool(), crs["epsg"].is_null()), (Some(true), true), "{crs}");
+    assert!(crs["wkt"].as_str().expect("wkt").starts_with("LOCAL_CS[\"hall local frame\""), "{crs}");
+}
+
+/// The georeferenced run's deliverables: its CRS in the report, LAS, LAZ,
+/// COPC and E57; each LAS point's time its scan's (journaled); LAZ the
+/// LAS's points; COPC all of them; E57 one `data3D` per scan at the
+/// report's fused pose, whose points (pose applied) are the LAS's.
+fn deliverables(run: &Path, report: &Value) {
+    let crs = &report["crs"];
+    assert_eq!(
+        (crs["name"].as_str(), crs["epsg"].as_u64(), crs["local"].as_bool()),
+        (Some("EPSG:25832"), Some(25832), Some(false))
+    );
+    let wkt = crs["wkt"].as_str().expect("wkt");
+    assert!(wkt.starts_with("PROJCS[\"ETRS89 / UTM zone 32N\""), "{wkt}");
+
+    let journal = std::fs::read_to_string(run.join("journal.jsonl")).expect("journal");
+    let scans: Vec<Value> = journal
+        .lines()
+        .map(|l| serde_json::from_str::<Value>(l).expect("a line"))
+        .filter(|e| e["event"] == "scan")
+        .collect();
+    // GPS = UNIX − 315,964,800 s + 18 leap seconds; LAS keeps GPS − 10⁹.
+    let adjusted: std::collections::BTreeMap<u16, f64> = scans
+        .iter()
+        .map(|e| {
+            (
+                e["station"].as_u64().expect("station") as u16,
+                e["data"]["unix_time_s"].as_f64().expect("time") - 315_964_800.0 + 18.0 - 1e9,
+            )
+        })
+        .collect();
+
+    let read_las = |name: &str| {
+        let mut reader = las::Reader::from_path(run.join(name)).expect("the las crate reads it");
+        let header = reader.header().clone();
+        assert_eq!(header.point_format().to_u8().expect("format"), 6, "{name}");
+        assert!(header.has_wkt_crs(), "{name}");
+        let vlr = header.all_vlrs().find(|v| v.user_id == "LASF_Projection" && v.record_id == 2112).expect("WKT VLR");
+        assert_eq!(String::from_utf8_lossy(&vlr.data).trim_end_matches('\0'), wkt, "{name}");
+        let data = reader.read_all().expect("points");
+        data.points().map(|p| p.expect("a point")).collect::<Vec<las::Point>>()
+    };
+    let las_points = read_las("cloud.las");
+    for p in &las_points {
+        let want = adjusted[&p.point_source_id];
+        assert!(
+            (p.gps_time.expect("time") - want).abs() < 1e-6,
+            "scan {}: {:?} vs {want}",
+            p.point_source_id,
+            p.gps_time
+        );
+    }
+    assert_eq!(read_las("cloud.laz"), las_points, "LAZ holds the LAS's points");
+    let mut copc = las::CopcReader::from_path(run.join("cloud.copc.laz")).expect("COPC");
+    let octree = copc.query(las::LodSelection::All, las::BoundsSelection::All).expect("COPC points");
+    assert_eq!(octree.len(), las_points.len());
+
+    let mut e57 = e57::E57Reader::from_file(run.join("cloud.e57")).expect("the e57 crate reads it");
+    assert_eq!(e57.coordinate_metadata(), Some(wkt));
+    let clouds = e57.pointclouds();
+    let fused = report["fusion"]["scans"].as_array().expect("fused scans");
+    assert_eq!(clouds.len(), scans.len());
+    assert_eq!(clouds.len(), fused.len());
+    let mut at = 0;
+    for (pc, f) in clouds.iter().zip(fused) {
+        let station = f["station"].as_u64().expect("station");
+        assert_eq!(pc.name.as_deref(), Some(format!("scan{station:03}").as_str()));
+        let t = &pc.transform.as_ref().expect("pose").translation;
+        for (v, key) in [t.x, t.y, t.z].into_iter().zip(["x_m", "y_m", "z_m"]) {
+            assert!((v - f["pose"][key].as_f64().expect("pose")).abs() < 1e-6, "{key}: {v} vs {}", f["pose"][key]);
+        }
+        let mut points = e57.pointcloud_simple(pc).expect("points");
+        points.apply_pose(true);
+        for p in points {
+            let e57::CartesianCoordinate::Valid { x, y, z } = p.expect("a point").cartesian else { panic!("invalid") };
+            let l = &las_points[at];
+            assert_eq!(u64::from(l.point_source_id), station);
+            assert!([x - l.x, y - l.y, z - l.z].iter().all(|d| d.abs() < 1.5e-4), "{:?} vs {l:?}", [x, y, z]);
+            at += 1;
+        }
+    }
+    assert_eq!(at, las_points.len());
 }

@@ -26,6 +26,66 @@ formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]
 type Case = (&'static str, (&'static str, &'static str), &'static str, &'static str, &'static str);
 
 const CASES: &[Case] = &[
+    (
+        "site: a geographic CRS",
+        (
+            "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]",
+            "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]\n[site]\ncrs = \"EPSG:4326\"",
+        ),
+        "19:7",
+        "site.crs",
+        "GEOGCS",
+    ),
+    (
+        "site: an EPSG code not known",
+        (
+            "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]",
+            "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]\n[site]\ncrs = \"EPSG:1\"",
+        ),
+        "19:7",
+        "site.crs",
+        "EPSG:1 is not in the EPSG definitions",
+    ),
+    (
+        "site: prose for a CRS",
+        (
+            "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]",
+            "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]\n[site]\ncrs = \"UTM 32\"",
+        ),
+        "19:7",
+        "site.crs",
+        "expected EPSG:NNNN or a WKT",
+    ),
+    (
+        "site: both a CRS and a local frame",
+        (
+            "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]",
+            "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]\n[site]\ncrs = \"EPSG:25832\"\nlocal_frame = \"grid\"",
+        ),
+        "19:7",
+        "site.crs",
+        "both `crs` and `local_frame`",
+    ),
+    (
+        "site: an empty local frame",
+        (
+            "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]",
+            "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]\n[site]\nlocal_frame = \"\"",
+        ),
+        "19:15",
+        "site.local_frame",
+        "empty",
+    ),
+    (
+        "site: unknown key",
+        (
+            "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]",
+            "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]\n[site]\ndatum = 1",
+        ),
+        "19:1",
+        "site.datum",
+        "unknown key",
+    ),
     ("unknown top-level table", ("[plan]", "[plann]\nx = 1\n[plan]"), "14:2", "plann", "unknown key"),
     ("unknown key in mission", ("name = \"ok\"", "name = \"ok\"\nnmae = 1"), "3:1", "mission.nmae", "unknown key"),
     ("missing name", ("name = \"ok\"", ""), "1:1", "mission.name", "missing key"),

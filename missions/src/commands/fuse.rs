@@ -49,15 +49,9 @@ pub fn run(args: &FuseArgs, out: &mut dyn Write) -> Result<Outcome> {
     let frames = target.join("frames");
     std::fs::create_dir_all(&frames).with_context(|| format!("creating {}", frames.display()))?;
     crate::run::fuse::write_frames(&frames, views, &fused)?;
-    let (cloud, source) = crate::run::fuse::merged(views, &fused, &mission.cloud_origin());
-    let written = crate::run::outputs::write(
-        mission,
-        &target,
-        cloud,
-        source,
-        &mut Recorder::disabled(),
-        &mut Timings::default(),
-    )?;
+    let cloud = crate::run::fuse::merged(views, &fused, &mission.cloud_origin());
+    let written =
+        crate::run::outputs::write(mission, &target, cloud, &mut Recorder::disabled(), &mut Timings::default())?;
     let mut report = FusionReport::new(views, &fused);
     report.seconds = Some(fused.seconds);
     report.pipe = written.pipe.clone();

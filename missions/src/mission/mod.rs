@@ -317,7 +317,7 @@ pub struct PipePlan {
 }
 
 /// Cloud formats `[output] formats` accepts.
-pub const OUTPUT_FORMATS: [&str; 5] = ["ply", "las", "e57", "pcd", "xyz"];
+pub const OUTPUT_FORMATS: [&str; 7] = ["ply", "las", "laz", "copc", "e57", "pcd", "xyz"];
 
 /// Where in the file each value came from, to point errors found later
 /// (e.g. by the planner) at the right line.
@@ -371,6 +371,9 @@ pub struct Mission {
     pub fusion: FusionPlan,
     /// The outputs.
     pub output: Output,
+    /// The coordinate reference system of the route, the control and the
+    /// outputs (`[site] crs` or `local_frame`).
+    pub crs: scanner::io::Crs,
     /// The pipe inspection, when `[pipe]` is given.
     pub pipe: Option<PipePlan>,
     /// The control points (`[[control]]`).

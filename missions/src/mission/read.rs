@@ -17,6 +17,7 @@ use super::{
     Acceptance, Backend, Control, ControlAt, FUSION_MODES, FusionMode, FusionPlan, Mission, MissionError,
     OUTPUT_FORMATS, Output, PipePlan, Plan, ScanPlan, Search, SerialPorts, Spans,
 };
+use scanner::io::Crs;
 
 /// A raw TOML value with its span.
 type Raw<'i> = Spanned<DeValue<'i>>;
@@ -81,6 +82,7 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>, scene_override: Op
     let scan = read_scan(r, root);
     let fusion = read_fusion(r, root, solo);
     let output = read_output(r, root);
+    let crs = read_site(r, root, name.as_deref());
     let pipe = read_pipe_table(r, root);
     let control = read_control(r, root);
 
@@ -137,6 +139,7 @@ fn read_mission(r: &mut Reader<'_>, root: &mut Table<'_, '_>, scene_override: Op
         scan,
         fusion: fusion?,
         output: output?,
+        crs: crs?,
         pipe: pipe?,
         control: control.into_iter().map(|(c, _)| c).collect(),
         spans,
@@ -455,6 +458,40 @@ fn read_output(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Output> {
     let rerun = o.optional(r, "rerun", |r, v, f| r.boolean(v, f));
     o.finish(r);
     Some(Output { formats: formats?.unwrap_or_else(|| vec!["ply".into()]), rerun: rerun?.unwrap_or(true) })
+}
+
+/// `[site]`: the coordinate reference system of the mission's coordinates
+/// — `crs` (`EPSG:NNNN` or a WKT definition) or `local_frame` (the name of
+/// a local engineering frame); without either, a local frame named after
+/// the mission.
+fn read_site(r: &mut Reader<'_>, root: &mut Table<'_, '_>, mission: Option<&str>) -> Option<Crs> {
+    let default = || Crs::local(&format!("{} local frame", mission.unwrap_or("cps-survey")));
+    if !root.has("site") {
+        return Some(default());
+    }
+    let mut t = root.table(r, "site");
+    let crs = t.optional(r, "crs", |r, v, f| {
+        let s = r.string(v, f)?;
+        Crs::parse(s.get_ref()).map_err(|message| r.problem(&s.span(), f, message)).ok().map(|c| (c, s.span()))
+    });
+    let local = t.optional(r, "local_frame", |r, v, f| {
+        let s = r.string(v, f)?;
+        if s.get_ref().trim().is_empty() {
+            r.problem(&s.span(), f, "expected the local frame's name, found an empty string");
+            return None;
+        }
+        Some(Crs::local(s.get_ref().trim()))
+    });
+    t.finish(r);
+    match (crs?, local?) {
+        (Some((_, span)), Some(_)) => {
+            r.problem(&span, "site.crs", "both `crs` and `local_frame` given: expected one (a local frame has no CRS)");
+            None
+        }
+        (Some((crs, _)), None) => Some(crs),
+        (None, Some(local)) => Some(local),
+        (None, None) => Some(default()),
+    }
 }
 
 /// `[pipe]`, when given.

@@ -49,6 +49,9 @@ pub struct ScanView {
     pub odometry: ParentPose,
     /// The simulator's true `world_from_body`, when known.
     pub truth: Option<Isometry3<f64>>,
+    /// When it was taken: GPS seconds (from the journal's UNIX time), if
+    /// journaled.
+    pub gps_time_s: Option<f64>,
 }
 
 impl ScanView {
@@ -219,23 +222,42 @@ pub fn error_heading(a: &Isometry3<f64>, b: &Isometry3<f64>) -> f64 {
 /// The merged world-frame cloud of `views` at the `fused` poses, relative
 /// to `origin` (see [`crate::mission::Mission::cloud_origin`]), each point
 /// with its scan.
-pub fn merged(views: &[ScanView], fused: &Fused, origin: &Vector3<f64>) -> (Vec<Point3<f32>>, Vec<u16>) {
+pub fn merged(views: &[ScanView], fused: &Fused, origin: &Vector3<f64>) -> PointCloud {
     let n = views.iter().map(|v| v.body.len()).sum();
-    let mut out =
-        PointCloud { points: Vec::with_capacity(n), source: Some(Vec::with_capacity(n)), ..PointCloud::default() };
+    let mut out = PointCloud {
+        points: Vec::with_capacity(n),
+        source: Some(Vec::with_capacity(n)),
+        origin: *origin,
+        ..PointCloud::default()
+    };
     for (v, f) in views.iter().zip(&fused.scans) {
-        extend(&mut out, fusion::direct::transform(&v.body, &relative(origin, &f.world_from_body)), v.station);
+        let points = fusion::direct::transform(&v.body, &relative(origin, &f.world_from_body));
+        extend(&mut out, points, v, &f.world_from_body);
     }
-    (out.points, out.source.unwrap_or_default())
+    out
 }
 
-/// Appends the points of the scan at `station` to `merged`, each with the
+/// Appends the points of `view`'s scan (already moved by `world_from_body`
+/// and made relative to `merged`'s origin) to `merged`: each point with the
 /// station's index as its scan (LAS `point_source_id`: 65535 for stations
-/// from 65535 on).
-pub fn extend(merged: &mut PointCloud, points: Vec<Point3<f32>>, station: usize) {
-    let id = u16::try_from(station).unwrap_or(u16::MAX);
+/// from 65535 on), the scan with its name, pose and time.
+pub fn extend(merged: &mut PointCloud, points: Vec<Point3<f32>>, view: &ScanView, world_from_body: &Isometry3<f64>) {
+    let id = u16::try_from(view.station).unwrap_or(u16::MAX);
+    let start = merged.points.len();
     merged.source.get_or_insert_with(Vec::new).extend(std::iter::repeat_n(id, points.len()));
     merged.points.extend(points);
+    merged.scans.push(scanner::io::ScanInfo {
+        name: scan_name(view),
+        points: start..merged.points.len(),
+        world_from_scan: *world_from_body,
+        gps_time_s: view.gps_time_s,
+    });
+}
+
+/// A scan's name: its file's stem (`scan003`).
+fn scan_name(view: &ScanView) -> String {
+    let stem = std::path::Path::new(&view.file).file_stem().map(|s| s.to_string_lossy().into_owned());
+    stem.unwrap_or_else(|| format!("scan{:03}", view.station))
 }
 
 /// Writes each scan's fused pose into `dir` as a 3DTK `.frames` file named
@@ -244,8 +266,7 @@ pub fn extend(merged: &mut PointCloud, points: Vec<Point3<f32>>, station: usize)
 pub fn write_frames(dir: &std::path::Path, views: &[ScanView], fused: &Fused) -> Result<Vec<String>> {
     let mut names = Vec::with_capacity(views.len());
     for (v, f) in views.iter().zip(&fused.scans) {
-        let stem = std::path::Path::new(&v.file).file_stem().map(|s| s.to_string_lossy().into_owned());
-        let name = format!("{}.frames", stem.unwrap_or_else(|| format!("scan{:03}", v.station)));
+        let name = format!("{}.frames", scan_name(v));
         scanner::io::write_3dtk_frames(&dir.join(&name), &f.world_from_body)
             .with_context(|| format!("writing {}", dir.join(&name).display()))?;
         names.push(name);

@@ -22,6 +22,10 @@ use crate::mission::PipePlan;
 /// File of the deviation map in a run directory.
 pub const DEVIATION_FILE: &str = "pipe_deviation.ply";
 
+/// The deviation's names in [`DEVIATION_FILE`]: ours, and CloudCompare's
+/// (it loads fields named `scalar_*` as scalar fields), same values.
+pub const DEVIATION_FIELDS: [&str; 2] = ["deviation_m", "scalar_deviation_m"];
+
 /// The inspection's results.
 #[derive(Debug, Clone)]
 pub struct Inspection {
@@ -48,7 +52,7 @@ pub fn inspect(plan: &PipePlan, cloud: &[Point3<f32>]) -> Result<Inspection> {
 /// per point) into `dir`.
 pub fn write_deviation_map(dir: &Path, cloud: &[Point3<f32>], inspection: &Inspection) -> Result<()> {
     let path = dir.join(DEVIATION_FILE);
-    scanner::io::write_ply_with_field(&path, cloud, "deviation_m", &inspection.deviations)?;
+    scanner::io::write_ply_with_field(&path, cloud, &DEVIATION_FIELDS, &inspection.deviations)?;
     Ok(())
 }
 

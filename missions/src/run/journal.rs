@@ -219,6 +219,9 @@ pub struct Scanned {
     /// CRC-32 (IEEE) of the file's bytes, 8 hex digits (version 2).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub crc32: Option<String>,
+    /// When the scan was taken: UNIX seconds, UTC (version 2).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unix_time_s: Option<f64>,
 }
 
 /// A pose in a record: x, y, z (m) and heading (rad).

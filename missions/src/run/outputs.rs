@@ -36,23 +36,29 @@ impl Written {
     }
 }
 
-/// Writes the merged `cloud` (each point's scan in `source`) into `dir` as `cloud.<format>` for each of the
-/// mission's formats and, with `[pipe]`, inspects it (logging the result to
-/// `rec`); the time each takes goes to `timings`.
+/// The file name of the merged cloud in `format` (an `[output] formats`
+/// name): `cloud.<format>`, `cloud.copc.laz` for COPC.
+pub fn cloud_file(format: &str) -> String {
+    if format == "copc" { "cloud.copc.laz".into() } else { format!("cloud.{format}") }
+}
+
+/// Writes the merged `cloud` (relative to the mission's cloud origin, each
+/// point's scan in `source`, each scan in `scans`) into `dir` as
+/// [`cloud_file`] for each of the mission's formats, in the mission's CRS,
+/// and, with `[pipe]`, inspects it (logging the result to `rec`); the time
+/// each takes goes to `timings`.
 pub fn write(
     mission: &Mission,
     dir: &Path,
-    cloud: Vec<Point3<f32>>,
-    source: Vec<u16>,
+    mut cloud: PointCloud,
     rec: &mut Recorder,
     timings: &mut Timings,
 ) -> Result<Written> {
     let started = Instant::now();
-    let cloud =
-        PointCloud { points: cloud, origin: mission.cloud_origin(), source: Some(source), ..PointCloud::default() };
+    cloud.crs = Some(mission.crs.clone());
     let mut files = Vec::new();
     for format in &mission.output.formats {
-        let name = format!("cloud.{format}");
+        let name = cloud_file(format);
         let path = dir.join(&name);
         scanner::io::write(&path, &cloud, Format::from_path(&path)?)?;
         files.push(name);

@@ -45,6 +45,10 @@ pub struct RunReport {
     pub backend: String,
     /// The scene's name.
     pub scene: String,
+    /// The coordinate reference system of every coordinate here and of
+    /// the cloud files (`[site]`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub crs: Option<CrsReport>,
     /// Every station, start included.
     pub stations: Vec<StationReport>,
     /// The last station's figures.
@@ -63,6 +67,26 @@ pub struct RunReport {
     /// station): the same object as `adjust --json`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub adjustment: Option<AdjustmentOutcome>,
+}
+
+/// A coordinate reference system in a report.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CrsReport {
+    /// `EPSG:NNNN`, the WKT's name or the local frame's.
+    pub name: String,
+    /// The EPSG code, if it has one.
+    pub epsg: Option<u16>,
+    /// Whether it is a local engineering frame (not georeferenced).
+    pub local: bool,
+    /// OGC WKT 1, as the LAS and E57 files carry it.
+    pub wkt: String,
+}
+
+impl CrsReport {
+    /// The report of `crs`.
+    pub fn new(crs: &scanner::io::Crs) -> Self {
+        Self { name: crs.name.clone(), epsg: crs.epsg, local: crs.is_local(), wkt: crs.wkt.clone() }
+    }
 }
 
 /// One station in `report.json`.
@@ -246,6 +270,7 @@ impl RunReport {
             seed: mission.backend.seed,
             backend: if mission.backend.serial.is_some() { "serial" } else { "sim" }.into(),
             scene: mission.backend.scene.clone(),
+            crs: Some(CrsReport::new(&mission.crs)),
             stations: stations.iter().map(StationReport::new).collect(),
             final_: FinalReport {
                 distance_m,

@@ -198,6 +198,7 @@ pub fn load(dir: &Path) -> Result<RunDir> {
                     tilt,
                     odometry,
                     truth,
+                    gps_time_s: s.data.unix_time_s.map(scanner::io::gps_time_of_unix),
                 });
             }
             _ => {}

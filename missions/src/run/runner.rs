@@ -98,6 +98,11 @@ fn target_of(goal: &PlanarPose) -> [f64; 3] {
 }
 
 /// Adds the seconds `f` takes to `total`.
+/// The time now: UNIX seconds, UTC.
+fn unix_now() -> f64 {
+    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64())
+}
+
 fn timed<T>(total: &mut f64, f: impl FnOnce() -> T) -> T {
     let t = Instant::now();
     let out = f();
@@ -509,7 +514,7 @@ impl Run<'_> {
                 let bytes =
                     std::fs::read(&file).map_err(|source| scanner::ScannerError::Io { path: file.clone(), source })?;
                 let crc32 = Some(crate::run::journal::crc32_hex(&bytes));
-                Ok(Scanned { file: format!("{name}.3d"), points, crc32 })
+                Ok(Scanned { file: format!("{name}.3d"), points, crc32, unix_time_s: Some(unix_now()) })
             })?;
         self.progress.slices_done += slices as u64;
         self.progress.scans.set_position(self.progress.slices_done);
@@ -562,12 +567,13 @@ impl Run<'_> {
             tilt: Tilt { roll_rad: tilt.roll_rad, pitch_rad: tilt.pitch_rad },
             odometry: ParentPose::new(believed.x_m, believed.y_m, nominal_z, believed.heading_rad),
             truth: truth.map(|t| t.tilt.world_from_body(&t.parent)),
+            gps_time_s: scanned.unix_time_s.map(scanner::io::gps_time_of_unix),
         };
+        if self.mission.fusion.mode == FusionMode::Direct {
+            super::fuse::extend(&mut self.merged, world, &view, &world_from_body);
+        }
         self.views.push(view);
         self.scan_times.push(self.steps.rec.now());
-        if self.mission.fusion.mode == FusionMode::Direct {
-            super::fuse::extend(&mut self.merged, world, index);
-        }
         Ok(scanned.file)
     }
 
@@ -612,7 +618,7 @@ impl Run<'_> {
                     Ok(())
                 })?;
             }
-            super::fuse::extend(merged, world, view.station);
+            super::fuse::extend(merged, world, view, &f.world_from_body);
         }
         Ok(fused)
     }
@@ -653,10 +659,9 @@ impl Run<'_> {
         super::fuse::write_frames(&self.dir.join("scans"), &self.views, &fused)?;
         self.progress.scans.finish_and_clear();
         let fusion = FusionReport::new(&self.views, &fused);
-        let merged = std::mem::take(&mut self.merged.points);
-        let source = self.merged.source.take().unwrap_or_default();
+        let merged = std::mem::take(&mut self.merged);
         let written: Written =
-            super::outputs::write(self.mission, &self.dir, merged, source, &mut self.steps.rec, &mut self.timings)?;
+            super::outputs::write(self.mission, &self.dir, merged, &mut self.steps.rec, &mut self.timings)?;
         let adjustment = self.adjust()?;
         let adjusted = adjustment.as_ref().and_then(AdjustmentOutcome::report);
         let accepted = mission_accepted(self.mission, &self.stations, &self.views, &fused, adjusted)

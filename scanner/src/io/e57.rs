@@ -1,12 +1,16 @@
-//! E57 through the `e57` crate: one point cloud of f32 Cartesian
-//! coordinates (f64 for a georeferenced cloud; + intensity as a unit float
-//! when present); reading takes every point cloud in the file with its pose
-//! applied.
+//! E57 through the `e57` crate. Writing: one `data3D` per scan of the
+//! cloud, its points in the scan's frame (f32) with the scan's pose (f64),
+//! name, acquisition time and a GUID of its own; points in no scan in one
+//! more `data3D` of world coordinates (f64 when georeferenced); intensity
+//! as a unit float when present; the CRS's WKT in `coordinateMetadata`.
+//! Reading takes every point cloud in the file with its pose applied.
 
 use std::path::Path;
 
-use e57::{CartesianCoordinate, E57Reader, E57Writer, Record, RecordValue};
-use nalgebra::Point3;
+use e57::{
+    CartesianCoordinate, DateTime, E57Reader, E57Writer, Quaternion, Record, RecordValue, Transform, Translation,
+};
+use nalgebra::{Isometry3, Point3};
 
 use super::PointCloud;
 use crate::error::{Result, ScannerError};
@@ -44,10 +48,60 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
 }
 
 pub(super) fn write(path: &Path, cloud: &PointCloud) -> Result<()> {
-    let mut writer = E57Writer::from_file(path, "cps-survey-e57").map_err(|e| ScannerError::whole_file(path, e))?;
-    // Georeferenced: 64-bit coordinates (origin + p).
-    let georeferenced = cloud.georeferenced();
-    let mut prototype = if georeferenced {
+    let mut writer = E57Writer::from_file(path, &guid()).map_err(|e| ScannerError::whole_file(path, e))?;
+    writer.set_coordinate_metadata(cloud.crs.as_ref().map(|c| c.wkt.clone()));
+    let now = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64());
+    writer.set_creation(Some(DateTime { gps_time: super::gps_time_of_unix(now), atomic_reference: false }));
+    // One data3D per scan, in the scan's own frame with its pose; points in
+    // no scan (or all of them, without scans) in one more, in the cloud's
+    // coordinates.
+    let mut covered = vec![false; cloud.len()];
+    for scan in &cloud.scans {
+        covered[scan.points.clone()].iter_mut().for_each(|c| *c = true);
+        let scan_from_world = scan.world_from_scan.inverse();
+        let points = scan.points.clone().map(|i| {
+            let local = scan_from_world * nalgebra::Point3::from(cloud.coordinates(i));
+            (i, [local.x, local.y, local.z].map(|v| RecordValue::Single(v as f32)))
+        });
+        let meta = Data3d { name: &scan.name, pose: Some(&scan.world_from_scan), gps_time_s: scan.gps_time_s };
+        add_data3d(&mut writer, path, cloud, &meta, false, points)?;
+    }
+    if covered.iter().any(|c| !c) || cloud.is_empty() {
+        // Georeferenced: 64-bit coordinates (origin + p).
+        let georeferenced = cloud.georeferenced();
+        let points = (0..cloud.len()).filter(|&i| !covered[i]).map(|i| {
+            let p = &cloud.points[i];
+            let values = if georeferenced {
+                cloud.coordinates(i).map(RecordValue::Double)
+            } else {
+                [p.x, p.y, p.z].map(RecordValue::Single)
+            };
+            (i, values)
+        });
+        let meta = Data3d { name: "cps-survey-cloud", pose: None, gps_time_s: None };
+        add_data3d(&mut writer, path, cloud, &meta, georeferenced, points)?;
+    }
+    writer.finalize().map_err(|e| ScannerError::whole_file(path, e))
+}
+
+/// What a `data3D` says of itself.
+struct Data3d<'a> {
+    name: &'a str,
+    pose: Option<&'a Isometry3<f64>>,
+    gps_time_s: Option<f64>,
+}
+
+/// Adds one `data3D` of `points` (index in `cloud`, coordinates) with
+/// `meta` and a new GUID.
+fn add_data3d(
+    writer: &mut E57Writer<std::fs::File>,
+    path: &Path,
+    cloud: &PointCloud,
+    meta: &Data3d<'_>,
+    double: bool,
+    points: impl Iterator<Item = (usize, [RecordValue; 3])>,
+) -> Result<()> {
+    let mut prototype = if double {
         vec![Record::CARTESIAN_X_F64, Record::CARTESIAN_Y_F64, Record::CARTESIAN_Z_F64]
     } else {
         vec![Record::CARTESIAN_X_F32, Record::CARTESIAN_Y_F32, Record::CARTESIAN_Z_F32]
@@ -55,21 +109,35 @@ pub(super) fn write(path: &Path, cloud: &PointCloud) -> Result<()> {
     if cloud.intensity.is_some() {
         prototype.push(Record::INTENSITY_UNIT_F32);
     }
-    {
-        let mut pc =
-            writer.add_pointcloud("cps-survey-cloud", prototype).map_err(|e| ScannerError::whole_file(path, e))?;
-        for (i, p) in cloud.points.iter().enumerate() {
-            let mut values = if georeferenced {
-                cloud.coordinates(i).map(RecordValue::Double).to_vec()
-            } else {
-                vec![RecordValue::Single(p.x), RecordValue::Single(p.y), RecordValue::Single(p.z)]
-            };
-            if let Some(v) = &cloud.intensity {
-                values.push(RecordValue::Single(v[i]));
-            }
-            pc.add_point(values).map_err(|e| ScannerError::whole_file(path, format!("point {i}: {e}")))?;
+    let mut pc = writer.add_pointcloud(&guid(), prototype).map_err(|e| ScannerError::whole_file(path, e))?;
+    pc.set_name(Some(meta.name.to_string()));
+    pc.set_transform(meta.pose.map(transform));
+    pc.set_acquisition_start(meta.gps_time_s.map(|gps_time| DateTime { gps_time, atomic_reference: false }));
+    for (i, xyz) in points {
+        let mut values = xyz.to_vec();
+        if let Some(v) = &cloud.intensity {
+            values.push(RecordValue::Single(v[i]));
         }
-        pc.finalize().map_err(|e| ScannerError::whole_file(path, e))?;
+        pc.add_point(values).map_err(|e| ScannerError::whole_file(path, format!("point {i}: {e}")))?;
     }
-    writer.finalize().map_err(|e| ScannerError::whole_file(path, e))
+    pc.finalize().map_err(|e| ScannerError::whole_file(path, e))
+}
+
+/// An E57 pose: a unit quaternion with w ≥ 0 and a translation.
+fn transform(pose: &Isometry3<f64>) -> Transform {
+    let q = pose.rotation.quaternion();
+    let sign = if q.w < 0.0 { -1.0 } else { 1.0 };
+    let t = &pose.translation.vector;
+    Transform {
+        rotation: Quaternion { w: sign * q.w, x: sign * q.i, y: sign * q.j, z: sign * q.k },
+        translation: Translation { x: t.x, y: t.y, z: t.z },
+    }
+}
+
+/// A new random (version 4) GUID in the braced form E57 files use.
+fn guid() -> String {
+    let v: u128 =
+        rand::random::<u128>() & !(0xf000u128 << 64) & !(0xc000u128 << 48) | (0x4000u128 << 64) | (0x8000u128 << 48);
+    let h = format!("{v:032x}");
+    format!("{{{}-{}-{}-{}-{}}}", &h[0..8], &h[8..12], &h[12..16], &h[16..20], &h[20..32])
 }

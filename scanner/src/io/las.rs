@@ -1,9 +1,15 @@
-//! LAS 1.4 through the `las` crate: point format 0 with intensity, scale
-//! 0.1 mm, offset at the cloud's lower corner (rounded to metres).
+//! LAS 1.4 and LAZ through the `las` crate: point format 6 (each point's
+//! scan in `point_source_id`, its scan's time as adjusted standard GPS
+//! time, intensity, return 1 of 1), scale 0.1 mm, offset at the cloud's
+//! lower corner (rounded to metres) plus its origin, the CRS as an OGC WKT
+//! VLR. COPC is that LAZ re-ordered into an octree by `copc-writer`,
+//! streaming through a spill file beside the output.
 
+use std::fs::File;
+use std::io::BufWriter;
 use std::path::Path;
 
-use las::{Builder, Point, Reader, Transform, Vector, Writer};
+use las::{Builder, GpsTimeType, Point, Reader, Transform, Vector, Vlr, Writer};
 use nalgebra::Point3;
 
 use super::PointCloud;
@@ -16,17 +22,39 @@ pub const LAS_SCALE_M: f64 = 1e-4;
 /// size).
 const BATCH: u64 = 1 << 16;
 
-/// The extended VLRs of a LAS 1.4 header are claims too: each one's 64-bit
-/// length must lie within the file before the `las` crate sizes a buffer by
-/// it (found by the `scan_file` fuzz target: a 400-byte file asked for
-/// 5.7 EB).
-fn check_evlrs(path: &Path) -> Result<()> {
+/// The point count and the extended VLRs of a LAS header are claims: each
+/// must fit in the file before the `las` crate sizes anything by it (found
+/// by the `scan_file` fuzz target: a 400-byte file asked for 5.7 EB through
+/// an extended VLR's length; 2^63 points overflow the crate's own
+/// arithmetic once LAZ support is compiled in).
+fn check_claims(path: &Path) -> Result<()> {
     use std::io::{Read as _, Seek as _, SeekFrom};
     let mut file = std::fs::File::open(path).map_err(|e| ScannerError::io(path, e))?;
     let len = file.metadata().map_err(|e| ScannerError::io(path, e))?.len();
-    let mut head = [0u8; 247];
-    if len < head.len() as u64 || file.read_exact(&mut head).is_err() {
-        return Ok(()); // too short for EVLRs: the crate says what is wrong
+    let mut head = [0u8; 255];
+    if len < 227 || file.read_exact(&mut head[..227]).is_err() {
+        return Ok(()); // too short for a header: the crate says what is wrong
+    }
+    let record = u64::from(u16::from_le_bytes([head[105], head[106]]));
+    let legacy = u64::from(u32::from_le_bytes(head[107..111].try_into().expect("4 bytes")));
+    let extended = if len >= 255 && file.read_exact(&mut head[227..255]).is_ok() && (head[24], head[25]) >= (1, 4) {
+        u64::from_le_bytes(head[247..255].try_into().expect("8 bytes"))
+    } else {
+        0
+    };
+    let count = legacy.max(extended);
+    // LAZ (the format's compression bits) holds fewer bytes than it
+    // claims points of: only the arithmetic must not overflow.
+    let compressed = head[104] & 0xc0 != 0;
+    if count.checked_mul(record).is_none_or(|bytes| bytes > len && !compressed) {
+        return Err(ScannerError::file(
+            path,
+            Location::File,
+            format!("the header says {count} points of {record} bytes; the file has {len} bytes in all"),
+        ));
+    }
+    if len < 255 {
+        return Ok(());
     }
     let (major, minor) = (head[24], head[25]);
     if (major, minor) < (1, 4) {
@@ -62,19 +90,11 @@ fn check_evlrs(path: &Path) -> Result<()> {
 }
 
 pub(super) fn read(path: &Path) -> Result<PointCloud> {
-    check_evlrs(path)?;
+    check_claims(path)?;
     let mut reader = Reader::from_path(path).map_err(|e| ScannerError::whole_file(path, e))?;
     let header = reader.header();
+    // (Checked against the file's length by `check_claims`.)
     let count = header.number_of_points();
-    let record = u64::from(header.point_format().len());
-    let len = std::fs::metadata(path).map_err(|e| ScannerError::io(path, e))?.len();
-    if count.checked_mul(record).is_none_or(|bytes| bytes > len) {
-        return Err(ScannerError::file(
-            path,
-            Location::File,
-            format!("the header says {count} points of {record} bytes; the file has {len} bytes in all"),
-        ));
-    }
     let t = header.transforms();
     for (axis, tr) in [("x", t.x), ("y", t.y), ("z", t.z)] {
         if !(tr.scale.is_finite() && tr.scale != 0.0 && tr.offset.is_finite()) {
@@ -129,8 +149,57 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
     Ok(cloud)
 }
 
-pub(super) fn write(path: &Path, cloud: &PointCloud) -> Result<()> {
+/// The LAS record id of an OGC WKT coordinate system (user `LASF_Projection`).
+pub const WKT_RECORD_ID: u16 = 2112;
+
+/// Adjusted standard GPS time: GPS seconds minus 10⁹ (LAS 1.4).
+const ADJUSTED_GPS_OFFSET_S: f64 = 1e9;
+
+pub(super) fn write(path: &Path, cloud: &PointCloud, compressed: bool) -> Result<()> {
+    let header = header(path, cloud, compressed)?;
+    let file = File::create(path).map_err(|e| ScannerError::io(path, e))?;
+    let mut writer =
+        Writer::new(BufWriter::with_capacity(1 << 20, file), header).map_err(|e| ScannerError::whole_file(path, e))?;
+    // Each point's time is its scan's: walk the scans alongside the points.
+    let mut scans: Vec<_> = cloud.scans.iter().filter(|s| !s.points.is_empty()).collect();
+    scans.sort_by_key(|s| s.points.start);
+    let mut scan = scans.iter().peekable();
+    for i in 0..cloud.points.len() {
+        while scan.peek().is_some_and(|s| s.points.end <= i) {
+            scan.next();
+        }
+        let gps_time = scan
+            .peek()
+            .filter(|s| s.points.contains(&i))
+            .and_then(|s| s.gps_time_s)
+            .map_or(0.0, |t| t - ADJUSTED_GPS_OFFSET_S);
+        let intensity = cloud.intensity.as_ref().map_or(0, |v| v[i].clamp(0.0, 65535.0).round() as u16);
+        let [x, y, z] = cloud.coordinates(i);
+        let point_source_id = cloud.source.as_ref().map_or(0, |s| s[i]);
+        let point = Point {
+            x,
+            y,
+            z,
+            intensity,
+            point_source_id,
+            return_number: 1,
+            number_of_returns: 1,
+            gps_time: Some(gps_time),
+            ..Default::default()
+        };
+        writer.write_point(point).map_err(|e| ScannerError::whole_file(path, format!("point {i}: {e}")))?;
+    }
+    writer.close().map_err(|e| ScannerError::whole_file(path, e))?;
+    let file = writer.into_inner().map_err(|e| ScannerError::whole_file(path, e))?;
+    file.get_ref().sync_all().map_err(|e| ScannerError::io(path, e))
+}
+
+/// The LAS 1.4 header of `cloud`: point format 6, compressed or not.
+fn header(path: &Path, cloud: &PointCloud, compressed: bool) -> Result<las::Header> {
     let mut builder = Builder::from((1, 4));
+    let mut format = las::point::Format::new(6).map_err(|e| ScannerError::whole_file(path, e))?;
+    format.is_compressed = compressed;
+    builder.point_format = format;
     let lo = cloud.points.iter().fold([f64::INFINITY; 3], |m, p| {
         [m[0].min(f64::from(p.x)), m[1].min(f64::from(p.y)), m[2].min(f64::from(p.z))]
     });
@@ -146,17 +215,50 @@ pub(super) fn write(path: &Path, cloud: &PointCloud) -> Result<()> {
     builder.generating_software = "cps-survey".into();
     builder.system_identifier = "cps-survey CPS team".into(); // at most 32 bytes
     builder.date = Some(today());
-    let header = builder.into_header().map_err(|e| ScannerError::whole_file(path, e))?;
-    let mut writer = Writer::from_path(path, header).map_err(|e| ScannerError::whole_file(path, e))?;
-    for i in 0..cloud.points.len() {
-        let intensity = cloud.intensity.as_ref().map_or(0, |v| v[i].clamp(0.0, 65535.0).round() as u16);
-        let [x, y, z] = cloud.coordinates(i);
-        let point_source_id = cloud.source.as_ref().map_or(0, |s| s[i]);
-        let point =
-            Point { x, y, z, intensity, point_source_id, return_number: 1, number_of_returns: 1, ..Default::default() };
-        writer.write_point(point).map_err(|e| ScannerError::whole_file(path, format!("point {i}: {e}")))?;
+    if cloud.scans.iter().any(|s| s.gps_time_s.is_some()) {
+        builder.gps_time_type = GpsTimeType::Standard;
     }
-    writer.close().map_err(|e| ScannerError::whole_file(path, e))
+    if let Some(crs) = &cloud.crs {
+        builder.has_wkt_crs = true;
+        let mut data = crs.wkt.clone().into_bytes();
+        data.push(0); // the specification's null terminator
+        builder.vlrs.push(Vlr {
+            user_id: "LASF_Projection".into(),
+            record_id: WKT_RECORD_ID,
+            description: "OGC WKT coordinate system".into(),
+            data,
+        });
+    }
+    builder.into_header().map_err(|e| ScannerError::whole_file(path, e))
+}
+
+/// Writes `cloud` as COPC: LAZ first (beside `path`), then re-ordered into
+/// an octree by `copc-writer`, which spills to a temporary file in the same
+/// directory rather than holding the points.
+pub(super) fn write_copc(path: &Path, cloud: &PointCloud) -> Result<()> {
+    if cloud.is_empty() {
+        return Err(ScannerError::file(
+            path,
+            Location::File,
+            "a COPC file needs at least one point; the cloud has none",
+        ));
+    }
+    let mut name = path.file_name().map(|n| n.to_os_string()).unwrap_or_default();
+    name.push(".laz");
+    let laz = path.with_file_name(name);
+    let result = write(&laz, cloud, true).and_then(|()| {
+        let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        copc_writer::convert_las_to_copc_streaming(
+            &laz,
+            path,
+            &copc_writer::CopcWriterParams::default(),
+            dir,
+            &copc_core::NeverCancel,
+        )
+        .map_err(|e| ScannerError::whole_file(path, format!("COPC: {e}")))
+    });
+    let _ = std::fs::remove_file(&laz);
+    result
 }
 
 /// Today's date (UTC), the file's creation date.

@@ -9,9 +9,16 @@
 //! | PLY | ✓ ascii, binary LE/BE | ✓ ascii, binary LE | optional intensity |
 //! | XYZ text | ✓ | ✓ | `x y z [intensity]` per line |
 //! | PCD | ✓ ascii, binary, binary_compressed | ✓ all three | F4/F8/U/I fields |
-//! | LAS 1.4 | ✓ | ✓ | 0.1 mm scale |
-//! | E57 | ✓ | ✓ | f32 Cartesian |
+//! | LAS 1.4 | ✓ | ✓ | point format 6, 0.1 mm scale, WKT CRS, each point's scan and time |
+//! | LAZ | ✓ | ✓ | LAS compressed (LASzip) |
+//! | COPC `.copc.laz` | ✓ (as LAZ) | ✓ | LAZ chunks in an octree, streamed by `copc-writer` |
+//! | E57 | ✓ | ✓ | one `data3D` per scan with its pose, name and time; CRS in `coordinateMetadata` |
+//!
+//! A georeferenced cloud (non-zero [`PointCloud::origin`]) is written in
+//! 64-bit coordinates; its [`Crs`] goes into LAS (WKT VLR), E57
+//! (`coordinateMetadata`) and PLY (comments).
 
+mod crs;
 mod e57;
 mod las;
 mod pcd;
@@ -22,8 +29,11 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
-use nalgebra::{Point3, Vector3};
+use std::ops::Range;
 
+use nalgebra::{Isometry3, Point3, Vector3};
+
+pub use crs::Crs;
 pub use pcd::PcdData;
 pub use ply::PlyEncoding;
 pub use text::{
@@ -49,12 +59,38 @@ pub struct PointCloud {
     /// The scan each point came from (its station's index), if known:
     /// LAS `point_source_id`.
     pub source: Option<Vec<u16>>,
+    /// The coordinate reference system of `origin + p`, if known.
+    pub crs: Option<Crs>,
+    /// The scans the points came from, each a run of points, when known
+    /// (E57 writes one `data3D` each; LAS takes each point's time from it).
+    pub scans: Vec<ScanInfo>,
+}
+
+/// One scan of a merged cloud.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScanInfo {
+    /// Its name (the scan file's stem, e.g. `scan003`).
+    pub name: String,
+    /// Its points in the cloud.
+    pub points: Range<usize>,
+    /// Where it was taken: `world_from_scan` in the CRS's coordinates
+    /// (absolute, not relative to the cloud's origin).
+    pub world_from_scan: Isometry3<f64>,
+    /// When it was taken: GPS seconds since 1980-01-06 00:00 UTC, if known.
+    pub gps_time_s: Option<f64>,
+}
+
+/// GPS time (seconds since 1980-01-06 00:00 UTC, without leap seconds) of
+/// a UNIX time: 315,964,800 s between the epochs, and the 18 leap seconds
+/// UTC has inserted since (none announced after 2016-12-31).
+pub fn gps_time_of_unix(unix_s: f64) -> f64 {
+    unix_s - 315_964_800.0 + 18.0
 }
 
 impl PointCloud {
     /// A cloud of points without intensity, at the zero origin.
     pub fn from_points(points: Vec<Point3<f32>>) -> Self {
-        Self { points, intensity: None, origin: Vector3::zeros(), source: None }
+        Self { points, ..Self::default() }
     }
 
     /// Whether the points are relative to a non-zero origin (the writers
@@ -93,29 +129,38 @@ pub enum Format {
     Pcd(PcdData),
     /// LAS 1.4.
     Las,
+    /// LAZ: LAS 1.4 compressed.
+    Laz,
+    /// COPC: LAZ 1.4 in octree-ordered chunks (`.copc.laz`).
+    Copc,
     /// E57.
     E57,
 }
 
 impl Format {
     /// The format for a file name's extension (`.3d`, `.ply`, `.xyz`/`.txt`,
-    /// `.pcd`, `.las`, `.e57`); writing uses binary PLY and
-    /// binary_compressed PCD.
+    /// `.pcd`, `.las`, `.laz`, `.copc.laz`, `.e57`); writing uses binary PLY
+    /// and binary_compressed PCD.
     pub fn from_path(path: &Path) -> Result<Self> {
         let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+        let name = path.file_name().and_then(|n| n.to_str()).map(str::to_ascii_lowercase).unwrap_or_default();
+        if name.ends_with(".copc.laz") {
+            return Ok(Format::Copc);
+        }
         Ok(match ext.as_deref() {
             Some("3d") => Format::ThreeDtk,
             Some("ply") => Format::Ply(PlyEncoding::BinaryLittleEndian),
             Some("xyz" | "txt") => Format::Xyz,
             Some("pcd") => Format::Pcd(PcdData::BinaryCompressed),
             Some("las") => Format::Las,
+            Some("laz") => Format::Laz,
             Some("e57") => Format::E57,
             _ => {
                 return Err(ScannerError::file(
                     path,
                     Location::File,
                     format!(
-                        "unknown scan file extension {:?}: expected .3d, .ply, .xyz, .txt, .pcd, .las or .e57",
+                        "unknown scan file extension {:?}: expected .3d, .ply, .xyz, .txt, .pcd, .las, .laz, .copc.laz or .e57",
                         ext.unwrap_or_default()
                     ),
                 ));
@@ -132,21 +177,23 @@ pub fn read(path: &Path) -> Result<PointCloud> {
         Format::Ply(_) => ply::read(path),
         Format::Xyz => text::read_xyz(path),
         Format::Pcd(_) => pcd::read(path),
-        Format::Las => las::read(path),
+        Format::Las | Format::Laz | Format::Copc => las::read(path),
         Format::E57 => e57::read(path),
     }
 }
 
-/// Writes `points` with one named float field per point (e.g. a deviation
-/// map) as binary little-endian PLY (via a temporary file and rename); viewers
-/// such as CloudCompare show the field as a scalar field.
-pub fn write_ply_with_field(path: &Path, points: &[Point3<f32>], field: &str, values: &[f32]) -> Result<()> {
-    if values.len() != points.len() || ["x", "y", "z"].contains(&field) || field.is_empty() {
+/// Writes `points` with one float value per point (e.g. a deviation map)
+/// under each of `names` as binary little-endian PLY (via a temporary file
+/// and rename) — e.g. `deviation_m` and `scalar_deviation_m`, the name
+/// CloudCompare loads as a scalar field.
+pub fn write_ply_with_field(path: &Path, points: &[Point3<f32>], names: &[&str], values: &[f32]) -> Result<()> {
+    let bad_name = names.iter().any(|n| ["x", "y", "z", ""].contains(n));
+    if values.len() != points.len() || names.is_empty() || bad_name {
         return Err(ScannerError::file(
             path,
             Location::File,
             format!(
-                "field `{field}` with {} values for {} points: expected a name other than x, y, z and one value per point",
+                "fields {names:?} with {} values for {} points: expected names other than x, y, z and one value per point",
                 values.len(),
                 points.len()
             ),
@@ -154,47 +201,53 @@ pub fn write_ply_with_field(path: &Path, points: &[Point3<f32>], field: &str, va
     }
     let tmp = temporary(path);
     let result =
-        with_writer(&tmp, |w| ply::write_scalar(w, points, Some((field, values)), PlyEncoding::BinaryLittleEndian));
+        with_writer(&tmp, |w| ply::write_scalar(w, points, Some((names, values)), PlyEncoding::BinaryLittleEndian));
     finish_write(path, &tmp, result)
 }
 
 /// Writes `cloud` to `path` in `format` (via a temporary file and rename).
 pub fn write(path: &Path, cloud: &PointCloud, format: Format) -> Result<()> {
-    if let Some(i) = &cloud.intensity
-        && i.len() != cloud.points.len()
-    {
-        return Err(ScannerError::file(
-            path,
-            Location::File,
-            format!("{} intensities for {} points: expected one per point", i.len(), cloud.points.len()),
-        ));
-    }
-    if let Some(s) = &cloud.source
-        && s.len() != cloud.points.len()
-    {
-        return Err(ScannerError::file(
-            path,
-            Location::File,
-            format!("{} scan indices for {} points: expected one per point", s.len(), cloud.points.len()),
-        ));
-    }
-    if !cloud.origin.iter().all(|v| v.is_finite()) {
-        return Err(ScannerError::file(
-            path,
-            Location::File,
-            format!("origin {:?}: expected finite coordinates", cloud.origin.as_slice()),
-        ));
-    }
+    check(cloud).map_err(|message| ScannerError::file(path, Location::File, message))?;
     let tmp = temporary(path);
     let result = match format {
         Format::ThreeDtk => with_writer(&tmp, |w| text::write_3dtk(w, cloud)),
         Format::Ply(e) => with_writer(&tmp, |w| ply::write(w, cloud, e)),
         Format::Xyz => with_writer(&tmp, |w| text::write_xyz(w, cloud)),
         Format::Pcd(d) => with_writer(&tmp, |w| pcd::write(w, cloud, d)),
-        Format::Las => las::write(&tmp, cloud),
+        Format::Las => las::write(&tmp, cloud, false),
+        Format::Laz => las::write(&tmp, cloud, true),
+        Format::Copc => las::write_copc(&tmp, cloud),
         Format::E57 => e57::write(&tmp, cloud),
     };
     finish_write(path, &tmp, result)
+}
+
+/// What a cloud must be to be written: one value per point in each
+/// per-point field, a finite origin, scans within the points with finite
+/// poses.
+fn check(cloud: &PointCloud) -> std::result::Result<(), String> {
+    let n = cloud.points.len();
+    let per_point = |what: &str, len: Option<usize>| match len {
+        Some(len) if len != n => Err(format!("{len} {what} for {n} points: expected one per point")),
+        _ => Ok(()),
+    };
+    per_point("intensities", cloud.intensity.as_ref().map(Vec::len))?;
+    per_point("scan indices", cloud.source.as_ref().map(Vec::len))?;
+    if !cloud.origin.iter().all(|v| v.is_finite()) {
+        return Err(format!("origin {:?}: expected finite coordinates", cloud.origin.as_slice()));
+    }
+    for s in &cloud.scans {
+        let pose = s.world_from_scan.to_homogeneous();
+        if s.points.start > s.points.end || s.points.end > n || !pose.iter().all(|v| v.is_finite()) {
+            return Err(format!(
+                "scan \"{}\": points {:?} and pose {:?}: expected a range within the {n} points and a finite pose",
+                s.name,
+                s.points,
+                s.world_from_scan.translation.vector.as_slice()
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Renames the written temporary file into place, or removes it after an

@@ -228,51 +228,55 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
 }
 
 pub(super) fn write(w: &mut impl Write, cloud: &PointCloud, encoding: PlyEncoding) -> std::io::Result<()> {
-    let scalar = cloud.intensity.as_deref().map(|v| ("intensity", v));
-    write_with(w, &cloud.points, cloud.georeferenced().then_some(cloud), scalar, encoding)
+    let scalar = cloud.intensity.as_deref().map(|v| (&["intensity"][..], v));
+    // The CRS in two comments: its name, then its WKT (one line).
+    let crs = cloud.crs.iter().flat_map(|c| [format!("crs {}", c.name), format!("crs_wkt {}", c.wkt)]).collect();
+    write_with(w, &cloud.points, cloud.georeferenced().then_some(cloud), scalar, encoding, crs)
 }
 
 /// Float x, y, z and, when given, one float scalar field per vertex.
 pub(super) fn write_scalar(
     w: &mut impl Write,
     points: &[Point3<f32>],
-    scalar: Option<(&str, &[f32])>,
+    scalar: Option<(&[&str], &[f32])>,
     encoding: PlyEncoding,
 ) -> std::io::Result<()> {
-    write_with(w, points, None, scalar, encoding)
+    write_with(w, points, None, scalar, encoding, Vec::new())
 }
 
 /// x, y, z — double from `georeferenced`'s coordinates (origin + p), else
-/// float — and, when given, one float scalar field per vertex.
+/// float — and, when given, one float scalar field per vertex; `comments`
+/// after ours.
 fn write_with(
     w: &mut impl Write,
     points: &[Point3<f32>],
     georeferenced: Option<&PointCloud>,
-    scalar: Option<(&str, &[f32])>,
+    scalar: Option<(&[&str], &[f32])>,
     encoding: PlyEncoding,
+    mut comments: Vec<String>,
 ) -> std::io::Result<()> {
     let scalar_at = |i: usize| scalar.map_or(0.0, |(_, v)| v[i]);
     match georeferenced {
         Some(cloud) => {
             let o = cloud.origin;
-            let comment = format!("georeferenced: x, y, z are coordinates (origin {} {} {})", o.x, o.y, o.z);
+            comments.insert(0, format!("georeferenced: x, y, z are coordinates (origin {} {} {})", o.x, o.y, o.z));
             let items = (0..points.len()).map(|i| GeoVertex { c: cloud.coordinates(i), intensity: scalar_at(i) });
-            write_items(w, ScalarType::Double, Some(comment), scalar, encoding, items.collect())
+            write_items(w, ScalarType::Double, comments, scalar, encoding, items.collect())
         }
         None => {
             let items = points.iter().enumerate().map(|(i, p)| Vertex { p: [p.x, p.y, p.z], intensity: scalar_at(i) });
-            write_items(w, ScalarType::Float, None, scalar, encoding, items.collect())
+            write_items(w, ScalarType::Float, comments, scalar, encoding, items.collect())
         }
     }
 }
 
 /// The PLY of `items`: x, y, z of type `xyz`, the scalar field's name if
-/// any, a comment besides ours.
+/// any, comments besides ours.
 fn write_items<V: PropertyAccess>(
     w: &mut impl Write,
     xyz: ScalarType,
-    comment: Option<String>,
-    scalar: Option<(&str, &[f32])>,
+    comments: Vec<String>,
+    scalar: Option<(&[&str], &[f32])>,
     encoding: PlyEncoding,
     items: Vec<V>,
 ) -> std::io::Result<()> {
@@ -282,13 +286,13 @@ fn write_items<V: PropertyAccess>(
         PlyEncoding::BinaryLittleEndian => Encoding::BinaryLittleEndian,
     };
     ply.header.comments.push("written by cps-survey; metres, x forward, y left, z up".into());
-    ply.header.comments.extend(comment);
+    ply.header.comments.extend(comments);
     let mut vertex = ElementDef::new("vertex".into());
     for n in ["x", "y", "z"] {
         vertex.properties.add(PropertyDef::new(n.into(), PropertyType::Scalar(xyz.clone())));
     }
-    if let Some((name, _)) = scalar {
-        vertex.properties.add(PropertyDef::new(name.into(), PropertyType::Scalar(ScalarType::Float)));
+    for name in scalar.map_or(&[][..], |(names, _)| names) {
+        vertex.properties.add(PropertyDef::new(name.to_string(), PropertyType::Scalar(ScalarType::Float)));
     }
     ply.header.elements.add(vertex);
     ply.payload.insert("vertex".into(), items);

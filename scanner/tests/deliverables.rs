@@ -1,0 +1,205 @@
+//! A merged survey cloud — three scans with poses and times, at
+//! national-grid coordinates in ETRS89 / UTM 32N — written as LAS, LAZ,
+//! COPC, E57 and PLY and read back by the format libraries (`las` with its
+//! own LAZ and COPC readers, `e57`): the CRS, each point's scan and time,
+//! each scan's pose, name and GUID, and every coordinate to 0.1 mm.
+
+use std::collections::HashMap;
+
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use scanner::io::{Crs, Format, PointCloud, ScanInfo, gps_time_of_unix, write};
+
+const ORIGIN: [f64; 3] = [500_000.0, 5_500_000.0, 300.0];
+
+/// 2023-06-01 08:00 UTC and the two scans after it, GPS seconds.
+fn scan_time(k: usize) -> f64 {
+    gps_time_of_unix(1_685_606_400.0) + 95.5 * k as f64
+}
+
+/// Three scans of 400 points each, taken at three poses, merged relative
+/// to the origin.
+fn survey() -> PointCloud {
+    let mut cloud = PointCloud {
+        origin: Vector3::from(ORIGIN),
+        crs: Some(Crs::parse("EPSG:25832").expect("UTM 32N")),
+        source: Some(Vec::new()),
+        intensity: Some(Vec::new()),
+        ..PointCloud::default()
+    };
+    for k in 0..3 {
+        let world_from_scan = Isometry3::from_parts(
+            Translation3::new(ORIGIN[0] + 12.5 * k as f64, ORIGIN[1] - 3.25 * k as f64, ORIGIN[2] + 0.5),
+            UnitQuaternion::from_euler_angles(0.01 * k as f64, -0.02, 0.7 * k as f64 - 1.0),
+        );
+        let start = cloud.len();
+        for i in 0..400 {
+            let t = i as f64;
+            let local = Point3::new(8.0 * (0.3 * t).sin() + 1e-4 * t, 6.0 * (0.17 * t).cos(), 2.0 * (0.05 * t).sin());
+            let world = world_from_scan * local;
+            cloud.points.push((world - Vector3::from(ORIGIN)).cast::<f32>());
+            cloud.source.as_mut().expect("sources").push(k as u16 + 4);
+            cloud.intensity.as_mut().expect("intensity").push((100 * k + i) as f32);
+        }
+        cloud.scans.push(ScanInfo {
+            name: format!("scan{:03}", k + 4),
+            points: start..cloud.len(),
+            world_from_scan,
+            gps_time_s: Some(scan_time(k)),
+        });
+    }
+    cloud
+}
+
+fn close(a: [f64; 3], b: [f64; 3], tolerance_m: f64) -> bool {
+    (0..3).all(|k| (a[k] - b[k]).abs() <= tolerance_m)
+}
+
+/// Reads a LAS/LAZ file with the `las` crate and checks it against `cloud`.
+fn check_las(path: &std::path::Path, cloud: &PointCloud, compressed: bool) {
+    let mut reader = las::Reader::from_path(path).expect("the las crate reads it");
+    let header = reader.header().clone();
+    assert_eq!(header.version(), las::Version::new(1, 4));
+    assert_eq!(header.point_format().to_u8().expect("a format"), 6);
+    assert_eq!(header.point_format().is_compressed, compressed);
+    assert!(header.has_wkt_crs(), "global encoding's WKT bit");
+    assert_eq!(header.gps_time_type(), las::GpsTimeType::Standard);
+    let wkt = header.vlrs().iter().find(|v| v.user_id == "LASF_Projection" && v.record_id == 2112).expect("WKT VLR");
+    let text = String::from_utf8(wkt.data.clone()).expect("UTF-8");
+    assert_eq!(text.trim_end_matches('\0'), cloud.crs.as_ref().expect("crs").wkt);
+    let data = reader.read_all().expect("points");
+    let points: Vec<las::Point> = data.points().map(|p| p.expect("a point")).collect();
+    assert_eq!(points.len(), cloud.len());
+    for (i, p) in points.iter().enumerate() {
+        let scan = i / 400;
+        assert!(close([p.x, p.y, p.z], cloud.coordinates(i), 1e-4), "point {i}: {p:?}");
+        assert_eq!(p.point_source_id, scan as u16 + 4);
+        let t = p.gps_time.expect("format 6 has a time");
+        assert!((t - (scan_time(scan) - 1e9)).abs() < 1e-6, "point {i}: adjusted GPS time {t}");
+        assert_eq!((p.return_number, p.number_of_returns), (1, 1));
+        assert_eq!(p.intensity, (100 * scan + i % 400) as u16);
+    }
+}
+
+#[test]
+fn las_and_laz_carry_crs_scan_and_time() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let cloud = survey();
+    let (las_path, laz_path) = (dir.path().join("c.las"), dir.path().join("c.laz"));
+    write(&las_path, &cloud, Format::from_path(&las_path).expect("las")).expect("LAS");
+    write(&laz_path, &cloud, Format::from_path(&laz_path).expect("laz")).expect("LAZ");
+    check_las(&las_path, &cloud, false);
+    check_las(&laz_path, &cloud, true);
+    // Our own reader takes both (f32, relative to nothing: within 0.1 m here).
+    for path in [&las_path, &laz_path] {
+        let back = scanner::io::read(path).expect("read back");
+        assert_eq!(back.len(), cloud.len());
+        assert!(close(back.coordinates(7), cloud.coordinates(7), 1.0), "{:?}", back.coordinates(7));
+    }
+    let (las_bytes, laz_bytes) = (file_len(&las_path), file_len(&laz_path));
+    assert!(laz_bytes * 2 < las_bytes, "LAZ {laz_bytes} B vs LAS {las_bytes} B: expected compression");
+}
+
+fn file_len(path: &std::path::Path) -> u64 {
+    std::fs::metadata(path).expect("metadata").len()
+}
+
+#[test]
+fn copc_is_a_laz_octree_with_every_point() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let cloud = survey();
+    let path = dir.path().join("c.copc.laz");
+    assert_eq!(Format::from_path(&path).expect("copc"), Format::Copc);
+    write(&path, &cloud, Format::Copc).expect("COPC");
+    // Nothing left beside it (the LAZ it was made from, the spill file).
+    let names: Vec<_> = std::fs::read_dir(dir.path()).expect("dir").map(|e| e.expect("entry").file_name()).collect();
+    assert_eq!(names, vec![std::ffi::OsString::from("c.copc.laz")]);
+    // The las crate's own COPC reader: the octree holds every point once.
+    let mut reader = las::CopcReader::from_path(&path).expect("the las crate reads COPC");
+    let data = reader.query(las::LodSelection::All, las::BoundsSelection::All).expect("points");
+    let points: Vec<las::Point> = data.points().map(|p| p.expect("a point")).collect();
+    assert_eq!(points.len(), cloud.len());
+    let header = reader.header().clone();
+    assert!(header.vlrs().iter().any(|v| v.user_id == "copc" && v.record_id == 1), "COPC info VLR");
+    let wkt = header.all_vlrs().find(|v| v.user_id == "LASF_Projection" && v.record_id == 2112).expect("WKT VLR");
+    assert_eq!(String::from_utf8_lossy(&wkt.data).trim_end_matches('\0'), cloud.crs.as_ref().expect("crs").wkt);
+    // Octree order: match each point by (scan, intensity), which is unique.
+    let by_key: HashMap<(u16, u16), usize> = (0..cloud.len())
+        .map(|i| ((cloud.source.as_ref().expect("s")[i], cloud.intensity.as_ref().expect("i")[i] as u16), i))
+        .collect();
+    for p in &points {
+        let i = by_key[&(p.point_source_id, p.intensity)];
+        assert!(close([p.x, p.y, p.z], cloud.coordinates(i), 1e-4), "point {i}: {p:?}");
+        assert!((p.gps_time.expect("time") - (scan_time(i / 400) - 1e9)).abs() < 1e-6);
+    }
+}
+
+#[test]
+fn e57_has_one_data3d_per_scan_with_pose_name_time_and_guid() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let cloud = survey();
+    let path = dir.path().join("c.e57");
+    write(&path, &cloud, Format::E57).expect("E57");
+    let mut reader = e57::E57Reader::from_file(&path).expect("the e57 crate reads it");
+    assert_eq!(reader.coordinate_metadata(), Some(cloud.crs.as_ref().expect("crs").wkt.as_str()));
+    let clouds = reader.pointclouds();
+    assert_eq!(clouds.len(), 3);
+    let mut guids: Vec<String> = clouds.iter().map(|pc| pc.guid.clone().expect("a GUID")).collect();
+    guids.push(reader.guid().to_string());
+    for (k, (pc, scan)) in clouds.iter().zip(&cloud.scans).enumerate() {
+        assert_eq!(pc.name.as_deref(), Some(scan.name.as_str()));
+        assert_eq!(pc.records, 400);
+        let t = pc.acquisition_start.as_ref().expect("acquisition time").gps_time;
+        assert!((t - scan_time(k)).abs() < 1e-6);
+        let pose = pc.transform.as_ref().expect("pose");
+        let want = scan.world_from_scan.translation.vector;
+        assert!(close([pose.translation.x, pose.translation.y, pose.translation.z], want.into(), 1e-9));
+        // With the pose applied (in f64), every point at its coordinates.
+        let mut points = reader.pointcloud_simple(pc).expect("points");
+        points.apply_pose(true);
+        for (j, p) in points.enumerate() {
+            let p = p.expect("a point");
+            let e57::CartesianCoordinate::Valid { x, y, z } = p.cartesian else { panic!("point {j}: invalid") };
+            let i = scan.points.start + j;
+            assert!(close([x, y, z], cloud.coordinates(i), 1e-4), "scan {k} point {j}: {:?}", [x, y, z]);
+        }
+    }
+    // A second file's GUIDs are all new.
+    let again = dir.path().join("d.e57");
+    write(&again, &cloud, Format::E57).expect("E57");
+    let reader = e57::E57Reader::from_file(&again).expect("reads");
+    guids.extend(reader.pointclouds().iter().map(|pc| pc.guid.clone().expect("a GUID")));
+    guids.push(reader.guid().to_string());
+    let n = guids.len();
+    guids.sort();
+    guids.dedup();
+    assert_eq!(guids.len(), n, "every GUID unique: {guids:?}");
+    assert!(guids.iter().all(|g| g.len() == 38 && g.as_bytes()[15] == b'4'), "version-4 GUIDs: {guids:?}");
+}
+
+#[test]
+fn ply_names_its_crs_in_comments() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let cloud = survey();
+    let path = dir.path().join("c.ply");
+    write(&path, &cloud, Format::from_path(&path).expect("ply")).expect("PLY");
+    let bytes = std::fs::read(&path).expect("bytes");
+    let end = bytes.windows(10).position(|w| w == b"end_header").expect("header");
+    let header = String::from_utf8_lossy(&bytes[..end]);
+    assert!(header.contains("comment crs EPSG:25832\n"), "{header}");
+    let wkt = cloud.crs.as_ref().expect("crs").wkt.as_str();
+    assert!(header.contains(&format!("comment crs_wkt {wkt}\n")), "{header}");
+}
+
+#[test]
+fn scans_outside_the_cloud_are_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut cloud = survey();
+    cloud.scans[2].points = 800..1300;
+    let path = dir.path().join("c.e57");
+    let error = write(&path, &cloud, Format::E57).expect_err("a scan beyond the points").to_string();
+    assert!(
+        error.contains("scan \"scan006\"") && error.contains("800..1300") && error.contains("1200 points"),
+        "{error}"
+    );
+    assert!(!path.exists());
+}
