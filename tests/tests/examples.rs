@@ -58,6 +58,37 @@ fn hall_fusion_modes_compare() {
             assert!((t[k] - f(&pose[key])).abs() < 1e-6, "{}: {key}", file.display());
         }
     }
+    // The full fused pose (4×4 and roll/pitch/yaw) agrees with `pose`; the
+    // 6×6 covariance (ω then translation) is symmetric with positive
+    // variances of plausible size; the links are the matches, each scan
+    // after the first a source of an accepted one.
+    for s in scans {
+        let m: Vec<Vec<f64>> = (0..4).map(|r| (0..4).map(|c| f(&s["world_from_body"][r][c])).collect()).collect();
+        for (k, key) in ["x_m", "y_m", "z_m"].iter().enumerate() {
+            assert!((m[k][3] - f(&s["pose"][key])).abs() < 1e-12, "{key}: {s}");
+        }
+        assert_eq!(m[3], [0.0, 0.0, 0.0, 1.0]);
+        let yaw = f(&s["roll_pitch_yaw_rad"][2]);
+        assert!((yaw - f(&s["pose"]["heading_rad"])).abs() < 1e-12);
+        assert!((m[1][0].atan2(m[0][0]) - yaw).abs() < 1e-9, "yaw from the matrix");
+        let c = &s["covariance"];
+        for r in 0..6 {
+            assert!(f(&c[r][r]) > 0.0, "{c}");
+            for k in 0..6 {
+                assert!((f(&c[r][k]) - f(&c[k][r])).abs() <= 1e-12 * f(&c[r][r]).max(f(&c[k][k])), "symmetric: {c}");
+            }
+        }
+        assert!(f(&c[3][3]).sqrt() < 0.02 && f(&c[2][2]).sqrt() < 0.01, "σx < 2 cm, σyaw < 0.6°: {c}");
+    }
+    let links = fusion["links"].as_array().expect("links");
+    for station in 1..22u64 {
+        let accepted = links.iter().filter(|l| l["source"] == station && l["accepted"] == true).count();
+        assert!(accepted >= 1, "scan {station} is the source of an accepted match: {links:?}");
+    }
+    for l in links.iter().filter(|l| l["accepted"] == true) {
+        assert!(l["correspondences"].as_u64().expect("n") >= 250 && f(&l["rmse_m"]) < 0.02, "{l}");
+        assert_eq!(l["targets"].as_array().expect("targets").len(), 1, "pairwise: {l}");
+    }
     let cps_icp = f(&fusion["rms_error_xy_m"]);
     let direct = f(&fusion["direct_rms_error_xy_m"]);
 
@@ -69,6 +100,9 @@ fn hall_fusion_modes_compare() {
         assert_eq!(j, json_file(&dir.path().join(format!("fusion/{mode}/fusion.json"))));
         assert!(dir.path().join(format!("fusion/{mode}/cloud.ply")).exists());
         assert!(dir.path().join(format!("fusion/{mode}/frames/scan021.frames")).exists());
+        let links = j["links"].as_array().expect("links");
+        assert_eq!(links.is_empty(), mode == "direct", "{mode}: {links:?}");
+        assert_eq!(j["scans"][3]["covariance"].is_null(), mode != "cps-icp", "{mode}");
         rms.insert(mode, f(&j["rms_error_xy_m"]));
         worst.insert(
             mode,

@@ -76,6 +76,28 @@ pub struct FusedScan {
     /// RMS residual of the scan's last ICP match, metres (`None` for direct
     /// fusion and for the scan that fixes the frame).
     pub rmse_m: Option<f64>,
+    /// The fused pose's 6×6 covariance (ξ = (ω, v): rotation then
+    /// translation, left perturbation, world frame), where the fusion
+    /// estimates one (`cps-icp`).
+    pub covariance: Option<nalgebra::Matrix6<f64>>,
+}
+
+/// One ICP match of a fusion: a scan (the source) against its partners.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Link {
+    /// The source scan's station.
+    pub source: usize,
+    /// The partner scans' stations (one for a pairwise match, the merged
+    /// neighbours for simultaneous matching).
+    pub targets: Vec<usize>,
+    /// Correspondences within the gate (inliers), when it ran.
+    pub correspondences: Option<usize>,
+    /// RMS residual, metres, when it ran.
+    pub rmse_m: Option<f64>,
+    /// Whether ICP converged.
+    pub converged: bool,
+    /// Whether the match is used, and if not why.
+    pub rejected: Option<String>,
 }
 
 /// The fusion of a run's scans.
@@ -91,6 +113,8 @@ pub struct Fused {
     pub seconds: f64,
     /// Every ICP run iteration by iteration, when asked for (`trace`).
     pub traces: Vec<fusion::multiview::IcpTrace>,
+    /// The last round's ICP matches, used or not.
+    pub links: Vec<Link>,
 }
 
 /// The tilt sensor's standard deviation the `cps-icp` fusion gives every
@@ -132,6 +156,9 @@ pub fn fuse(
     let started = Instant::now();
     let scans: Vec<&[Point3<f32>]> = views.iter().map(|v| v.body.as_slice()).collect();
     let mut traces = Vec::new();
+    let mut links = Vec::new();
+    let mut covariance = vec![None; views.len()];
+    let station = |k: usize| views[k].station;
     let traced = |mut c: MultiviewConfig| {
         c.icp.trace = trace;
         c
@@ -153,6 +180,18 @@ pub fn fuse(
             let r = fusion::multiview::register_views(&scans, &coarse.world_from_scan, &config, progress)
                 .context("ICP fusion (simultaneous matching, fine pass)")?;
             traces = coarse.traces.into_iter().chain(r.traces).collect();
+            for (s, (m, partners)) in r.last_match.iter().zip(&r.partners).enumerate() {
+                if let Some(m) = m {
+                    links.push(Link {
+                        source: station(s),
+                        targets: partners.iter().map(|&k| station(k)).collect(),
+                        correspondences: Some(m.inliers),
+                        rmse_m: Some(m.rmse_m),
+                        converged: m.converged,
+                        rejected: None,
+                    });
+                }
+            }
             let rmse = r.last_match.iter().map(|m| m.as_ref().map(|m| m.rmse_m)).collect();
             (r.world_from_scan, rmse, coarse.matches + r.matches)
         }
@@ -169,9 +208,28 @@ pub fn fuse(
             )
             .context("CPS+ICP fusion")?;
             let mut rmse = vec![None; views.len()];
-            for (_, s, m) in &r.matches {
+            for (t, s, m) in &r.matches {
                 rmse[*s] = Some(m.rmse_m);
+                links.push(Link {
+                    source: station(*s),
+                    targets: vec![station(*t)],
+                    correspondences: Some(m.inliers),
+                    rmse_m: Some(m.rmse_m),
+                    converged: m.converged,
+                    rejected: None,
+                });
             }
+            for (t, s, why) in &r.failed {
+                links.push(Link {
+                    source: station(*s),
+                    targets: vec![station(*t)],
+                    correspondences: None,
+                    rmse_m: None,
+                    converged: false,
+                    rejected: Some(why.clone()),
+                });
+            }
+            covariance = r.covariance.iter().copied().map(Some).collect();
             traces = r.traces;
             (r.world_from_scan, rmse, r.matches.len())
         }
@@ -180,9 +238,15 @@ pub fn fuse(
         .iter()
         .zip(poses)
         .zip(rmse)
-        .map(|((v, world_from_body), rmse_m)| FusedScan { station: v.station, world_from_body, rmse_m })
+        .zip(covariance)
+        .map(|(((v, world_from_body), rmse_m), covariance)| FusedScan {
+            station: v.station,
+            world_from_body,
+            rmse_m,
+            covariance,
+        })
         .collect();
-    Ok(Fused { mode, scans, matches, seconds: started.elapsed().as_secs_f64(), traces })
+    Ok(Fused { mode, scans, matches, seconds: started.elapsed().as_secs_f64(), traces, links })
 }
 
 /// The scans' joint CPS prior: the 4N×4N covariance of their stations

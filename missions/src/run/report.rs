@@ -163,6 +163,29 @@ pub struct FusionReport {
     /// The pipe inspection of the re-fused cloud (`fuse` with `[pipe]`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pipe: Option<PipeReport>,
+    /// The last round's ICP matches, used or rejected (empty for `direct`).
+    #[serde(default)]
+    pub links: Vec<LinkReport>,
+}
+
+/// One ICP match in a [`FusionReport`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LinkReport {
+    /// The matched (source) scan's station.
+    pub source: usize,
+    /// The stations of the scans it was matched against.
+    pub targets: Vec<usize>,
+    /// Correspondences within the gate, when ICP ran.
+    pub correspondences: Option<usize>,
+    /// RMS residual, metres, when ICP ran.
+    pub rmse_m: Option<f64>,
+    /// Whether ICP converged.
+    pub converged: bool,
+    /// Whether the match is used in the fused poses.
+    pub accepted: bool,
+    /// Why not, when rejected.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
 }
 
 /// One scan in a [`FusionReport`].
@@ -176,6 +199,18 @@ pub struct FusedScanReport {
     pub pose: PoseRecord,
     /// RMSE of its last ICP match.
     pub rmse_m: Option<f64>,
+    /// The fused 6-DoF pose: `world_from_body`, 4×4 row-major (metres).
+    #[serde(default)]
+    pub world_from_body: [[f64; 4]; 4],
+    /// Roll, pitch and yaw of the fused pose (x-y-z Euler angles, yaw =
+    /// `pose.heading_rad`), radians.
+    #[serde(default)]
+    pub roll_pitch_yaw_rad: [f64; 3],
+    /// The fused pose's 6×6 covariance, order (ω_x, ω_y, ω_z, x, y, z) —
+    /// rotation (rad) then translation (m), left perturbation, world frame,
+    /// as `register`'s — where the fusion estimates one (`cps-icp`).
+    #[serde(default)]
+    pub covariance: Option<[[f64; 6]; 6]>,
     /// Horizontal error of the fused pose (simulator).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub error_xy_m: Option<f64>,
@@ -200,12 +235,16 @@ impl FusionReport {
             .zip(&fused.scans)
             .map(|(v, f)| {
                 let t = f.world_from_body.translation.vector;
-                let (_, _, yaw) = f.world_from_body.rotation.euler_angles();
+                let (roll, pitch, yaw) = f.world_from_body.rotation.euler_angles();
+                let m = f.world_from_body.to_homogeneous();
                 let mut s = FusedScanReport {
                     station: v.station,
                     file: v.file.clone(),
                     pose: PoseRecord { x_m: t.x, y_m: t.y, z_m: t.z, heading_rad: yaw },
                     rmse_m: f.rmse_m,
+                    world_from_body: std::array::from_fn(|r| std::array::from_fn(|c| m[(r, c)])),
+                    roll_pitch_yaw_rad: [roll, pitch, yaw],
+                    covariance: f.covariance.map(|c| std::array::from_fn(|r| std::array::from_fn(|k| c[(r, k)]))),
                     error_xy_m: None,
                     direct_error_xy_m: None,
                     error_heading_rad: None,
@@ -233,6 +272,19 @@ impl FusionReport {
             direct_rms_error_xy_m: rms(sq[1]),
             seconds: None,
             pipe: None,
+            links: fused
+                .links
+                .iter()
+                .map(|l| LinkReport {
+                    source: l.source,
+                    targets: l.targets.clone(),
+                    correspondences: l.correspondences,
+                    rmse_m: l.rmse_m,
+                    converged: l.converged,
+                    accepted: l.rejected.is_none(),
+                    reason: l.rejected.clone(),
+                })
+                .collect(),
         }
     }
 }
