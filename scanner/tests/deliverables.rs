@@ -202,4 +202,8 @@ fn scans_outside_the_cloud_are_refused() {
         "{error}"
     );
     assert!(!path.exists());
+    cloud.scans[2].points = 700..1200;
+    let error = write(&path, &cloud, Format::Las).expect_err("two scans sharing points").to_string();
+    assert!(error.contains("\"scan005\" (points 400..800) and \"scan006\" (points 700..1200) share points"), "{error}");
+    assert!(!path.exists());
 }

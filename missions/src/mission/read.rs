@@ -8,6 +8,7 @@ use std::sync::Arc;
 
 use cps::{DistanceErrorModel, Instrument, RAD_PER_ARCSEC};
 use nalgebra::{Matrix4, Point3, Vector3, Vector4};
+use scanner::io::Crs;
 use toml::Spanned;
 use toml::de::{DeTable, DeValue};
 
@@ -17,7 +18,6 @@ use super::{
     Acceptance, Backend, Control, ControlAt, FUSION_MODES, FusionMode, FusionPlan, Mission, MissionError,
     OUTPUT_FORMATS, Output, PipePlan, Plan, ScanPlan, Search, SerialPorts, Spans,
 };
-use scanner::io::Crs;
 
 /// A raw TOML value with its span.
 type Raw<'i> = Spanned<DeValue<'i>>;

@@ -97,12 +97,12 @@ fn target_of(goal: &PlanarPose) -> [f64; 3] {
     [goal.x_m, goal.y_m, goal.heading_rad]
 }
 
-/// Adds the seconds `f` takes to `total`.
 /// The time now: UNIX seconds, UTC.
 fn unix_now() -> f64 {
     std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64())
 }
 
+/// Adds the seconds `f` takes to `total`.
 fn timed<T>(total: &mut f64, f: impl FnOnce() -> T) -> T {
     let t = Instant::now();
     let out = f();

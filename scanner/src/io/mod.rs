@@ -223,8 +223,8 @@ pub fn write(path: &Path, cloud: &PointCloud, format: Format) -> Result<()> {
 }
 
 /// What a cloud must be to be written: one value per point in each
-/// per-point field, a finite origin, scans within the points with finite
-/// poses.
+/// per-point field, a finite origin, scans within the points (no point in
+/// two) with finite poses.
 fn check(cloud: &PointCloud) -> std::result::Result<(), String> {
     let n = cloud.points.len();
     let per_point = |what: &str, len: Option<usize>| match len {
@@ -235,6 +235,14 @@ fn check(cloud: &PointCloud) -> std::result::Result<(), String> {
     per_point("scan indices", cloud.source.as_ref().map(Vec::len))?;
     if !cloud.origin.iter().all(|v| v.is_finite()) {
         return Err(format!("origin {:?}: expected finite coordinates", cloud.origin.as_slice()));
+    }
+    let mut runs: Vec<&ScanInfo> = cloud.scans.iter().filter(|s| !s.points.is_empty()).collect();
+    runs.sort_by_key(|s| s.points.start);
+    if let Some(w) = runs.windows(2).find(|w| w[1].points.start < w[0].points.end) {
+        return Err(format!(
+            "scans \"{}\" (points {:?}) and \"{}\" (points {:?}) share points: expected each point in one scan",
+            w[0].name, w[0].points, w[1].name, w[1].points
+        ));
     }
     for s in &cloud.scans {
         let pose = s.world_from_scan.to_homogeneous();
