@@ -31,6 +31,17 @@ fn walk(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
     out
 }
 
+/// Whether `new` holds everything `old` does (later versions only add
+/// keys): every key of an object with a value that holds the old one,
+/// arrays element by element, anything else equal.
+fn holds(new: &Value, old: &Value) -> bool {
+    match (new, old) {
+        (Value::Object(n), Value::Object(o)) => o.iter().all(|(k, v)| n.get(k).is_some_and(|nv| holds(nv, v))),
+        (Value::Array(n), Value::Array(o)) => n.len() == o.len() && n.iter().zip(o).all(|(a, b)| holds(a, b)),
+        _ => new == old,
+    }
+}
+
 fn json(path: &std::path::Path) -> Value {
     serde_json::from_str(&std::fs::read_to_string(path).expect("file")).expect("JSON")
 }
@@ -45,7 +56,7 @@ fn a_version_1_run_re_fuses() {
     assert_eq!(again.points, original.points, "the same points at the same poses");
     let report = json(&run.join("report.json"));
     let fusion = json(&run.join("fusion/direct/fusion.json"));
-    assert_eq!(fusion["scans"], report["fusion"]["scans"]);
+    assert!(holds(&fusion["scans"], &report["fusion"]["scans"]), "{}\n{}", fusion["scans"], report["fusion"]["scans"]);
 }
 
 #[test]
@@ -77,7 +88,7 @@ fn a_version_1_run_resumes_to_the_same_report() {
         assert!(resumed.stdout.contains("journal events replayed"), "{}", resumed.stdout);
         let report = json(&run.join("report.json"));
         for key in ["stations", "final", "fusion", "accepted"] {
-            assert_eq!(report[key], expected[key], "{key}");
+            assert!(holds(&report[key], &expected[key]), "{key}: {}\n{}", report[key], expected[key]);
         }
         // The journal goes on in the version it was started with.
         let journal = std::fs::read_to_string(run.join("journal.jsonl")).expect("journal");
