@@ -100,6 +100,20 @@ pub struct Link {
     pub rejected: Option<String>,
 }
 
+impl Link {
+    /// A match that ran: `m` of the scan at `source` against `targets`.
+    fn matched(source: usize, targets: Vec<usize>, m: &fusion::icp::IcpResult) -> Self {
+        Self {
+            source,
+            targets,
+            correspondences: Some(m.inliers),
+            rmse_m: Some(m.rmse_m),
+            converged: m.converged,
+            rejected: None,
+        }
+    }
+}
+
 /// The fusion of a run's scans.
 #[derive(Debug, Clone)]
 pub struct Fused {
@@ -182,14 +196,7 @@ pub fn fuse(
             traces = coarse.traces.into_iter().chain(r.traces).collect();
             for (s, (m, partners)) in r.last_match.iter().zip(&r.partners).enumerate() {
                 if let Some(m) = m {
-                    links.push(Link {
-                        source: station(s),
-                        targets: partners.iter().map(|&k| station(k)).collect(),
-                        correspondences: Some(m.inliers),
-                        rmse_m: Some(m.rmse_m),
-                        converged: m.converged,
-                        rejected: None,
-                    });
+                    links.push(Link::matched(station(s), partners.iter().map(|&k| station(k)).collect(), m));
                 }
             }
             let rmse = r.last_match.iter().map(|m| m.as_ref().map(|m| m.rmse_m)).collect();
@@ -210,14 +217,7 @@ pub fn fuse(
             let mut rmse = vec![None; views.len()];
             for (t, s, m) in &r.matches {
                 rmse[*s] = Some(m.rmse_m);
-                links.push(Link {
-                    source: station(*s),
-                    targets: vec![station(*t)],
-                    correspondences: Some(m.inliers),
-                    rmse_m: Some(m.rmse_m),
-                    converged: m.converged,
-                    rejected: None,
-                });
+                links.push(Link::matched(station(*s), vec![station(*t)], m));
             }
             for (t, s, why) in &r.failed {
                 links.push(Link {

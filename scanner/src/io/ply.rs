@@ -234,7 +234,8 @@ pub(super) fn write(w: &mut impl Write, cloud: &PointCloud, encoding: PlyEncodin
     write_with(w, &cloud.points, cloud.georeferenced().then_some(cloud), scalar, encoding, crs)
 }
 
-/// Float x, y, z and, when given, one float scalar field per vertex.
+/// Float x, y, z and, when given, one float value per vertex under each
+/// of the scalar's names.
 pub(super) fn write_scalar(
     w: &mut impl Write,
     points: &[Point3<f32>],
@@ -245,8 +246,8 @@ pub(super) fn write_scalar(
 }
 
 /// x, y, z — double from `georeferenced`'s coordinates (origin + p), else
-/// float — and, when given, one float scalar field per vertex; `comments`
-/// after ours.
+/// float — and, when given, one float value per vertex under each of the
+/// scalar's names; `comments` after ours.
 fn write_with(
     w: &mut impl Write,
     points: &[Point3<f32>],
