@@ -182,3 +182,37 @@ fn frames_files_hold_the_transform_slam6d_reads() {
     let e = scanner::io::read_3dtk_frames(&frames).expect_err("bad frame").to_string();
     assert!(e.contains("line 1") && e.contains("expected 16"), "{e}");
 }
+
+/// CRC-32 (IEEE, reflected 0xEDB88320) bit by bit: an independent
+/// derivation of the checksum the writers compute on the way.
+fn crc32_bitwise(bytes: &[u8]) -> u32 {
+    let mut crc = !0u32;
+    for &b in bytes {
+        crc ^= u32::from(b);
+        for _ in 0..8 {
+            crc = if crc & 1 == 1 { (crc >> 1) ^ 0xEDB8_8320 } else { crc >> 1 };
+        }
+    }
+    !crc
+}
+
+#[test]
+fn the_checksum_of_a_written_file_is_that_of_its_bytes() {
+    assert_eq!(crc32_bitwise(b"123456789"), 0xCBF4_3926, "the standard check value");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let cloud = cloud(3000, true);
+    for (name, format) in [
+        ("c.3d", Format::ThreeDtk),
+        ("c.ply", Format::Ply(PlyEncoding::BinaryLittleEndian)),
+        ("c.xyz", Format::Xyz),
+        ("c.pcd", Format::Pcd(PcdData::BinaryCompressed)),
+        ("c.las", Format::Las),
+        ("c.e57", Format::E57),
+    ] {
+        let path = dir.path().join(name);
+        let crc = scanner::io::write_with_crc32(&path, &cloud, format).expect("written");
+        let bytes = std::fs::read(&path).expect("read back");
+        assert_eq!(crc, crc32_bitwise(&bytes), "{name}");
+        assert_eq!(scanner::io::file_crc32(&path).expect("file"), crc, "{name}");
+    }
+}

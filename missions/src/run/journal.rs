@@ -499,15 +499,14 @@ impl Read {
     }
 }
 
-/// CRC-32 (IEEE) of bytes, 8 lower-case hex digits (as journaled).
-pub fn crc32_hex(bytes: &[u8]) -> String {
-    format!("{:08x}", crc32fast::hash(bytes))
+/// A CRC-32 (IEEE) as journaled: 8 lower-case hex digits.
+pub fn crc32_hex(crc: u32) -> String {
+    format!("{crc:08x}")
 }
 
 /// CRC-32 of a file's bytes (see [`crc32_hex`]).
 pub fn file_crc32(path: &Path) -> Result<String> {
-    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-    Ok(crc32_hex(&bytes))
+    Ok(crc32_hex(scanner::io::file_crc32(path)?))
 }
 
 /// Checks that a scan file in `dir` is the one `scanned` records: its

@@ -504,17 +504,17 @@ impl Run<'_> {
                 let scan =
                     timed(&mut t.scan_s, || team.scan(slices, &mut |slice, _| bar.set_position(done + slice as u64)))?;
                 let cloud = PointCloud::from_points(scan.points);
-                timed(&mut t.scan_files_s, || {
-                    scanner::io::write(&dir.join(format!("{name}.3d")), &cloud, Format::ThreeDtk)?;
-                    scanner::io::write_3dtk_pose(&dir.join(format!("{name}.pose")), &world_from_body)
+                let file = format!("{name}.3d");
+                // The checksum of the bytes as they are written (no read-back).
+                let crc = timed(&mut t.scan_files_s, || -> scanner::Result<u32> {
+                    let crc = scanner::io::write_with_crc32(&dir.join(&file), &cloud, Format::ThreeDtk)?;
+                    scanner::io::write_3dtk_pose(&dir.join(format!("{name}.pose")), &world_from_body)?;
+                    Ok(crc)
                 })?;
                 let points = cloud.len();
                 taken = Some(cloud);
-                let file = dir.join(format!("{name}.3d"));
-                let bytes =
-                    std::fs::read(&file).map_err(|source| scanner::ScannerError::Io { path: file.clone(), source })?;
-                let crc32 = Some(crate::run::journal::crc32_hex(&bytes));
-                Ok(Scanned { file: format!("{name}.3d"), points, crc32, unix_time_s: Some(unix_now()) })
+                let crc32 = Some(crate::run::journal::crc32_hex(crc));
+                Ok(Scanned { file, points, crc32, unix_time_s: Some(unix_now()) })
             })?;
         self.progress.slices_done += slices as u64;
         self.progress.scans.set_position(self.progress.slices_done);

@@ -202,22 +202,43 @@ pub fn write_ply_with_field(path: &Path, points: &[Point3<f32>], names: &[&str],
     let tmp = temporary(path);
     let result =
         with_writer(&tmp, |w| ply::write_scalar(w, points, Some((names, values)), PlyEncoding::BinaryLittleEndian));
-    finish_write(path, &tmp, result)
+    finish_write(path, &tmp, result).map(|_| ())
 }
 
 /// Writes `cloud` to `path` in `format` (via a temporary file and rename).
 pub fn write(path: &Path, cloud: &PointCloud, format: Format) -> Result<()> {
+    write_file(path, cloud, format).map(|_| ())
+}
+
+/// Writes `cloud` as [`write`] does and returns the CRC-32 (IEEE) of the
+/// file's bytes: hashed as they are written for the formats written as one
+/// stream (3DTK, PLY, XYZ, PCD), read back for the others.
+pub fn write_with_crc32(path: &Path, cloud: &PointCloud, format: Format) -> Result<u32> {
+    match write_file(path, cloud, format)? {
+        Some(crc) => Ok(crc),
+        None => file_crc32(path),
+    }
+}
+
+/// CRC-32 (IEEE) of a file's bytes.
+pub fn file_crc32(path: &Path) -> Result<u32> {
+    read_bytes(path).map(|bytes| crc32fast::hash(&bytes))
+}
+
+/// [`write`], with the CRC-32 of what was written when it was hashed on
+/// the way.
+fn write_file(path: &Path, cloud: &PointCloud, format: Format) -> Result<Option<u32>> {
     check(cloud).map_err(|message| ScannerError::file(path, Location::File, message))?;
     let tmp = temporary(path);
     let result = match format {
-        Format::ThreeDtk => with_writer(&tmp, |w| text::write_3dtk(w, cloud)),
-        Format::Ply(e) => with_writer(&tmp, |w| ply::write(w, cloud, e)),
-        Format::Xyz => with_writer(&tmp, |w| text::write_xyz(w, cloud)),
-        Format::Pcd(d) => with_writer(&tmp, |w| pcd::write(w, cloud, d)),
-        Format::Las => las::write(&tmp, cloud, false),
-        Format::Laz => las::write(&tmp, cloud, true),
-        Format::Copc => las::write_copc(&tmp, cloud),
-        Format::E57 => e57::write(&tmp, cloud),
+        Format::ThreeDtk => with_writer(&tmp, |w| text::write_3dtk(w, cloud)).map(Some),
+        Format::Ply(e) => with_writer(&tmp, |w| ply::write(w, cloud, e)).map(Some),
+        Format::Xyz => with_writer(&tmp, |w| text::write_xyz(w, cloud)).map(Some),
+        Format::Pcd(d) => with_writer(&tmp, |w| pcd::write(w, cloud, d)).map(Some),
+        Format::Las => las::write(&tmp, cloud, false).map(|()| None),
+        Format::Laz => las::write(&tmp, cloud, true).map(|()| None),
+        Format::Copc => las::write_copc(&tmp, cloud).map(|()| None),
+        Format::E57 => e57::write(&tmp, cloud).map(|()| None),
     };
     finish_write(path, &tmp, result)
 }
@@ -260,9 +281,9 @@ fn check(cloud: &PointCloud) -> std::result::Result<(), String> {
 
 /// Renames the written temporary file into place, or removes it after an
 /// error (reported against `path`).
-fn finish_write(path: &Path, tmp: &Path, result: Result<()>) -> Result<()> {
+fn finish_write<T>(path: &Path, tmp: &Path, result: Result<T>) -> Result<T> {
     match result {
-        Ok(()) => std::fs::rename(tmp, path).map_err(|e| ScannerError::io(path, e)),
+        Ok(value) => std::fs::rename(tmp, path).map(|()| value).map_err(|e| ScannerError::io(path, e)),
         Err(e) => {
             let _ = std::fs::remove_file(tmp);
             Err(match e {
@@ -280,11 +301,34 @@ fn temporary(path: &Path) -> PathBuf {
     path.with_file_name(name)
 }
 
-fn with_writer(path: &Path, f: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>) -> Result<()> {
+/// Writes `path` through `f`, synced to the disk; returns the CRC-32 of
+/// the bytes written.
+fn with_writer(path: &Path, f: impl FnOnce(&mut BufWriter<Hashed<File>>) -> std::io::Result<()>) -> Result<u32> {
     let file = File::create(path).map_err(|e| ScannerError::io(path, e))?;
-    let mut w = BufWriter::with_capacity(1 << 20, file);
+    let mut w = BufWriter::with_capacity(1 << 20, Hashed { inner: file, crc: crc32fast::Hasher::new() });
     f(&mut w).and_then(|()| w.flush()).map_err(|e| ScannerError::io(path, e))?;
-    w.get_ref().sync_all().map_err(|e| ScannerError::io(path, e))
+    let hashed = w.get_ref();
+    hashed.inner.sync_all().map_err(|e| ScannerError::io(path, e))?;
+    Ok(hashed.crc.clone().finalize())
+}
+
+/// A writer that hashes (CRC-32) the bytes it passes on.
+#[derive(Debug)]
+struct Hashed<W> {
+    inner: W,
+    crc: crc32fast::Hasher,
+}
+
+impl<W: Write> Write for Hashed<W> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.inner.write(buf)?;
+        self.crc.update(&buf[..n]);
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.inner.flush()
+    }
 }
 
 /// Reads a whole file.
