@@ -60,6 +60,10 @@ pub enum Command {
     /// simulated world; prints the [backend.serial] table with the ports and
     /// runs until stopped (Ctrl-C).
     Emulate(commands::emulate::EmulateArgs),
+    /// Print the JSON Schema of a JSON document this tool writes (report,
+    /// fusion, adjust, predict, plan, montecarlo, register, emulate), list
+    /// them, or write them all with --out DIR.
+    Schemas(commands::schemas::SchemasArgs),
 }
 
 /// The process exit code of a command's result: 0 success, 1 acceptance
@@ -84,6 +88,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> anyhow::Result<Outcome> {
         Command::Adjust(args) => commands::adjust::run(args, out),
         Command::Register(args) => commands::register::run(args, out),
         Command::Emulate(args) => commands::emulate::run(args, out),
+        Command::Schemas(args) => commands::schemas::run(args, out),
     }?;
     out.flush()?;
     Ok(outcome)

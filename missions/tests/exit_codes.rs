@@ -15,7 +15,11 @@ fn success_is_0() {
     let out = cps_survey(&["predict", &example("paper-1km.toml"), "--json"]);
     assert_eq!(out.status.code(), Some(0));
     assert!(out.stderr.is_empty());
-    assert!(String::from_utf8_lossy(&out.stdout).starts_with("{\"mission\":\"paper-1km\""));
+    // The versioned header first, then the document.
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let head =
+        format!("{{\"schema_version\":1,\"tool_version\":\"{}\",\"mission\":\"paper-1km\"", env!("CARGO_PKG_VERSION"));
+    assert!(stdout.starts_with(&head), "{stdout:.200}");
 }
 
 #[test]

@@ -68,8 +68,7 @@ pub fn run(args: &AdjustArgs, out: &mut dyn Write) -> Result<Outcome> {
     std::fs::write(&listing, crate::view::listing::listing(&run.mission, &report))
         .with_context(|| format!("writing {}", listing.display()))?;
     if args.json {
-        serde_json::to_writer(&mut *out, &report)?;
-        writeln!(out)?;
+        crate::view::document::write_line(out, &report)?;
     } else {
         crate::view::listing::summary(out, &report)?;
         writeln!(out, "the listing: {}", listing.display())?;

@@ -20,7 +20,6 @@ use scanner::emulate::sick::LmsEmulator;
 use scanner::emulate::{Emulator, Faults};
 use scanner::sim::SimWorld;
 use serde::Serialize;
-use serde_json::{Value, json};
 
 use super::Outcome;
 use crate::mission::Mission;
@@ -69,7 +68,7 @@ pub fn run(args: &EmulateArgs, out: &mut dyn Write) -> Result<Outcome> {
     let planned = Planned::new(&mission)?;
     let team = start(&mission, &planned, args.truth.as_deref(), &args.fault)?;
     if args.json {
-        writeln!(out, "{}", ports_json(&mission, &team))?;
+        crate::view::document::write_line(out, &ports_json(&mission, &team))?;
     } else {
         writeln!(
             out,
@@ -264,20 +263,58 @@ pub fn backend_toml(mission: &Mission, team: &EmulatedTeam) -> String {
     t
 }
 
+/// `emulate --json`: the ports.
+#[derive(Serialize, schemars::JsonSchema)]
+pub(crate) struct PortsJson {
+    /// `[mission] name`.
+    mission: String,
+    /// The simulated world's seed.
+    seed: u64,
+    /// Every instrument served.
+    instruments: Vec<InstrumentJson>,
+    /// The `[backend.serial]` table with these ports (TOML).
+    backend_serial: String,
+}
+
+/// One served instrument.
+#[derive(Serialize, schemars::JsonSchema)]
+struct InstrumentJson {
+    /// `total-station`, `tilt`, `scanner`, `head`, `parent` or a child's name.
+    role: String,
+    /// The pseudo-terminal.
+    path: String,
+    /// Its baud rate.
+    baud: u32,
+    /// The protocol spoken.
+    protocol: &'static str,
+}
+
+impl crate::view::document::Document for PortsJson {
+    const NAME: &'static str = "emulate";
+    const VERSION: u32 = 1;
+}
+
 /// The ports as JSON: `{"mission", "seed", "instruments": [{"role", "path", "baud", "protocol"}], "backend_serial"}`.
-pub fn ports_json(mission: &Mission, team: &EmulatedTeam) -> Value {
+fn ports_json(mission: &Mission, team: &EmulatedTeam) -> PortsJson {
     let protocol = |role: &str| match role {
         "total-station" => "Leica GeoCOM",
         "tilt" => "NMEA 0183 XDR",
         "scanner" => "SICK LMS-2xx",
         _ => "cps-survey robot ($PCPS)",
     };
-    json!({
-        "mission": mission.name,
-        "seed": mission.backend.seed,
-        "instruments": team.served.iter().map(|s| json!({
-            "role": s.role, "path": s.emulator.path(), "baud": s.baud, "protocol": protocol(&s.role),
-        })).collect::<Vec<_>>(),
-        "backend_serial": backend_toml(mission, team),
-    })
+    PortsJson {
+        mission: mission.name.clone(),
+        seed: mission.backend.seed,
+        instruments: team
+            .served
+            .iter()
+            .map(|s| InstrumentJson {
+                role: s.role.clone(),
+                path: s.emulator.path().to_string(),
+                baud: s.baud,
+                protocol: protocol(&s.role),
+            })
+            .collect(),
+        backend_serial: backend_toml(mission, team),
+    }
 }

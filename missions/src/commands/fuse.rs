@@ -55,10 +55,9 @@ pub fn run(args: &FuseArgs, out: &mut dyn Write) -> Result<Outcome> {
     let mut report = FusionReport::new(views, &fused);
     report.seconds = Some(fused.seconds);
     report.pipe = written.pipe.clone();
-    crate::run::report::write_json(&target.join("fusion.json"), &report)?;
+    crate::view::document::write_file(&target.join("fusion.json"), &report)?;
     if args.json {
-        serde_json::to_writer(&mut *out, &report)?;
-        writeln!(out)?;
+        crate::view::document::write_line(out, &report)?;
     } else {
         crate::view::tables::fusion(out, views, &fused)?;
         if let Some(pipe) = &report.pipe {

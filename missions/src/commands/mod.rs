@@ -11,6 +11,7 @@ pub mod plan;
 pub mod predict;
 pub mod register;
 pub mod run;
+pub mod schemas;
 pub mod validate;
 
 use std::path::Path;

@@ -68,8 +68,9 @@ pub struct RegisterArgs {
     pub json: bool,
 }
 
-#[derive(Serialize)]
-struct Report {
+/// `register --json`.
+#[derive(Serialize, schemars::JsonSchema)]
+pub(crate) struct Report {
     target_from_source: [[f64; 4]; 4],
     converged: bool,
     iterations: usize,
@@ -79,6 +80,11 @@ struct Report {
     /// 6×6, order (ωx, ωy, ωz, vx, vy, vz), radians and metres, left
     /// perturbation in the target frame.
     covariance: Vec<[f64; 6]>,
+}
+
+impl crate::view::document::Document for Report {
+    const NAME: &'static str = "register";
+    const VERSION: u32 = 1;
 }
 
 /// Runs `register`: reads both scans, aligns and writes the report.
@@ -110,8 +116,7 @@ pub fn run(args: &RegisterArgs, out: &mut dyn Write) -> anyhow::Result<super::Ou
         .with_context(|| format!("registering {} to {}", args.source.display(), args.target.display()))?;
     let seconds = start.elapsed().as_secs_f64();
     if args.json {
-        serde_json::to_writer(&mut *out, &report(&result, seconds))?;
-        writeln!(out)?;
+        crate::view::document::write_line(out, &report(&result, seconds))?;
     } else {
         write_text(out, &result, seconds)?;
     }

@@ -28,6 +28,14 @@ use crate::planning::preanalysis::{KINDS, point_name};
 /// The version of the adjustment report's shape.
 pub const SCHEMA_VERSION: u32 = 1;
 
+/// `adjust --json`, nested whole as `report.json`'s `adjustment`: it
+/// carries its own header.
+impl crate::view::document::Document for AdjustmentReport {
+    const NAME: &'static str = "adjust";
+    const VERSION: u32 = SCHEMA_VERSION;
+    const SELF_VERSIONED: bool = true;
+}
+
 /// The journal's readings as the dance's network: every `measure` event in
 /// the dance's reading order (checked), the stations reached (their fix's
 /// pose as the approximation) — a run stopped early gives the network so
@@ -103,10 +111,13 @@ pub fn network(
 
 /// The report of an adjustment (`adjust --json`, `report.json`'s
 /// `adjustment`). Covariances and w use the a-priori variance factor.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct AdjustmentReport {
-    /// This shape's version.
+    /// The version of this document's schema.
     pub schema_version: u32,
+    /// The cps-survey version that wrote it.
+    #[serde(default)]
+    pub tool_version: String,
     /// vᵀPv / redundancy.
     pub sigma0_squared: f64,
     /// Observations minus unknowns.
@@ -148,7 +159,7 @@ pub struct AdjustmentReport {
 }
 
 /// The global test as reported.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct GlobalTestReport {
     /// vᵀPv.
     pub statistic: f64,
@@ -171,7 +182,7 @@ impl From<&cps::batch::GlobalTest> for GlobalTestReport {
 }
 
 /// The tests' settings.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct TestingReport {
     /// Global test level.
     pub alpha: f64,
@@ -188,7 +199,7 @@ pub struct TestingReport {
 }
 
 /// A horizontal error ellipse, metres, orientation counter-clockwise from +x.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct EllipseReport {
     /// Semi-major axis.
     pub semi_major_m: f64,
@@ -207,7 +218,7 @@ impl EllipseReport {
 }
 
 /// An adjusted station.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct StationAdjusted {
     /// Station index.
     pub index: usize,
@@ -230,7 +241,7 @@ pub struct StationAdjusted {
 }
 
 /// An adjusted point.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct PointAdjusted {
     /// Its name: a control point's, or `child@cycle` for a placement.
     pub id: String,
@@ -247,7 +258,7 @@ pub struct PointAdjusted {
 }
 
 /// One scalar observation's statistics.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct ObservationReport {
     /// Its index in this list.
     pub index: usize,
@@ -279,7 +290,7 @@ pub struct ObservationReport {
 }
 
 /// A weighted prior coordinate's statistics.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct CoordinateReport {
     /// `station N` or the control point's name.
     pub of: String,
@@ -298,7 +309,7 @@ pub struct CoordinateReport {
 }
 
 /// A misclosure at a control point.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct Misclosure {
     /// The control point.
     pub control: String,
@@ -319,7 +330,7 @@ pub struct Misclosure {
 }
 
 /// The observation whose MDB moves its station the most.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct WorstMdb {
     /// Index into `observations`.
     pub observation: usize,
@@ -406,6 +417,7 @@ pub fn adjust(
         .map(|(observation, station, shift_m)| WorstMdb { observation, station, shift_m });
     Ok(AdjustmentReport {
         schema_version: SCHEMA_VERSION,
+        tool_version: crate::view::document::TOOL_VERSION.into(),
         sigma0_squared: a.sigma0_squared,
         redundancy: a.redundancy,
         unknowns: a.unknowns,
@@ -530,7 +542,7 @@ fn misclosures(net: &DanceNetwork, name: &dyn Fn(usize) -> String) -> Vec<Misclo
 
 /// The adjustment at the end of a run, as `report.json` has it: the report,
 /// or why the network could not be adjusted.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(untagged)]
 pub enum AdjustmentOutcome {
     /// The adjustment.

@@ -94,7 +94,7 @@ pub fn label(pipe: &Pipe, anomaly: &Anomaly) -> String {
 }
 
 /// A tube: its axis ends and radius, metres, world frame.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct TubeReport {
     /// One end of the axis.
     pub axis_from_m: [f64; 3],
@@ -111,7 +111,7 @@ impl From<&Pipe> for TubeReport {
 }
 
 /// Distribution of the deviations, metres.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct DeviationStats {
     /// Points mapped.
     pub points: usize,
@@ -151,7 +151,7 @@ fn deviation_stats(deviations: &[f32], threshold_m: f64) -> DeviationStats {
 }
 
 /// One anomaly as reported.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct AnomalyReport {
     /// `intrusion` or `bulge`.
     pub kind: String,
@@ -181,7 +181,7 @@ pub struct AnomalyReport {
 
 /// The pipe inspection as reported (`report.json`'s and `fusion.json`'s
 /// `pipe`): the fitted tube and its anomalies, or why there is no fit.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(untagged)]
 pub enum PipeReport {
     /// The fit and the deviation map.
@@ -194,7 +194,7 @@ pub enum PipeReport {
 }
 
 /// A fitted pipe's report.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct PipeFitted {
     /// The nominal tube.
     pub nominal: TubeReport,

@@ -225,7 +225,7 @@ pub struct Scanned {
 }
 
 /// A pose in a record: x, y, z (m) and heading (rad).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct PoseRecord {
     /// x, metres.
     pub x_m: f64,

@@ -14,6 +14,7 @@ use super::fuse::{Fused, ScanView, error_heading, error_xy};
 use super::inspection::PipeReport;
 use super::journal::{Matrix4Record, PoseRecord, matrix_record};
 use crate::mission::Mission;
+use crate::view::document::Document;
 
 /// One parent station of a run.
 #[derive(Debug, Clone, PartialEq)]
@@ -35,7 +36,7 @@ pub struct StationRecord {
 }
 
 /// `report.json`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct RunReport {
     /// `[mission] name`.
     pub mission: String,
@@ -70,7 +71,7 @@ pub struct RunReport {
 }
 
 /// A coordinate reference system in a report.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct CrsReport {
     /// `EPSG:NNNN`, the WKT's name or the local frame's.
     pub name: String,
@@ -90,7 +91,7 @@ impl CrsReport {
 }
 
 /// One station in `report.json`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct StationReport {
     /// Station index (0 = start).
     pub index: usize,
@@ -109,7 +110,7 @@ pub struct StationReport {
 }
 
 /// `report.json`'s `final`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct FinalReport {
     /// Path length (the true path on the simulator, the estimated one on
     /// serial ports), metres.
@@ -118,12 +119,17 @@ pub struct FinalReport {
     pub sigma_xy2_m2: f64,
     /// Its horizontal error against the truth, metres.
     pub error_xy_m: Option<f64>,
-    /// That error in % of the distance.
+    /// Deprecated: the same as `error_drift_percent` (`predict` used the
+    /// name for a predicted σ).
+    #[schemars(extend("deprecated" = true))]
     pub drift_percent: Option<f64>,
+    /// That error in % of the distance.
+    #[serde(default)]
+    pub error_drift_percent: Option<f64>,
 }
 
 /// Where the wall time went, seconds (positioning is the rest of `wall_s`).
-#[derive(Debug, Default, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Default, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct Timings {
     /// The whole run.
     pub wall_s: f64,
@@ -145,7 +151,7 @@ pub struct Timings {
 
 /// How the scans were fused: per scan the fused pose, its RMSE and (on the
 /// simulator) the errors of it and of the direct fusion; their RMS.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct FusionReport {
     /// `direct`, `icp` or `cps-icp`.
     pub mode: String,
@@ -169,7 +175,7 @@ pub struct FusionReport {
 }
 
 /// One ICP match in a [`FusionReport`].
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct LinkReport {
     /// The matched (source) scan's station.
     pub source: usize,
@@ -189,7 +195,7 @@ pub struct LinkReport {
 }
 
 /// One scan in a [`FusionReport`].
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct FusedScanReport {
     /// The parent station.
     pub station: usize,
@@ -317,6 +323,7 @@ impl RunReport {
         // Along the true path on the simulator, the estimated one on serial ports.
         let at = |s: &StationRecord| s.truth.unwrap_or(s.pose).position;
         let distance_m: f64 = stations.windows(2).map(|w| (at(&w[1]) - at(&w[0])).norm()).sum();
+        let drift = last.error_xy_m.map(|e| if distance_m > 0.0 { 100.0 * e / distance_m } else { 0.0 });
         Ok(Self {
             mission: mission.name.clone(),
             seed: mission.backend.seed,
@@ -328,7 +335,8 @@ impl RunReport {
                 distance_m,
                 sigma_xy2_m2: cps::sigma_xy2(&last.covariance),
                 error_xy_m: last.error_xy_m,
-                drift_percent: last.error_xy_m.map(|e| if distance_m > 0.0 { 100.0 * e / distance_m } else { 0.0 }),
+                drift_percent: drift,
+                error_drift_percent: drift,
             },
             fusion,
             pipe,
@@ -339,10 +347,14 @@ impl RunReport {
     }
 }
 
-/// Writes `value` as pretty JSON (with a final newline) to `path`.
-pub fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<()> {
-    let text = serde_json::to_string_pretty(value)? + "\n";
-    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+impl Document for RunReport {
+    const NAME: &'static str = "report";
+    const VERSION: u32 = 1;
+}
+
+impl Document for FusionReport {
+    const NAME: &'static str = "fusion";
+    const VERSION: u32 = 1;
 }
 
 /// `stations.csv`: one row per station, the header with units; with an

@@ -677,7 +677,7 @@ impl Run<'_> {
         let mut report =
             RunReport::new(self.mission, &self.stations, fusion, written.pipe.clone(), accepted, self.timings)?;
         report.adjustment = adjustment;
-        super::report::write_json(&self.dir.join("report.json"), &report)?;
+        crate::view::document::write_file(&self.dir.join("report.json"), &report)?;
         let adjusted = report.adjustment.as_ref().and_then(AdjustmentOutcome::report);
         super::report::write_stations_csv(&self.dir.join("stations.csv"), &self.stations, adjusted)?;
         let viewer_warning = recording_end.map_err(|e| {

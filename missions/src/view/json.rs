@@ -1,5 +1,6 @@
 //! The `--json` documents of `predict`, `plan` and `montecarlo`, typed
-//! (the README's command reference documents each key).
+//! and versioned (the README's command reference documents each key, and
+//! `docs/schemas/` their schemas).
 
 use std::io::Write;
 
@@ -11,14 +12,18 @@ use crate::commands::montecarlo::MonteCarlo;
 use crate::mission::Mission;
 use crate::planning::Planned;
 use crate::planning::analysis::{self, PlanReport};
+use crate::view::document::{Document, write_line};
 
-/// Writes `doc` as one JSON line.
-fn write_line<T: Serialize>(out: &mut dyn Write, doc: &T) -> std::io::Result<()> {
-    serde_json::to_writer(&mut *out, doc)?;
-    writeln!(out)
+/// A position: x, y, z, metres (the shape of every position in every
+/// document; poses add `heading_rad`).
+#[derive(Serialize, schemars::JsonSchema)]
+struct PositionJson {
+    x_m: f64,
+    y_m: f64,
+    z_m: f64,
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, schemars::JsonSchema)]
 struct PoseJson {
     x_m: f64,
     y_m: f64,
@@ -32,7 +37,7 @@ impl PoseJson {
     }
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, schemars::JsonSchema)]
 struct EllipseJson {
     semi_major_m: f64,
     semi_minor_m: f64,
@@ -45,67 +50,86 @@ impl From<ErrorEllipse> for EllipseJson {
     }
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, schemars::JsonSchema)]
 struct ChildJson {
     name: String,
     position: PoseJson,
+    /// 3×3, order (x, y, z), m².
     covariance: [[f64; 3]; 3],
     sigma_xy_m: f64,
     ellipse_95_m: EllipseJson,
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, schemars::JsonSchema)]
 struct StepJson {
     step: usize,
     cycle: usize,
     action: &'static str,
     robot: String,
+    /// Deprecated: the same as `position`.
+    #[schemars(extend("deprecated" = true))]
     position_m: [f64; 3],
-    /// 4×4 (x, y, z, θ) for the parent, 3×3 (x, y, z) for a child.
+    /// Where the robot is.
+    position: PositionJson,
+    /// 4×4, order (x, y, z, θ), for the parent, 3×3 (x, y, z) for a
+    /// child; m², m·rad, rad².
     covariance: Vec<Vec<f64>>,
     sigma_xy_m: f64,
     ellipse_95_m: EllipseJson,
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, schemars::JsonSchema)]
 struct ScanJson {
     step: usize,
     station: usize,
     pose: PoseJson,
+    /// 4×4, order (x, y, z, θ), m², m·rad, rad².
     covariance: Vec<Vec<f64>>,
     sigma_xy_m: f64,
     sigma_heading_rad: f64,
     ellipse_95_m: EllipseJson,
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, schemars::JsonSchema)]
 struct CycleJson {
     cycle: usize,
     distance_m: f64,
     parent: PoseJson,
+    /// 4×4, order (x, y, z, θ), m², m·rad, rad².
     covariance: [[f64; 4]; 4],
     ellipse_1sigma_m: EllipseJson,
     ellipse_95_m: EllipseJson,
     sigma_xy2_m2: f64,
     sigma_heading_rad: f64,
+    /// Deprecated: the same as `sigma_drift_percent` (`report.json` once
+    /// used the name for a true error).
+    #[schemars(extend("deprecated" = true))]
     drift_percent: f64,
+    /// The predicted horizontal σ (√(σx² + σy²)) in % of the distance.
+    sigma_drift_percent: f64,
     children: Vec<ChildJson>,
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, schemars::JsonSchema)]
 struct FinalJson {
     distance_m: f64,
     sigma_xy2_m2: f64,
     sigma_xy_m: f64,
     sigma_heading_rad: f64,
+    /// Deprecated: the same as `sigma_drift_percent`.
+    #[schemars(extend("deprecated" = true))]
     drift_percent: f64,
+    /// The predicted horizontal σ in % of the distance.
+    sigma_drift_percent: f64,
     ellipse_95_m: EllipseJson,
     max_final_sigma_xy_m: Option<f64>,
     accepted: bool,
 }
 
-#[derive(Serialize)]
-struct PredictionJson {
+/// `predict --json`: per cycle the parent and every child, per step every
+/// estimate a step sets, every scan station, the planned network adjusted.
+#[derive(Serialize, schemars::JsonSchema)]
+pub(crate) struct PredictionJson {
     mission: String,
     children: Vec<String>,
     cycles: Vec<CycleJson>,
@@ -117,13 +141,14 @@ struct PredictionJson {
     adjusted_error: Option<String>,
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, schemars::JsonSchema)]
 struct AdjustedStationJson {
     index: usize,
     x_m: f64,
     y_m: f64,
     z_m: f64,
     heading_rad: f64,
+    /// 4×4, order (x, y, z, θ), m², m·rad, rad².
     covariance: [[f64; 4]; 4],
     sigma_xy_m: f64,
     filter_sigma_xy_m: Option<f64>,
@@ -131,7 +156,7 @@ struct AdjustedStationJson {
     control: Vec<String>,
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, schemars::JsonSchema)]
 struct PlannedObservationJson {
     station: usize,
     target: String,
@@ -143,7 +168,7 @@ struct PlannedObservationJson {
 }
 
 /// The pre-analysis: the planned network adjusted.
-#[derive(Serialize)]
+#[derive(Serialize, schemars::JsonSchema)]
 struct AdjustedJson {
     stations: Vec<AdjustedStationJson>,
     worst_station: Option<usize>,
@@ -244,6 +269,7 @@ pub fn prediction(out: &mut dyn Write, mission: &Mission, planned: &Planned) -> 
             sigma_xy2_m2: c.sigma_xy2_m2(),
             sigma_heading_rad: c.sigma_heading_rad(),
             drift_percent: c.drift_percent(),
+            sigma_drift_percent: c.drift_percent(),
             children: c
                 .children_covariance
                 .iter()
@@ -288,6 +314,7 @@ pub fn prediction(out: &mut dyn Write, mission: &Mission, planned: &Planned) -> 
             action: step_kind(steps, e),
             robot: mission.robot_label(e.robot),
             position_m: [e.position.x, e.position.y, e.position.z],
+            position: PositionJson { x_m: e.position.x, y_m: e.position.y, z_m: e.position.z },
             covariance: nested(&e.covariance),
             sigma_xy_m: e.sigma_xy2_m2().sqrt(),
             ellipse_95_m: ellipse_95(e),
@@ -299,6 +326,7 @@ pub fn prediction(out: &mut dyn Write, mission: &Mission, planned: &Planned) -> 
         sigma_xy_m: l.sigma_xy2_m2().sqrt(),
         sigma_heading_rad: l.sigma_heading_rad(),
         drift_percent: l.drift_percent(),
+        sigma_drift_percent: l.drift_percent(),
         ellipse_95_m: l.ellipse_1sigma().scaled(CHI2_2D_95_SQRT).into(),
         max_final_sigma_xy_m: mission.acceptance.max_final_sigma_xy_m,
         accepted: crate::planning::accepted(mission, planned),
@@ -316,7 +344,7 @@ pub fn prediction(out: &mut dyn Write, mission: &Mission, planned: &Planned) -> 
     write_line(out, &doc)
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, schemars::JsonSchema)]
 struct ViolationJson {
     step: usize,
     cycle: usize,
@@ -328,7 +356,7 @@ struct ViolationJson {
     message: String,
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, schemars::JsonSchema)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 enum FormationJson {
     Symmetric { forward_m: f64, lateral_m: f64, up_m: f64 },
@@ -348,7 +376,7 @@ impl FormationJson {
     }
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, schemars::JsonSchema)]
 struct OptimizedJson {
     strategy: &'static str,
     hops: usize,
@@ -366,14 +394,14 @@ struct OptimizedJson {
     worst_station_sigma_xy_m: Option<f64>,
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, schemars::JsonSchema)]
 struct PredictedJson {
     sigma_xy2_m2: Option<f64>,
     sigma_xy_m: Option<f64>,
     sigma_heading_rad: Option<f64>,
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, schemars::JsonSchema)]
 struct SensitivityJson {
     total_m2: f64,
     range_m2: f64,
@@ -383,20 +411,20 @@ struct SensitivityJson {
     dominant: &'static str,
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, schemars::JsonSchema)]
 struct LongerStrideJson {
     stride_m: f64,
     cycles: usize,
     sigma_xy2_m2: f64,
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, schemars::JsonSchema)]
 struct WhatIfJson {
     one_more_child_sigma_xy2_m2: Option<f64>,
     longer_stride: Option<LongerStrideJson>,
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, schemars::JsonSchema)]
 struct UncheckedJson {
     cycle: usize,
     child: String,
@@ -404,23 +432,38 @@ struct UncheckedJson {
     redundancy_number: f64,
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, schemars::JsonSchema)]
 struct ReliabilityJson {
     min_redundancy_number: Option<f64>,
     unchecked: Vec<UncheckedJson>,
 }
 
-#[derive(Serialize)]
-struct PlanJson {
+/// `plan --json`: the plan as written (its violations, the analysis) and
+/// the optimized plan.
+#[derive(Serialize, schemars::JsonSchema)]
+pub(crate) struct PlanJson {
     mission: String,
     strategy: &'static str,
     hops: usize,
     stride_m: f64,
     formation_m: Vec<[f64; 3]>,
     scene: Option<String>,
+    /// Deprecated: the same as `station_count` (`stations` is a list in
+    /// every other document).
+    #[schemars(extend("deprecated" = true))]
     stations: usize,
+    /// Deprecated: the same as `cycle_count`.
+    #[schemars(extend("deprecated" = true))]
     cycles: usize,
+    /// Deprecated: the same as `step_count`.
+    #[schemars(extend("deprecated" = true))]
     steps: usize,
+    /// Parent stations, the start included.
+    station_count: usize,
+    /// Dance cycles.
+    cycle_count: usize,
+    /// Steps of the plan.
+    step_count: usize,
     violations: Vec<ViolationJson>,
     predicted: PredictedJson,
     sensitivity: Option<SensitivityJson>,
@@ -433,13 +476,13 @@ struct PlanJson {
     accepted: bool,
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, schemars::JsonSchema)]
 struct ControlSightingJson {
     station: usize,
     slope_distance_m: f64,
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, schemars::JsonSchema)]
 struct ControlSeenJson {
     name: String,
     fixed: bool,
@@ -494,6 +537,9 @@ pub fn plan(out: &mut dyn Write, mission: &Mission, report: &PlanReport) -> std:
         stations: written.stations(),
         cycles: written.dance.cycles.len(),
         steps: written.steps.len(),
+        station_count: written.stations(),
+        cycle_count: written.dance.cycles.len(),
+        step_count: written.steps.len(),
         violations,
         predicted: PredictedJson {
             sigma_xy2_m2: report.sigma_xy2_m2,
@@ -549,7 +595,7 @@ pub fn plan(out: &mut dyn Write, mission: &Mission, report: &PlanReport) -> std:
     write_line(out, &doc)
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, schemars::JsonSchema)]
 struct McStationJson {
     index: usize,
     predicted_sigma_xy2_m2: f64,
@@ -570,8 +616,9 @@ impl McStationJson {
     }
 }
 
-#[derive(Serialize)]
-struct MonteCarloJson {
+/// `montecarlo --json`: the final station's figures and every station's.
+#[derive(Serialize, schemars::JsonSchema)]
+pub(crate) struct MonteCarloJson {
     mission: String,
     seed: u64,
     trials: usize,
@@ -604,4 +651,19 @@ pub fn montecarlo(out: &mut dyn Write, mission: &Mission, mc: &MonteCarlo) -> an
         adjusted_interval: (!mc.adjusted.is_empty()).then_some([mc.adjusted_interval.0, mc.adjusted_interval.1]),
     };
     Ok(write_line(out, &doc)?)
+}
+
+impl Document for PredictionJson {
+    const NAME: &'static str = "predict";
+    const VERSION: u32 = 1;
+}
+
+impl Document for PlanJson {
+    const NAME: &'static str = "plan";
+    const VERSION: u32 = 1;
+}
+
+impl Document for MonteCarloJson {
+    const NAME: &'static str = "montecarlo";
+    const VERSION: u32 = 1;
 }

@@ -1,8 +1,10 @@
-//! What the user sees: [`tables`] on the terminal, [`json`] documents, the
+//! What the user sees: [`tables`] on the terminal, [`json`] documents (each
+//! a versioned [`document`]), the
 //! adjustment's [`listing`],
 //! [`plot`]s (SVG) and the Rerun [`recording`]; [`shapes`] is the geometry
 //! the plot and the recording share.
 
+pub mod document;
 pub mod json;
 pub mod listing;
 pub mod plot;

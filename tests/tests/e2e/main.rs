@@ -17,4 +17,5 @@ mod readme;
 mod register;
 mod rrd;
 mod run;
+mod schemas;
 mod serial;

@@ -19,6 +19,14 @@ fn hall_runs_end_to_end() {
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).expect("report")).expect("JSON");
     assert_eq!(report["mission"], "hall");
     assert_eq!(report["seed"], 1);
+    assert_eq!(report["schema_version"], 1);
+    assert_eq!(report["tool_version"], env!("CARGO_PKG_VERSION"));
+    assert_eq!(report["adjustment"]["tool_version"], env!("CARGO_PKG_VERSION"));
+    // `drift_percent` (deprecated) is the true error's, as `error_drift_percent`.
+    let last = &report["final"];
+    assert_eq!(last["drift_percent"], last["error_drift_percent"]);
+    let (e, d) = (last["error_xy_m"].as_f64().expect("error"), last["distance_m"].as_f64().expect("distance"));
+    assert!((last["error_drift_percent"].as_f64().expect("drift") - 100.0 * e / d).abs() < 1e-9);
     let stations = report["stations"].as_array().expect("stations");
     assert_eq!(stations.len(), 22);
     for (k, s) in stations.iter().enumerate() {

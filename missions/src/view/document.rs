@@ -1,0 +1,81 @@
+//! The versioned JSON contract: every JSON document the CLI writes opens
+//! with `schema_version` (of that document's schema,
+//! `docs/schemas/<name>.schema.json`) and `tool_version` (the cps-survey
+//! that wrote it), then the document's own keys.
+
+use std::io::Write;
+
+use schemars::JsonSchema;
+use serde::Serialize;
+
+/// The cps-survey version written into every document.
+pub const TOOL_VERSION: &str = env!("CARGO_PKG_VERSION");
+
+/// A JSON document of the contract: its schema's file name and version.
+pub trait Document: Serialize + JsonSchema {
+    /// `docs/schemas/<NAME>.schema.json`.
+    const NAME: &'static str;
+    /// Raised when a key changes meaning or goes; keys are only ever added
+    /// within a version.
+    const VERSION: u32;
+    /// Whether the document carries `schema_version` and `tool_version` as
+    /// its own keys (the adjustment, which `report.json` nests whole).
+    const SELF_VERSIONED: bool = false;
+}
+
+/// `document` with its header: what is written, and what the schema
+/// describes.
+#[derive(Debug, Serialize, JsonSchema)]
+pub struct Versioned<'a, T> {
+    /// The version of this document's schema.
+    pub schema_version: u32,
+    /// The cps-survey version that wrote this document.
+    pub tool_version: &'static str,
+    /// The document.
+    #[serde(flatten)]
+    pub document: &'a T,
+}
+
+/// `document` with its header.
+pub fn versioned<T: Document>(document: &T) -> Versioned<'_, T> {
+    Versioned { schema_version: T::VERSION, tool_version: TOOL_VERSION, document }
+}
+
+/// Writes `document` with its header as one JSON line.
+pub fn write_line<T: Document>(out: &mut dyn Write, document: &T) -> std::io::Result<()> {
+    if T::SELF_VERSIONED {
+        serde_json::to_writer(&mut *out, document)?;
+    } else {
+        serde_json::to_writer(&mut *out, &versioned(document))?;
+    }
+    writeln!(out)
+}
+
+/// Writes `document` with its header as pretty JSON (with a final
+/// newline) to `path`.
+pub fn write_file<T: Document>(path: &std::path::Path, document: &T) -> anyhow::Result<()> {
+    use anyhow::Context;
+    let text = if T::SELF_VERSIONED {
+        serde_json::to_string_pretty(document)?
+    } else {
+        serde_json::to_string_pretty(&versioned(document))?
+    } + "\n";
+    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+}
+
+/// The JSON Schema (draft 2020-12) of `T`'s documents, header included.
+pub fn schema<T: Document + 'static>() -> schemars::Schema {
+    // The documents are written, never read: the serialization contract
+    // (a key skipped when empty is optional, `serde(default)` is not).
+    let generator = || schemars::generate::SchemaSettings::draft2020_12().for_serialize().into_generator();
+    let own = generator().into_root_schema_for::<T>();
+    let mut schema =
+        if T::SELF_VERSIONED { own.clone() } else { generator().into_root_schema_for::<Versioned<'static, T>>() };
+    schema.insert("title".into(), format!("cps-survey {} document, schema version {}", T::NAME, T::VERSION).into());
+    // The document's own description, not the header's.
+    match own.get("description") {
+        Some(d) => schema.insert("description".into(), d.clone()),
+        None => schema.remove("description"),
+    };
+    schema
+}
