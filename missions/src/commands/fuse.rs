@@ -6,7 +6,7 @@
 use std::io::Write;
 use std::path::PathBuf;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 
 use super::Outcome;
 use crate::mission::FusionMode;
@@ -42,12 +42,13 @@ pub fn run(args: &FuseArgs, out: &mut dyn Write) -> Result<Outcome> {
         bail!("{}: the journal has no scans to fuse", dir.display());
     }
     let mode = args.mode.unwrap_or(mission.fusion.mode);
+    // Where the results go, checked before the fusion runs.
+    let target = dir.join("fusion").join(mode.name());
+    crate::run::outputs::check_targets(mission, &target, &["fusion.json"])?;
+    let frames = target.join("frames");
+    crate::run::outputs::check_targets(mission, &frames, &[])?;
     let scanner = mission.scan.scanner_in_body();
     let fused = crate::run::fuse::fuse(views, mode, &mission.fusion, scanner, false, &mut |_, _| {})?;
-    let target = dir.join("fusion").join(mode.name());
-    std::fs::create_dir_all(&target).with_context(|| format!("creating {}", target.display()))?;
-    let frames = target.join("frames");
-    std::fs::create_dir_all(&frames).with_context(|| format!("creating {}", frames.display()))?;
     crate::run::fuse::write_frames(&frames, views, &fused)?;
     let cloud = crate::run::fuse::merged(views, &fused, &mission.cloud_origin());
     let written =

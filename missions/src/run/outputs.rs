@@ -42,6 +42,30 @@ pub fn cloud_file(format: &str) -> String {
     if format == "copc" { "cloud.copc.laz".into() } else { format!("cloud.{format}") }
 }
 
+/// Checks, before any work, that the output stage can write into `dir`:
+/// creates it (and its parents), and refuses a target of [`write`] — a
+/// cloud file, the deviation map, and `extra` (the caller's own files) —
+/// that exists as something other than a file, naming it. A survey that
+/// cannot be written is refused before it is measured, not after.
+pub fn check_targets(mission: &Mission, dir: &Path, extra: &[&str]) -> Result<()> {
+    use anyhow::{Context, bail};
+    if dir.exists() && !dir.is_dir() {
+        bail!("{}: exists and is not a directory; expected the output directory", dir.display());
+    }
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let clouds = mission.output.formats.iter().map(|f| cloud_file(f));
+    let pipe = mission.pipe.as_ref().map(|_| DEVIATION_FILE.to_string());
+    for name in clouds.chain(pipe).chain(extra.iter().map(|e| e.to_string())) {
+        let path = dir.join(&name);
+        if let Ok(meta) = std::fs::symlink_metadata(&path)
+            && !meta.file_type().is_file()
+        {
+            bail!("{}: exists and is not a file; the outputs write {name} there (remove or rename it)", path.display());
+        }
+    }
+    Ok(())
+}
+
 /// Writes the merged `cloud` (relative to the mission's cloud origin, each
 /// point's scan in `source`, each scan in `scans`) into `dir` as
 /// [`cloud_file`] for each of the mission's formats, in the mission's CRS,

@@ -180,6 +180,7 @@ struct Run<'m> {
 pub fn run(mission: &Mission, planned: &Planned, dir: &Path, options: &RunOptions) -> Result<RunSummary> {
     let started = Instant::now();
     crate::planning::constraints::refuse_violations(mission, planned)?;
+    super::outputs::check_targets(mission, dir, &["report.json", "stations.csv", "adjustment.txt", "mission.rrd"])?;
     let journal = super::resume::open(mission, planned, dir, options.resume, options.abort_after_events)?;
     std::fs::create_dir_all(dir.join("scans")).with_context(|| format!("creating {}", dir.join("scans").display()))?;
 

@@ -213,3 +213,43 @@ fn a_journal_torn_inside_a_multi_byte_character_resumes() {
     assert_eq!(after[..whole], bytes[..whole], "every line before the torn one kept");
     assert!(std::str::from_utf8(&after).is_ok(), "the torn bytes cut");
 }
+
+#[test]
+fn outputs_that_cannot_be_written_are_refused_before_anything_is_measured() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mission = example("indoor-compact.toml");
+    // --out is a file.
+    let file = dir.path().join("file");
+    std::fs::write(&file, "mine").expect("write");
+    let refused = cps_survey(run_args(&mission, &file, &[]));
+    assert_eq!(refused.code, 2, "{}", refused.stderr);
+    assert!(refused.stderr.contains("file: exists and is not a directory"), "{}", refused.stderr);
+    assert_eq!(std::fs::read_to_string(&file).expect("kept"), "mine");
+    // A cloud file's name is taken by a directory: refused before the
+    // survey starts (no journal), not after it.
+    let out = dir.path().join("r");
+    std::fs::create_dir_all(out.join("cloud.ply")).expect("mkdir");
+    let refused = cps_survey(run_args(&mission, &out, &[]));
+    assert_eq!(refused.code, 2, "{}", refused.stderr);
+    assert!(
+        refused.stderr.contains("cloud.ply: exists and is not a file; the outputs write cloud.ply there"),
+        "{}",
+        refused.stderr
+    );
+    assert!(!out.join("journal.jsonl").exists(), "nothing measured");
+    std::fs::remove_dir(out.join("cloud.ply")).expect("rmdir");
+    let done = cps_survey(run_args(&mission, &out, &[]));
+    assert_eq!(done.code, 0, "{}", done.stderr);
+    // `fuse` checks its directory before it fuses.
+    let fusion = out.join("fusion");
+    std::fs::create_dir_all(&fusion).expect("mkdir");
+    std::fs::write(fusion.join("icp"), "mine").expect("write");
+    let refused = cps_survey(["fuse".into(), out.clone().into_os_string(), "--mode".into(), "icp".into()]);
+    assert_eq!(refused.code, 2, "{}", refused.stderr);
+    assert!(refused.stderr.contains("icp: exists and is not a directory"), "{}", refused.stderr);
+    std::fs::create_dir_all(fusion.join("direct").join("fusion.json")).expect("mkdir");
+    let refused = cps_survey(["fuse".into(), out.clone().into_os_string(), "--mode".into(), "direct".into()]);
+    assert_eq!(refused.code, 2, "{}", refused.stderr);
+    assert!(refused.stderr.contains("fusion.json: exists and is not a file"), "{}", refused.stderr);
+    assert!(!fusion.join("direct").join("cloud.ply").exists(), "nothing fused");
+}
