@@ -207,3 +207,42 @@ fn scans_outside_the_cloud_are_refused() {
     assert!(error.contains("\"scan005\" (points 400..800) and \"scan006\" (points 700..1200) share points"), "{error}");
     assert!(!path.exists());
 }
+
+/// More points than one encoding batch (2^20) and many LAZ chunks: every
+/// point read back by the `las` crate where it was, in order, in LAS and
+/// in LAZ alike.
+#[test]
+fn las_and_laz_keep_every_point_across_batches() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let n = (1 << 20) + 54_321;
+    let points: Vec<Point3<f32>> =
+        (0..n).map(|i| Point3::new((i % 1000) as f32 * 0.01, (i / 1000) as f32 * 0.01, (i % 7) as f32)).collect();
+    let cloud =
+        PointCloud { source: Some((0..n).map(|i| (i / 100_000) as u16).collect()), ..PointCloud::from_points(points) };
+    for name in ["big.las", "big.laz"] {
+        let path = dir.path().join(name);
+        write(&path, &cloud, Format::from_path(&path).expect("format")).expect("written");
+        let mut reader = las::Reader::from_path(&path).expect("the las crate reads it");
+        assert_eq!(reader.header().number_of_points(), n as u64, "{name}");
+        let data = reader.read_all().expect("points");
+        let mut i = 0;
+        for p in data.points() {
+            let p = p.expect("a point");
+            assert!(close([p.x, p.y, p.z], cloud.coordinates(i), 1e-4), "{name} point {i}: {p:?}");
+            assert_eq!(p.point_source_id, (i / 100_000) as u16, "{name} point {i}");
+            i += 1;
+        }
+        assert_eq!(i, n, "{name}");
+    }
+}
+
+/// A cloud wider than the 32-bit scaled integers reach (±214 km at 0.1 mm
+/// from the offset) is refused, naming the point, not wrapped around.
+#[test]
+fn las_refuses_coordinates_beyond_its_integers() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let cloud = PointCloud::from_points(vec![Point3::new(0.0, 0.0, 0.0), Point3::new(300_000.0, 0.0, 0.0)]);
+    let path = dir.path().join("wide.las");
+    let e = write(&path, &cloud, Format::Las).expect_err("too wide").to_string();
+    assert!(e.contains("wide.las") && e.contains("point 1") && e.contains("does not fit"), "{e}");
+}

@@ -2,15 +2,17 @@
 //! scan in `point_source_id`, its scan's time as adjusted standard GPS
 //! time, intensity, return 1 of 1), scale 0.1 mm, offset at the cloud's
 //! lower corner (rounded to metres) plus its origin, the CRS as an OGC WKT
-//! VLR. COPC is that LAZ re-ordered into an octree by `copc-writer`,
+//! VLR. Records are encoded in parallel and handed to the crate in batches
+//! (LAZ chunks compressed in parallel). COPC is that LAZ re-ordered into an octree by `copc-writer`,
 //! streaming through a spill file beside the output.
 
 use std::fs::File;
 use std::io::BufWriter;
 use std::path::Path;
 
-use las::{Builder, GpsTimeType, Point, Reader, Transform, Vector, Vlr, Writer};
+use las::{Builder, GpsTimeType, PointDataBuilder, Reader, Transform, Vector, Vlr, Writer};
 use nalgebra::Point3;
+use rayon::prelude::*;
 
 use super::PointCloud;
 use crate::error::{Location, Result, ScannerError};
@@ -155,39 +157,77 @@ pub const WKT_RECORD_ID: u16 = 2112;
 /// Adjusted standard GPS time: GPS seconds minus 10⁹ (LAS 1.4).
 const ADJUSTED_GPS_OFFSET_S: f64 = 1e9;
 
+/// Points encoded and written at a time: about 30 MB of records.
+const BATCH_POINTS: usize = 1 << 20;
+
+/// The length of a point format 6 record (LAS 1.4 R15, table 16): X, Y, Z
+/// (i32, scaled), intensity (u16), return number | number of returns << 4,
+/// flags, classification, user data (u8 each), scan angle (i16), point
+/// source id (u16), GPS time (f64), little-endian. The `las` crate checks
+/// the length against the format and reads the records back for the
+/// header's bounds and counts.
+const FORMAT_6_LEN: usize = 30;
+
 pub(super) fn write(path: &Path, cloud: &PointCloud, compressed: bool) -> Result<()> {
     let header = header(path, cloud, compressed)?;
     let file = File::create(path).map_err(|e| ScannerError::io(path, e))?;
     let mut writer =
         Writer::new(BufWriter::with_capacity(1 << 20, file), header).map_err(|e| ScannerError::whole_file(path, e))?;
-    // Each point's time is its scan's: walk the scans alongside the points.
+    // Each point's time is its scan's.
     let mut scans: Vec<_> = cloud.scans.iter().filter(|s| !s.points.is_empty()).collect();
     scans.sort_by_key(|s| s.points.start);
-    let mut scan = scans.iter().peekable();
-    for i in 0..cloud.points.len() {
-        while scan.peek().is_some_and(|s| s.points.end <= i) {
-            scan.next();
-        }
-        let gps_time = scan
-            .peek()
+    let gps_time = |i: usize| {
+        let k = scans.partition_point(|s| s.points.end <= i);
+        scans
+            .get(k)
             .filter(|s| s.points.contains(&i))
             .and_then(|s| s.gps_time_s)
-            .map_or(0.0, |t| t - ADJUSTED_GPS_OFFSET_S);
-        let intensity = cloud.intensity.as_ref().map_or(0, |v| v[i].clamp(0.0, 65535.0).round() as u16);
-        let [x, y, z] = cloud.coordinates(i);
-        let point_source_id = cloud.source.as_ref().map_or(0, |s| s[i]);
-        let point = Point {
-            x,
-            y,
-            z,
-            intensity,
-            point_source_id,
-            return_number: 1,
-            number_of_returns: 1,
-            gps_time: Some(gps_time),
-            ..Default::default()
-        };
-        writer.write_point(point).map_err(|e| ScannerError::whole_file(path, format!("point {i}: {e}")))?;
+            .map_or(0.0, |t| t - ADJUSTED_GPS_OFFSET_S)
+    };
+    let offset = *writer.header().transforms();
+    let slab = PointDataBuilder::new().for_header(writer.header());
+    if usize::from(writer.header().point_format().len()) != FORMAT_6_LEN {
+        return Err(ScannerError::whole_file(path, "the header's point format is not format 6"));
+    }
+    let n = cloud.points.len();
+    for batch in (0..n).step_by(BATCH_POINTS) {
+        let end = n.min(batch + BATCH_POINTS);
+        // Encoded in parallel into one buffer, written at once: LAZ
+        // compresses its chunks (50,000 points each) in parallel too.
+        let mut bytes = vec![0u8; (end - batch) * FORMAT_6_LEN];
+        bytes
+            .par_chunks_mut(FORMAT_6_LEN)
+            .enumerate()
+            .try_for_each(|(k, record)| {
+                let i = batch + k;
+                let [x, y, z] = cloud.coordinates(i);
+                let raw = |v: f64, t: &Transform| {
+                    let r = ((v - t.offset) / t.scale).round();
+                    (r >= f64::from(i32::MIN) && r <= f64::from(i32::MAX)).then_some(r as i32).ok_or(i)
+                };
+                record[0..4].copy_from_slice(&raw(x, &offset.x)?.to_le_bytes());
+                record[4..8].copy_from_slice(&raw(y, &offset.y)?.to_le_bytes());
+                record[8..12].copy_from_slice(&raw(z, &offset.z)?.to_le_bytes());
+                let intensity = cloud.intensity.as_ref().map_or(0, |v| v[i].clamp(0.0, 65535.0).round() as u16);
+                record[12..14].copy_from_slice(&intensity.to_le_bytes());
+                record[14] = 1 | (1 << 4); // return 1 of 1
+                // 15..20: flags, classification, user data, scan angle: 0.
+                record[20..22].copy_from_slice(&cloud.source.as_ref().map_or(0, |s| s[i]).to_le_bytes());
+                record[22..30].copy_from_slice(&gps_time(i).to_le_bytes());
+                Ok(())
+            })
+            .map_err(|i: usize| {
+                ScannerError::whole_file(
+                    path,
+                    format!(
+                        "point {i}: {:?} does not fit the LAS offsets {:?} at 0.1 mm",
+                        cloud.coordinates(i),
+                        [offset.x.offset, offset.y.offset, offset.z.offset]
+                    ),
+                )
+            })?;
+        let points = slab.clone().build_from_bytes(bytes).map_err(|e| ScannerError::whole_file(path, e))?;
+        writer.write_points(&points).map_err(|e| ScannerError::whole_file(path, e))?;
     }
     writer.close().map_err(|e| ScannerError::whole_file(path, e))?;
     let file = writer.into_inner().map_err(|e| ScannerError::whole_file(path, e))?;
