@@ -246,3 +246,103 @@ fn las_refuses_coordinates_beyond_its_integers() {
     let e = write(&path, &cloud, Format::Las).expect_err("too wide").to_string();
     assert!(e.contains("wide.las") && e.contains("point 1") && e.contains("does not fit"), "{e}");
 }
+
+/// `survey()`'s scans as parts, each with its own points, fields and scan.
+fn parts(cloud: &PointCloud) -> Vec<PointCloud> {
+    cloud
+        .scans
+        .iter()
+        .map(|s| PointCloud {
+            points: cloud.points[s.points.clone()].to_vec(),
+            intensity: cloud.intensity.as_ref().map(|v| v[s.points.clone()].to_vec()),
+            source: cloud.source.as_ref().map(|v| v[s.points.clone()].to_vec()),
+            scans: vec![ScanInfo { points: 0..s.points.len(), ..s.clone() }],
+            ..cloud.clone()
+        })
+        .collect()
+}
+
+/// A cloud written a scan at a time is the cloud written whole: the same
+/// bytes where a format is one stream, the same points, scans, times and
+/// poses where the file carries dates or GUIDs.
+#[test]
+fn a_cloud_written_scan_by_scan_is_the_cloud_written_whole() {
+    use scanner::io::{CloudHeader, CloudWriter, PcdData, PlyEncoding};
+    let dir = tempfile::tempdir().expect("tempdir");
+    let cloud = survey();
+    let streamed = |name: &str, format: Format| {
+        let path = dir.path().join(format!("s-{name}"));
+        let mut writer = CloudWriter::create(&path, format, CloudHeader::of(&cloud)).expect("created");
+        for part in parts(&cloud) {
+            writer.push(&part).expect("pushed");
+        }
+        writer.finish().expect("finished");
+        path
+    };
+    for (name, format) in [
+        ("c.3d", Format::ThreeDtk),
+        ("c.xyz", Format::Xyz),
+        ("c.ply", Format::Ply(PlyEncoding::BinaryLittleEndian)),
+        ("a.ply", Format::Ply(PlyEncoding::Ascii)),
+        ("c.pcd", Format::Pcd(PcdData::Binary)),
+        ("a.pcd", Format::Pcd(PcdData::Ascii)),
+        ("z.pcd", Format::Pcd(PcdData::BinaryCompressed)),
+    ] {
+        let whole = dir.path().join(format!("w-{name}"));
+        write(&whole, &cloud, format).expect("whole");
+        let bytes = std::fs::read(&whole).expect("read");
+        assert!(bytes.len() > 1000, "{name}");
+        assert_eq!(std::fs::read(streamed(name, format)).expect("read"), bytes, "{name}");
+    }
+    check_las(&streamed("c.las", Format::Las), &cloud, false);
+    check_las(&streamed("c.laz", Format::Laz), &cloud, true);
+    let mut reader = las::CopcReader::from_path(streamed("c.copc.laz", Format::Copc)).expect("COPC");
+    let data = reader.query(las::LodSelection::All, las::BoundsSelection::All).expect("points");
+    assert_eq!(data.len(), cloud.len());
+    let reader = e57::E57Reader::from_file(streamed("c.e57", Format::E57)).expect("E57");
+    let clouds = reader.pointclouds();
+    assert_eq!(clouds.len(), 3);
+    for (pc, scan) in clouds.iter().zip(&cloud.scans) {
+        assert_eq!((pc.name.as_deref(), pc.records), (Some(scan.name.as_str()), 400));
+    }
+    // Only the finished files are there.
+    let mut names: Vec<String> = std::fs::read_dir(dir.path())
+        .expect("dir")
+        .map(|e| e.expect("entry").file_name().into_string().expect("utf-8"))
+        .collect();
+    names.retain(|n| n.ends_with(".partial") || n.contains(".laz."));
+    assert!(names.is_empty(), "left behind: {names:?}");
+}
+
+/// A part that is not what the header said, a count that does not add up,
+/// and a writer dropped unfinished: refused naming the file, nothing left.
+#[test]
+fn a_streamed_cloud_refuses_parts_it_was_not_promised() {
+    use scanner::io::{CloudHeader, CloudWriter};
+    let dir = tempfile::tempdir().expect("tempdir");
+    let cloud = survey();
+    let parts = parts(&cloud);
+    let path = dir.path().join("c.las");
+    let header = CloudHeader::of(&cloud);
+
+    let mut w = CloudWriter::create(&path, Format::Las, header.clone()).expect("created");
+    let moved = PointCloud { origin: Vector3::zeros(), ..parts[0].clone() };
+    let e = w.push(&moved).expect_err("another origin").to_string();
+    assert!(e.contains("c.las") && e.contains("expected the cloud's origin"), "{e}");
+    let bare = PointCloud { intensity: None, ..parts[0].clone() };
+    let e = w.push(&bare).expect_err("no intensity").to_string();
+    assert!(e.contains("without intensities"), "{e}");
+    w.push(&parts[0]).expect("a good part");
+    let e = w.finish().expect_err("two scans missing").to_string();
+    assert!(e.contains("400 points written: expected 1200"), "{e}");
+    assert!(!path.exists());
+
+    let mut w =
+        CloudWriter::create(&path, Format::Las, CloudHeader { points: 500, ..header.clone() }).expect("created");
+    w.push(&parts[0]).expect("400 of 500");
+    let e = w.push(&parts[1]).expect_err("800 > 500").to_string();
+    assert!(e.contains("800 points after this part: expected 500"), "{e}");
+    drop(w);
+    let left: Vec<_> = std::fs::read_dir(dir.path()).expect("dir").collect();
+    assert!(left.is_empty(), "an unfinished writer leaves nothing: {left:?}");
+}

@@ -47,41 +47,81 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
     Ok(cloud)
 }
 
-pub(super) fn write(path: &Path, cloud: &PointCloud) -> Result<()> {
-    let mut writer = E57Writer::from_file(path, &guid()).map_err(|e| ScannerError::whole_file(path, e))?;
-    writer.set_coordinate_metadata(cloud.crs.as_ref().map(|c| c.wkt.clone()));
-    let now = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64());
-    writer.set_creation(Some(DateTime { gps_time: super::gps_time_of_unix(now), atomic_reference: false }));
-    // One data3D per scan, in the scan's own frame with its pose; points in
-    // no scan (or all of them, without scans) in one more, in the cloud's
-    // coordinates.
-    let mut covered = vec![false; cloud.len()];
-    for scan in &cloud.scans {
-        covered[scan.points.clone()].iter_mut().for_each(|c| *c = true);
-        let scan_from_world = scan.world_from_scan.inverse();
-        let points = scan.points.clone().map(|i| {
-            let local = scan_from_world * nalgebra::Point3::from(cloud.coordinates(i));
-            (i, [local.x, local.y, local.z].map(|v| RecordValue::Single(v as f32)))
-        });
-        let meta = Data3d { name: &scan.name, pose: Some(&scan.world_from_scan), gps_time_s: scan.gps_time_s };
-        add_data3d(&mut writer, path, cloud, &meta, false, points)?;
+/// An E57 file written part by part: one `data3D` per scan of each part,
+/// in the scan's own frame with its pose; a part's points in no scan in
+/// one more, in the cloud's coordinates (64-bit when georeferenced).
+pub(super) struct E57Stream {
+    writer: E57Writer<std::fs::File>,
+    path: std::path::PathBuf,
+    data3d: usize,
+}
+
+impl std::fmt::Debug for E57Stream {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("E57Stream").field("path", &self.path).field("data3d", &self.data3d).finish_non_exhaustive()
     }
-    if covered.iter().any(|c| !c) || cloud.is_empty() {
-        // Georeferenced: 64-bit coordinates (origin + p).
-        let georeferenced = cloud.georeferenced();
-        let points = (0..cloud.len()).filter(|&i| !covered[i]).map(|i| {
-            let p = &cloud.points[i];
+}
+
+impl E57Stream {
+    /// Creates `path` with the cloud's CRS and the creation time.
+    pub(super) fn create(path: &Path, cloud: &super::CloudHeader) -> Result<Self> {
+        let mut writer = E57Writer::from_file(path, &guid()).map_err(|e| ScannerError::whole_file(path, e))?;
+        writer.set_coordinate_metadata(cloud.crs.as_ref().map(|c| c.wkt.clone()));
+        let now = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64());
+        writer.set_creation(Some(DateTime { gps_time: super::gps_time_of_unix(now), atomic_reference: false }));
+        Ok(Self { writer, path: path.to_path_buf(), data3d: 0 })
+    }
+
+    /// Adds `part`'s scans (and its points in none).
+    pub(super) fn push(&mut self, part: &PointCloud) -> Result<()> {
+        let (writer, path) = (&mut self.writer, self.path.as_path());
+        let mut covered = vec![false; part.len()];
+        for scan in &part.scans {
+            covered[scan.points.clone()].iter_mut().for_each(|c| *c = true);
+            let scan_from_world = scan.world_from_scan.inverse();
+            let points = scan.points.clone().map(|i| {
+                let local = scan_from_world * nalgebra::Point3::from(part.coordinates(i));
+                (i, [local.x, local.y, local.z].map(|v| RecordValue::Single(v as f32)))
+            });
+            let meta = Data3d { name: &scan.name, pose: Some(&scan.world_from_scan), gps_time_s: scan.gps_time_s };
+            add_data3d(writer, path, part, &meta, false, points)?;
+            self.data3d += 1;
+        }
+        if covered.iter().any(|c| !c) {
+            self.add_world(part, |i| !covered[i])?;
+        }
+        Ok(())
+    }
+
+    /// `part`'s points where `keep` in one `data3D` in the cloud's
+    /// coordinates.
+    fn add_world(&mut self, part: &PointCloud, keep: impl Fn(usize) -> bool) -> Result<()> {
+        let georeferenced = part.georeferenced();
+        let points = (0..part.len()).filter(|&i| keep(i)).map(|i| {
+            let p = &part.points[i];
             let values = if georeferenced {
-                cloud.coordinates(i).map(RecordValue::Double)
+                part.coordinates(i).map(RecordValue::Double)
             } else {
                 [p.x, p.y, p.z].map(RecordValue::Single)
             };
             (i, values)
         });
         let meta = Data3d { name: "cps-survey-cloud", pose: None, gps_time_s: None };
-        add_data3d(&mut writer, path, cloud, &meta, georeferenced, points)?;
+        add_data3d(&mut self.writer, &self.path, part, &meta, georeferenced, points)?;
+        self.data3d += 1;
+        Ok(())
     }
-    writer.finalize().map_err(|e| ScannerError::whole_file(path, e))
+
+    /// Finishes the file (an empty cloud gets one empty `data3D`).
+    pub(super) fn finish(mut self, cloud: &super::CloudHeader) -> Result<()> {
+        if self.data3d == 0 {
+            let empty =
+                PointCloud { origin: cloud.origin, intensity: cloud.intensity.then(Vec::new), ..PointCloud::default() };
+            self.add_world(&empty, |_| true)?;
+        }
+        let path = self.path.clone();
+        self.writer.finalize().map_err(|e| ScannerError::whole_file(&path, e))
+    }
 }
 
 /// What a `data3D` says of itself.

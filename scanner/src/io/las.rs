@@ -8,13 +8,13 @@
 
 use std::fs::File;
 use std::io::BufWriter;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use las::{Builder, GpsTimeType, PointDataBuilder, Reader, Transform, Vector, Vlr, Writer};
 use nalgebra::Point3;
 use rayon::prelude::*;
 
-use super::PointCloud;
+use super::{CloudHeader, PointCloud};
 use crate::error::{Location, Result, ScannerError};
 
 /// Coordinate resolution of the LAS files we write, metres.
@@ -168,94 +168,141 @@ const BATCH_POINTS: usize = 1 << 20;
 /// header's bounds and counts.
 const FORMAT_6_LEN: usize = 30;
 
-pub(super) fn write(path: &Path, cloud: &PointCloud, compressed: bool) -> Result<()> {
-    let header = header(path, cloud, compressed)?;
-    let file = File::create(path).map_err(|e| ScannerError::io(path, e))?;
-    let mut writer =
-        Writer::new(BufWriter::with_capacity(1 << 20, file), header).map_err(|e| ScannerError::whole_file(path, e))?;
-    // Each point's time is its scan's.
-    let mut scans: Vec<_> = cloud.scans.iter().filter(|s| !s.points.is_empty()).collect();
-    scans.sort_by_key(|s| s.points.start);
-    let gps_time = |i: usize| {
-        let k = scans.partition_point(|s| s.points.end <= i);
-        scans
-            .get(k)
-            .filter(|s| s.points.contains(&i))
-            .and_then(|s| s.gps_time_s)
-            .map_or(0.0, |t| t - ADJUSTED_GPS_OFFSET_S)
-    };
-    let offset = *writer.header().transforms();
-    let slab = PointDataBuilder::new().for_header(writer.header());
-    if usize::from(writer.header().point_format().len()) != FORMAT_6_LEN {
-        return Err(ScannerError::whole_file(path, "the header's point format is not format 6"));
-    }
-    let n = cloud.points.len();
-    for batch in (0..n).step_by(BATCH_POINTS) {
-        let end = n.min(batch + BATCH_POINTS);
-        // Encoded in parallel into one buffer, written at once: LAZ
-        // compresses its chunks (50,000 points each) in parallel too.
-        let mut bytes = vec![0u8; (end - batch) * FORMAT_6_LEN];
-        bytes
-            .par_chunks_mut(FORMAT_6_LEN)
-            .enumerate()
-            .try_for_each(|(k, record)| {
-                let i = batch + k;
-                let [x, y, z] = cloud.coordinates(i);
-                let raw = |v: f64, t: &Transform| {
-                    let r = ((v - t.offset) / t.scale).round();
-                    (r >= f64::from(i32::MIN) && r <= f64::from(i32::MAX)).then_some(r as i32).ok_or(i)
-                };
-                record[0..4].copy_from_slice(&raw(x, &offset.x)?.to_le_bytes());
-                record[4..8].copy_from_slice(&raw(y, &offset.y)?.to_le_bytes());
-                record[8..12].copy_from_slice(&raw(z, &offset.z)?.to_le_bytes());
-                let intensity = cloud.intensity.as_ref().map_or(0, |v| v[i].clamp(0.0, 65535.0).round() as u16);
-                record[12..14].copy_from_slice(&intensity.to_le_bytes());
-                record[14] = 1 | (1 << 4); // return 1 of 1
-                // 15..20: flags, classification, user data, scan angle: 0.
-                record[20..22].copy_from_slice(&cloud.source.as_ref().map_or(0, |s| s[i]).to_le_bytes());
-                record[22..30].copy_from_slice(&gps_time(i).to_le_bytes());
-                Ok(())
-            })
-            .map_err(|i: usize| {
-                ScannerError::whole_file(
-                    path,
-                    format!(
-                        "point {i}: {:?} does not fit the LAS offsets {:?} at 0.1 mm",
-                        cloud.coordinates(i),
-                        [offset.x.offset, offset.y.offset, offset.z.offset]
-                    ),
-                )
-            })?;
-        let points = slab.clone().build_from_bytes(bytes).map_err(|e| ScannerError::whole_file(path, e))?;
-        writer.write_points(&points).map_err(|e| ScannerError::whole_file(path, e))?;
-    }
-    writer.close().map_err(|e| ScannerError::whole_file(path, e))?;
-    let file = writer.into_inner().map_err(|e| ScannerError::whole_file(path, e))?;
-    file.get_ref().sync_all().map_err(|e| ScannerError::io(path, e))
+/// A LAS or LAZ file written part by part: the `las` crate's writer,
+/// which counts the points and their bounds and writes the header when
+/// finished. It is opened at the first part, whose lower corner (rounded
+/// to metres) plus the origin becomes the offset.
+pub(super) struct LasStream {
+    writer: Option<Writer<BufWriter<File>>>,
+    cloud: CloudHeader,
+    compressed: bool,
+    path: PathBuf,
 }
 
-/// The LAS 1.4 header of `cloud`: point format 6, compressed or not.
-fn header(path: &Path, cloud: &PointCloud, compressed: bool) -> Result<las::Header> {
+impl std::fmt::Debug for LasStream {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LasStream").field("path", &self.path).finish_non_exhaustive()
+    }
+}
+
+impl LasStream {
+    /// Creates `path` for a cloud of `cloud`'s kind.
+    pub(super) fn create(path: &Path, cloud: &CloudHeader, compressed: bool) -> Result<Self> {
+        File::create(path).map_err(|e| ScannerError::io(path, e))?;
+        Ok(Self { writer: None, cloud: cloud.clone(), compressed, path: path.to_path_buf() })
+    }
+
+    /// The writer, opened with the offset at `points`' lower corner.
+    fn writer(&mut self, points: &[Point3<f32>]) -> Result<&mut Writer<BufWriter<File>>> {
+        if self.writer.is_none() {
+            let path = &self.path;
+            let lo = points.iter().fold([f64::INFINITY; 3], |m, p| {
+                [m[0].min(f64::from(p.x)), m[1].min(f64::from(p.y)), m[2].min(f64::from(p.z))]
+            });
+            let corner = lo.map(|v| if v.is_finite() { v.floor() } else { 0.0 });
+            let header = header(path, &self.cloud, corner, self.compressed)?;
+            if usize::from(header.point_format().len()) != FORMAT_6_LEN {
+                return Err(ScannerError::whole_file(path, "the header's point format is not format 6"));
+            }
+            let file = File::create(path).map_err(|e| ScannerError::io(path, e))?;
+            let writer = Writer::new(BufWriter::with_capacity(1 << 20, file), header)
+                .map_err(|e| ScannerError::whole_file(path, e))?;
+            self.writer = Some(writer);
+        }
+        self.writer.as_mut().ok_or_else(|| ScannerError::whole_file(&self.path, "the LAS writer is not open"))
+    }
+
+    /// Appends `part`'s points (each with its scan's time).
+    pub(super) fn push(&mut self, part: &PointCloud) -> Result<()> {
+        let path = self.path.clone();
+        let path = &path;
+        let writer = self.writer(&part.points)?;
+        let mut scans: Vec<_> = part.scans.iter().filter(|s| !s.points.is_empty()).collect();
+        scans.sort_by_key(|s| s.points.start);
+        let gps_time = |i: usize| {
+            let k = scans.partition_point(|s| s.points.end <= i);
+            scans
+                .get(k)
+                .filter(|s| s.points.contains(&i))
+                .and_then(|s| s.gps_time_s)
+                .map_or(0.0, |t| t - ADJUSTED_GPS_OFFSET_S)
+        };
+        let offset = *writer.header().transforms();
+        let slab = PointDataBuilder::new().for_header(writer.header());
+        let n = part.points.len();
+        for batch in (0..n).step_by(BATCH_POINTS) {
+            let end = n.min(batch + BATCH_POINTS);
+            // Encoded in parallel into one buffer, written at once: LAZ
+            // compresses its chunks (50,000 points each) in parallel too.
+            let mut bytes = vec![0u8; (end - batch) * FORMAT_6_LEN];
+            bytes
+                .par_chunks_mut(FORMAT_6_LEN)
+                .enumerate()
+                .try_for_each(|(k, record)| {
+                    let i = batch + k;
+                    let [x, y, z] = part.coordinates(i);
+                    let raw = |v: f64, t: &Transform| {
+                        let r = ((v - t.offset) / t.scale).round();
+                        (r >= f64::from(i32::MIN) && r <= f64::from(i32::MAX)).then_some(r as i32).ok_or(i)
+                    };
+                    record[0..4].copy_from_slice(&raw(x, &offset.x)?.to_le_bytes());
+                    record[4..8].copy_from_slice(&raw(y, &offset.y)?.to_le_bytes());
+                    record[8..12].copy_from_slice(&raw(z, &offset.z)?.to_le_bytes());
+                    let intensity = part.intensity.as_ref().map_or(0, |v| v[i].clamp(0.0, 65535.0).round() as u16);
+                    record[12..14].copy_from_slice(&intensity.to_le_bytes());
+                    record[14] = 1 | (1 << 4); // return 1 of 1
+                    // 15..20: flags, classification, user data, scan angle: 0.
+                    record[20..22].copy_from_slice(&part.source.as_ref().map_or(0, |s| s[i]).to_le_bytes());
+                    record[22..30].copy_from_slice(&gps_time(i).to_le_bytes());
+                    Ok(())
+                })
+                .map_err(|i: usize| {
+                    ScannerError::whole_file(
+                        path,
+                        format!(
+                            "point {i}: {:?} does not fit the LAS offsets {:?} at 0.1 mm",
+                            part.coordinates(i),
+                            [offset.x.offset, offset.y.offset, offset.z.offset]
+                        ),
+                    )
+                })?;
+            let points = slab.clone().build_from_bytes(bytes).map_err(|e| ScannerError::whole_file(path, e))?;
+            writer.write_points(&points).map_err(|e| ScannerError::whole_file(path, e))?;
+        }
+        Ok(())
+    }
+
+    /// Writes the header's counts and bounds and syncs the file.
+    pub(super) fn finish(mut self) -> Result<()> {
+        self.writer(&[])?;
+        let path = &self.path;
+        let Some(mut writer) = self.writer.take() else {
+            return Err(ScannerError::whole_file(path, "the LAS writer is not open"));
+        };
+        writer.close().map_err(|e| ScannerError::whole_file(path, e))?;
+        let file = writer.into_inner().map_err(|e| ScannerError::whole_file(path, e))?;
+        file.get_ref().sync_all().map_err(|e| ScannerError::io(path, e))
+    }
+}
+
+/// The LAS 1.4 header of a cloud: point format 6, compressed or not; the
+/// offsets at the cloud's origin plus `corner` (whole metres: the scaled
+/// integers stay small, the coordinates exact to the scale).
+fn header(path: &Path, cloud: &CloudHeader, corner: [f64; 3], compressed: bool) -> Result<las::Header> {
     let mut builder = Builder::from((1, 4));
     let mut format = las::point::Format::new(6).map_err(|e| ScannerError::whole_file(path, e))?;
     format.is_compressed = compressed;
     builder.point_format = format;
-    let lo = cloud.points.iter().fold([f64::INFINITY; 3], |m, p| {
-        [m[0].min(f64::from(p.x)), m[1].min(f64::from(p.y)), m[2].min(f64::from(p.z))]
-    });
-    // The offsets carry the origin: the scaled integers stay small and the
-    // coordinates exact to the scale.
-    let o = [cloud.origin.x, cloud.origin.y, cloud.origin.z];
-    let offset = [0, 1, 2].map(|k| o[k] + if lo[k].is_finite() { lo[k].floor() } else { 0.0 });
+    let o = cloud.origin;
     builder.transforms = Vector {
-        x: Transform { scale: LAS_SCALE_M, offset: offset[0] },
-        y: Transform { scale: LAS_SCALE_M, offset: offset[1] },
-        z: Transform { scale: LAS_SCALE_M, offset: offset[2] },
+        x: Transform { scale: LAS_SCALE_M, offset: o.x + corner[0] },
+        y: Transform { scale: LAS_SCALE_M, offset: o.y + corner[1] },
+        z: Transform { scale: LAS_SCALE_M, offset: o.z + corner[2] },
     };
     builder.generating_software = "cps-survey".into();
     builder.system_identifier = "cps-survey CPS team".into(); // at most 32 bytes
     builder.date = Some(today());
-    if cloud.scans.iter().any(|s| s.gps_time_s.is_some()) {
+    if cloud.timed {
         builder.gps_time_type = GpsTimeType::Standard;
     }
     if let Some(crs) = &cloud.crs {
@@ -272,33 +319,19 @@ fn header(path: &Path, cloud: &PointCloud, compressed: bool) -> Result<las::Head
     builder.into_header().map_err(|e| ScannerError::whole_file(path, e))
 }
 
-/// Writes `cloud` as COPC: LAZ first (beside `path`), then re-ordered into
-/// an octree by `copc-writer`, which spills to a temporary file in the same
-/// directory rather than holding the points.
-pub(super) fn write_copc(path: &Path, cloud: &PointCloud) -> Result<()> {
-    if cloud.is_empty() {
-        return Err(ScannerError::file(
-            path,
-            Location::File,
-            "a COPC file needs at least one point; the cloud has none",
-        ));
-    }
-    let mut name = path.file_name().map(|n| n.to_os_string()).unwrap_or_default();
-    name.push(".laz");
-    let laz = path.with_file_name(name);
-    let result = write(&laz, cloud, true).and_then(|()| {
-        let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-        copc_writer::convert_las_to_copc_streaming(
-            &laz,
-            path,
-            &copc_writer::CopcWriterParams::default(),
-            dir,
-            &copc_core::NeverCancel,
-        )
-        .map_err(|e| ScannerError::whole_file(path, format!("COPC: {e}")))
-    });
-    let _ = std::fs::remove_file(&laz);
-    result
+/// Re-orders the LAZ file `laz` into the COPC file `path` (an octree of
+/// LAZ chunks) with `copc-writer`, which spills to a temporary file in the
+/// same directory rather than holding the points.
+pub(super) fn convert_to_copc(laz: &Path, path: &Path) -> Result<()> {
+    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    copc_writer::convert_las_to_copc_streaming(
+        laz,
+        path,
+        &copc_writer::CopcWriterParams::default(),
+        dir,
+        &copc_core::NeverCancel,
+    )
+    .map_err(|e| ScannerError::whole_file(path, format!("COPC: {e}")))
 }
 
 /// Today's date (UTC), the file's creation date.

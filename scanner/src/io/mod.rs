@@ -14,6 +14,9 @@
 //! | COPC `.copc.laz` | ✓ (as LAZ) | ✓ | LAZ chunks in an octree, streamed by `copc-writer` |
 //! | E57 | ✓ | ✓ | one `data3D` per scan with its pose, name and time; CRS in `coordinateMetadata` |
 //!
+//! A cloud can also be written part by part, a scan at a time
+//! ([`CloudWriter`]): one part in memory instead of the whole.
+//!
 //! A georeferenced cloud (non-zero [`PointCloud::origin`]) is written in
 //! 64-bit coordinates; its [`Crs`] goes into LAS (WKT VLR), E57
 //! (`coordinateMetadata`) and PLY (comments).
@@ -23,6 +26,7 @@ mod e57;
 mod las;
 mod pcd;
 mod ply;
+mod stream;
 mod text;
 
 use std::fs::File;
@@ -36,6 +40,7 @@ use nalgebra::{Isometry3, Point3, Vector3};
 pub use crs::Crs;
 pub use pcd::PcdData;
 pub use ply::PlyEncoding;
+pub use stream::CloudWriter;
 pub use text::{
     from_3dtk_axes, read_3dtk_frames, read_3dtk_pose, read_matrix4, to_3dtk_axes, write_3dtk_frames, write_3dtk_pose,
 };
@@ -64,6 +69,45 @@ pub struct PointCloud {
     /// The scans the points came from, each a run of points, when known
     /// (E57 writes one `data3D` each; LAS takes each point's time from it).
     pub scans: Vec<ScanInfo>,
+}
+
+/// What a cloud written part by part ([`CloudWriter`]) is, known before
+/// its points: every part has this origin, CRS and fields, and the parts
+/// hold `points` points together.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct CloudHeader {
+    /// The parts' [`PointCloud::origin`].
+    pub origin: Vector3<f64>,
+    /// Their CRS.
+    pub crs: Option<Crs>,
+    /// Points in all parts together (PLY and PCD headers state it first).
+    pub points: usize,
+    /// Whether the parts have intensities.
+    pub intensity: bool,
+    /// Whether the parts have their points' scans (`source`).
+    pub source: bool,
+    /// Whether the parts' scans carry their times (LAS then says its
+    /// times are adjusted standard GPS time).
+    pub timed: bool,
+}
+
+impl CloudHeader {
+    /// The header of `cloud` written whole.
+    pub fn of(cloud: &PointCloud) -> Self {
+        Self {
+            origin: cloud.origin,
+            crs: cloud.crs.clone(),
+            points: cloud.len(),
+            intensity: cloud.intensity.is_some(),
+            source: cloud.source.is_some(),
+            timed: cloud.scans.iter().any(|s| s.gps_time_s.is_some()),
+        }
+    }
+
+    /// Whether the coordinates are written in 64 bits (a non-zero origin).
+    pub fn georeferenced(&self) -> bool {
+        self.origin != Vector3::zeros()
+    }
 }
 
 /// One scan of a merged cloud.
@@ -229,24 +273,15 @@ pub fn file_crc32(path: &Path) -> Result<u32> {
 /// the way.
 fn write_file(path: &Path, cloud: &PointCloud, format: Format) -> Result<Option<u32>> {
     check(cloud).map_err(|message| ScannerError::file(path, Location::File, message))?;
-    let tmp = temporary(path);
-    let result = match format {
-        Format::ThreeDtk => with_writer(&tmp, |w| text::write_3dtk(w, cloud)).map(Some),
-        Format::Ply(e) => with_writer(&tmp, |w| ply::write(w, cloud, e)).map(Some),
-        Format::Xyz => with_writer(&tmp, |w| text::write_xyz(w, cloud)).map(Some),
-        Format::Pcd(d) => with_writer(&tmp, |w| pcd::write(w, cloud, d)).map(Some),
-        Format::Las => las::write(&tmp, cloud, false).map(|()| None),
-        Format::Laz => las::write(&tmp, cloud, true).map(|()| None),
-        Format::Copc => las::write_copc(&tmp, cloud).map(|()| None),
-        Format::E57 => e57::write(&tmp, cloud).map(|()| None),
-    };
-    finish_write(path, &tmp, result)
+    let mut writer = CloudWriter::create(path, format, CloudHeader::of(cloud))?;
+    writer.push(cloud)?;
+    writer.finish()
 }
 
 /// What a cloud must be to be written: one value per point in each
 /// per-point field, a finite origin, scans within the points (no point in
 /// two) with finite poses.
-fn check(cloud: &PointCloud) -> std::result::Result<(), String> {
+pub(crate) fn check(cloud: &PointCloud) -> std::result::Result<(), String> {
     let n = cloud.points.len();
     let per_point = |what: &str, len: Option<usize>| match len {
         Some(len) if len != n => Err(format!("{len} {what} for {n} points: expected one per point")),
@@ -281,7 +316,7 @@ fn check(cloud: &PointCloud) -> std::result::Result<(), String> {
 
 /// Renames the written temporary file into place, or removes it after an
 /// error (reported against `path`).
-fn finish_write<T>(path: &Path, tmp: &Path, result: Result<T>) -> Result<T> {
+pub(crate) fn finish_write<T>(path: &Path, tmp: &Path, result: Result<T>) -> Result<T> {
     match result {
         Ok(value) => std::fs::rename(tmp, path).map(|()| value).map_err(|e| ScannerError::io(path, e)),
         Err(e) => {
@@ -295,7 +330,7 @@ fn finish_write<T>(path: &Path, tmp: &Path, result: Result<T>) -> Result<T> {
     }
 }
 
-fn temporary(path: &Path) -> PathBuf {
+pub(crate) fn temporary(path: &Path) -> PathBuf {
     let mut name = path.file_name().map(|n| n.to_os_string()).unwrap_or_default();
     name.push(".partial");
     path.with_file_name(name)
@@ -303,7 +338,10 @@ fn temporary(path: &Path) -> PathBuf {
 
 /// Writes `path` through `f`, synced to the disk; returns the CRC-32 of
 /// the bytes written.
-fn with_writer(path: &Path, f: impl FnOnce(&mut BufWriter<Hashed<File>>) -> std::io::Result<()>) -> Result<u32> {
+pub(crate) fn with_writer(
+    path: &Path,
+    f: impl FnOnce(&mut BufWriter<Hashed<File>>) -> std::io::Result<()>,
+) -> Result<u32> {
     let file = File::create(path).map_err(|e| ScannerError::io(path, e))?;
     let mut w = BufWriter::with_capacity(1 << 20, Hashed { inner: file, crc: crc32fast::Hasher::new() });
     f(&mut w).and_then(|()| w.flush()).map_err(|e| ScannerError::io(path, e))?;
@@ -314,9 +352,9 @@ fn with_writer(path: &Path, f: impl FnOnce(&mut BufWriter<Hashed<File>>) -> std:
 
 /// A writer that hashes (CRC-32) the bytes it passes on.
 #[derive(Debug)]
-struct Hashed<W> {
-    inner: W,
-    crc: crc32fast::Hasher,
+pub(crate) struct Hashed<W> {
+    pub(crate) inner: W,
+    pub(crate) crc: crc32fast::Hasher,
 }
 
 impl<W: Write> Write for Hashed<W> {

@@ -357,11 +357,19 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
 }
 
 pub(super) fn write(w: &mut impl Write, cloud: &PointCloud, data: PcdData) -> std::io::Result<()> {
-    let n = cloud.points.len();
-    let with_i = cloud.intensity.is_some();
+    write_header(w, &super::CloudHeader::of(cloud), data)?;
+    match data {
+        PcdData::Ascii | PcdData::Binary => write_points(w, cloud, data),
+        PcdData::BinaryCompressed => write_compressed(w, cloud),
+    }
+}
+
+/// The header of a cloud of `header.points` points.
+pub(super) fn write_header(w: &mut impl Write, header: &super::CloudHeader, data: PcdData) -> std::io::Result<()> {
+    let n = header.points;
     // Georeferenced: x, y, z as 8-byte doubles (origin + p).
-    let xyz_size = if cloud.georeferenced() { 8 } else { 4 };
-    let (fields, sizes, types, counts) = if with_i {
+    let xyz_size = if header.georeferenced() { 8 } else { 4 };
+    let (fields, sizes, types, counts) = if header.intensity {
         ("x y z intensity", format!("{xyz_size} {xyz_size} {xyz_size} 4"), "F F F F", "1 1 1 1")
     } else {
         ("x y z", format!("{xyz_size} {xyz_size} {xyz_size}"), "F F F", "1 1 1")
@@ -374,61 +382,64 @@ pub(super) fn write(w: &mut impl Write, cloud: &PointCloud, data: PcdData) -> st
     write!(
         w,
         "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS {fields}\nSIZE {sizes}\nTYPE {types}\nCOUNT {counts}\nWIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA {encoding}\n"
-    )?;
-    let georeferenced = cloud.georeferenced();
-    // Field f of point i: its little-endian bytes and its text.
-    let value = |i: usize, f: usize, bytes: &mut Vec<u8>| -> String {
-        if f < 3 && georeferenced {
-            let v = cloud.coordinates(i)[f];
-            bytes.extend_from_slice(&v.to_le_bytes());
-            format!("{v:.4}")
-        } else {
-            let v = match f {
-                0 => cloud.points[i].x,
-                1 => cloud.points[i].y,
-                2 => cloud.points[i].z,
-                _ => cloud.intensity.as_ref().map_or(0.0, |v| v[i]),
-            };
-            bytes.extend_from_slice(&v.to_le_bytes());
-            v.to_string()
-        }
-    };
-    let nf = if with_i { 4 } else { 3 };
+    )
+}
+
+/// Field `f` of point `i` of `cloud`: its little-endian bytes (appended to
+/// `bytes`) and its text.
+fn value(cloud: &PointCloud, i: usize, f: usize, bytes: &mut Vec<u8>) -> String {
+    if f < 3 && cloud.georeferenced() {
+        let v = cloud.coordinates(i)[f];
+        bytes.extend_from_slice(&v.to_le_bytes());
+        format!("{v:.4}")
+    } else {
+        let v = match f {
+            0 => cloud.points[i].x,
+            1 => cloud.points[i].y,
+            2 => cloud.points[i].z,
+            _ => cloud.intensity.as_ref().map_or(0.0, |v| v[i]),
+        };
+        bytes.extend_from_slice(&v.to_le_bytes());
+        v.to_string()
+    }
+}
+
+/// The records of `cloud`'s points (ascii or binary: one point after the
+/// other, so a cloud can be written part by part).
+pub(super) fn write_points(w: &mut impl Write, cloud: &PointCloud, data: PcdData) -> std::io::Result<()> {
+    let nf = if cloud.intensity.is_some() { 4 } else { 3 };
     let mut scratch = Vec::with_capacity(8);
-    match data {
-        PcdData::Ascii => {
-            for i in 0..n {
-                let row: Vec<String> = (0..nf).map(|f| value(i, f, &mut scratch)).collect();
-                writeln!(w, "{}", row.join(" "))?;
-            }
-        }
-        PcdData::Binary => {
-            for i in 0..n {
-                for f in 0..nf {
-                    scratch.clear();
-                    value(i, f, &mut scratch);
-                    w.write_all(&scratch)?;
-                }
-            }
-        }
-        PcdData::BinaryCompressed => {
-            let mut plain = Vec::with_capacity(n * (nf * 4 + if georeferenced { 12 } else { 0 }));
+    for i in 0..cloud.points.len() {
+        if data == PcdData::Ascii {
+            let row: Vec<String> = (0..nf).map(|f| value(cloud, i, f, &mut scratch)).collect();
+            writeln!(w, "{}", row.join(" "))?;
+        } else {
             for f in 0..nf {
-                for i in 0..n {
-                    value(i, f, &mut plain);
-                }
+                scratch.clear();
+                value(cloud, i, f, &mut scratch);
+                w.write_all(&scratch)?;
             }
-            let packed = if plain.is_empty() {
-                Vec::new()
-            } else {
-                lzf::compress(&plain).unwrap_or_else(|_| literal_lzf(&plain))
-            };
-            w.write_all(&(packed.len() as u32).to_le_bytes())?;
-            w.write_all(&(plain.len() as u32).to_le_bytes())?;
-            w.write_all(&packed)?;
         }
     }
     Ok(())
+}
+
+/// binary_compressed: every field's column, LZF-compressed as one block
+/// (the whole cloud at once).
+fn write_compressed(w: &mut impl Write, cloud: &PointCloud) -> std::io::Result<()> {
+    let n = cloud.points.len();
+    let nf = if cloud.intensity.is_some() { 4 } else { 3 };
+    let mut plain = Vec::with_capacity(n * (nf * 4 + if cloud.georeferenced() { 12 } else { 0 }));
+    for f in 0..nf {
+        for i in 0..n {
+            value(cloud, i, f, &mut plain);
+        }
+    }
+    let packed =
+        if plain.is_empty() { Vec::new() } else { lzf::compress(&plain).unwrap_or_else(|_| literal_lzf(&plain)) };
+    w.write_all(&(packed.len() as u32).to_le_bytes())?;
+    w.write_all(&(plain.len() as u32).to_le_bytes())?;
+    w.write_all(&packed)
 }
 
 /// An LZF stream of literal runs only (for data LZF cannot shrink).

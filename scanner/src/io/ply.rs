@@ -9,7 +9,7 @@ use std::path::Path;
 use nalgebra::Point3;
 use ply_rs_bw::parser::{Parser, Reader};
 use ply_rs_bw::ply::{
-    Addable, ElementDef, Encoding, Ply, Property, PropertyAccess, PropertyAccessResult, PropertyDef, PropertyType,
+    Addable, ElementDef, Encoding, Header, Property, PropertyAccess, PropertyAccessResult, PropertyDef, PropertyType,
     ScalarType,
 };
 use ply_rs_bw::writer::Writer;
@@ -227,11 +227,41 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
     Ok(cloud)
 }
 
-pub(super) fn write(w: &mut impl Write, cloud: &PointCloud, encoding: PlyEncoding) -> std::io::Result<()> {
-    let scalar = cloud.intensity.as_deref().map(|v| (&["intensity"][..], v));
-    // The CRS in two comments: its name, then its WKT (one line).
-    let crs = cloud.crs.iter().flat_map(|c| [format!("crs {}", c.name), format!("crs_wkt {}", c.wkt)]).collect();
-    write_with(w, &cloud.points, cloud.georeferenced().then_some(cloud), scalar, encoding, crs)
+/// The PLY header of a cloud: x, y, z (double when georeferenced: the
+/// coordinates, origin + p), `intensity` if it has one, its CRS in two
+/// comments (its name, then its WKT on one line), its point count.
+pub(super) fn cloud_header(cloud: &super::CloudHeader, encoding: PlyEncoding) -> Header {
+    let mut comments: Vec<String> =
+        cloud.crs.iter().flat_map(|c| [format!("crs {}", c.name), format!("crs_wkt {}", c.wkt)]).collect();
+    let xyz = if cloud.georeferenced() {
+        let o = cloud.origin;
+        comments.insert(0, format!("georeferenced: x, y, z are coordinates (origin {} {} {})", o.x, o.y, o.z));
+        ScalarType::Double
+    } else {
+        ScalarType::Float
+    };
+    let names: &[&str] = if cloud.intensity { &["intensity"] } else { &[] };
+    header(xyz, comments, names, encoding, cloud.points)
+}
+
+/// Writes the header.
+pub(super) fn write_header(w: &mut impl Write, header: &Header) -> std::io::Result<()> {
+    Writer::<Vertex>::new().write_header(w, header).map(|_| ()).map_err(|e| std::io::Error::other(e.to_string()))
+}
+
+/// Writes `cloud`'s vertices as `header` (of [`cloud_header`]) declares
+/// them: one vertex after the other, so a cloud can be written part by
+/// part.
+pub(super) fn write_points(w: &mut impl Write, cloud: &PointCloud, header: &Header) -> std::io::Result<()> {
+    let scalar_at = |i: usize| cloud.intensity.as_ref().map_or(0.0, |v| v[i]);
+    if cloud.georeferenced() {
+        let items = (0..cloud.len()).map(|i| GeoVertex { c: cloud.coordinates(i), intensity: scalar_at(i) });
+        write_vertices(w, header, &items.collect())
+    } else {
+        let items =
+            cloud.points.iter().enumerate().map(|(i, p)| Vertex { p: [p.x, p.y, p.z], intensity: scalar_at(i) });
+        write_vertices(w, header, &items.collect())
+    }
 }
 
 /// Float x, y, z and, when given, one float value per vertex under each
@@ -242,60 +272,41 @@ pub(super) fn write_scalar(
     scalar: Option<(&[&str], &[f32])>,
     encoding: PlyEncoding,
 ) -> std::io::Result<()> {
-    write_with(w, points, None, scalar, encoding, Vec::new())
-}
-
-/// x, y, z — double from `georeferenced`'s coordinates (origin + p), else
-/// float — and, when given, one float value per vertex under each of the
-/// scalar's names; `comments` after ours.
-fn write_with(
-    w: &mut impl Write,
-    points: &[Point3<f32>],
-    georeferenced: Option<&PointCloud>,
-    scalar: Option<(&[&str], &[f32])>,
-    encoding: PlyEncoding,
-    mut comments: Vec<String>,
-) -> std::io::Result<()> {
+    let names = scalar.map_or(&[][..], |(names, _)| names);
+    let header = header(ScalarType::Float, Vec::new(), names, encoding, points.len());
+    write_header(w, &header)?;
     let scalar_at = |i: usize| scalar.map_or(0.0, |(_, v)| v[i]);
-    match georeferenced {
-        Some(cloud) => {
-            let o = cloud.origin;
-            comments.insert(0, format!("georeferenced: x, y, z are coordinates (origin {} {} {})", o.x, o.y, o.z));
-            let items = (0..points.len()).map(|i| GeoVertex { c: cloud.coordinates(i), intensity: scalar_at(i) });
-            write_items(w, ScalarType::Double, comments, scalar, encoding, items.collect())
-        }
-        None => {
-            let items = points.iter().enumerate().map(|(i, p)| Vertex { p: [p.x, p.y, p.z], intensity: scalar_at(i) });
-            write_items(w, ScalarType::Float, comments, scalar, encoding, items.collect())
-        }
-    }
+    let items = points.iter().enumerate().map(|(i, p)| Vertex { p: [p.x, p.y, p.z], intensity: scalar_at(i) });
+    write_vertices(w, &header, &items.collect())
 }
 
-/// The PLY of `items`: x, y, z of type `xyz`, the scalar field's name if
-/// any, comments besides ours.
-fn write_items<V: PropertyAccess>(
-    w: &mut impl Write,
-    xyz: ScalarType,
-    comments: Vec<String>,
-    scalar: Option<(&[&str], &[f32])>,
-    encoding: PlyEncoding,
-    items: Vec<V>,
-) -> std::io::Result<()> {
-    let mut ply = Ply::<V>::new();
-    ply.header.encoding = match encoding {
+/// A header of `count` vertices: x, y, z of type `xyz`, one float under
+/// each of `names`, `comments` after ours.
+fn header(xyz: ScalarType, comments: Vec<String>, names: &[&str], encoding: PlyEncoding, count: usize) -> Header {
+    let mut header = Header::new();
+    header.encoding = match encoding {
         PlyEncoding::Ascii => Encoding::Ascii,
         PlyEncoding::BinaryLittleEndian => Encoding::BinaryLittleEndian,
     };
-    ply.header.comments.push("written by cps-survey; metres, x forward, y left, z up".into());
-    ply.header.comments.extend(comments);
+    header.comments.push("written by cps-survey; metres, x forward, y left, z up".into());
+    header.comments.extend(comments);
     let mut vertex = ElementDef::new("vertex".into());
+    vertex.count = count;
     for n in ["x", "y", "z"] {
         vertex.properties.add(PropertyDef::new(n.into(), PropertyType::Scalar(xyz.clone())));
     }
-    for name in scalar.map_or(&[][..], |(names, _)| names) {
+    for name in names {
         vertex.properties.add(PropertyDef::new(name.to_string(), PropertyType::Scalar(ScalarType::Float)));
     }
-    ply.header.elements.add(vertex);
-    ply.payload.insert("vertex".into(), items);
-    Writer::new().write_ply(w, &mut ply).map(|_| ()).map_err(|e| std::io::Error::other(e.to_string()))
+    header.elements.add(vertex);
+    header
+}
+
+/// Writes `items` as the header's vertices.
+fn write_vertices<V: PropertyAccess>(w: &mut impl Write, header: &Header, items: &Vec<V>) -> std::io::Result<()> {
+    let vertex = &header.elements["vertex"];
+    Writer::new()
+        .write_payload_of_element(w, items, vertex, header)
+        .map(|_| ())
+        .map_err(|e| std::io::Error::other(e.to_string()))
 }

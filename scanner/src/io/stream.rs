@@ -1,0 +1,232 @@
+//! A cloud file written part by part — a scan at a time — so that writing
+//! a merged cloud needs one part in memory, not the whole: every format
+//! but PCD's `binary_compressed` (one LZF block of every column) streams.
+//! Like [`super::write`], it writes a temporary file and renames it when
+//! finished; a writer dropped unfinished removes it.
+
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+use super::e57::E57Stream;
+use super::las::{LasStream, convert_to_copc};
+use super::{CloudHeader, Format, Hashed, PcdData, PointCloud, check, finish_write, pcd, ply, temporary, text};
+use crate::error::{Location, Result, ScannerError};
+
+/// A cloud file being written part by part: [`CloudWriter::create`] with
+/// what the cloud is ([`CloudHeader`]), [`CloudWriter::push`] each part,
+/// [`CloudWriter::finish`].
+#[derive(Debug)]
+pub struct CloudWriter {
+    path: PathBuf,
+    tmp: PathBuf,
+    header: CloudHeader,
+    written: usize,
+    sink: Option<Sink>,
+}
+
+#[derive(Debug)]
+enum Sink {
+    /// One byte stream after its header (hashed on the way).
+    Stream {
+        w: BufWriter<Hashed<File>>,
+        kind: Kind,
+    },
+    /// PCD `binary_compressed`: the parts gathered, compressed at the end.
+    Gathered(PointCloud),
+    Las(LasStream),
+    /// LAZ into `laz`, re-ordered into COPC at the end.
+    Copc {
+        laz: PathBuf,
+        stream: LasStream,
+    },
+    E57(Box<E57Stream>),
+}
+
+#[derive(Debug)]
+enum Kind {
+    ThreeDtk,
+    Xyz,
+    Ply(ply_rs_bw::ply::Header),
+    Pcd(PcdData),
+}
+
+impl CloudWriter {
+    /// Starts writing `path` in `format` for a cloud that `header`
+    /// describes.
+    pub fn create(path: &Path, format: Format, header: CloudHeader) -> Result<Self> {
+        if !header.origin.iter().all(|v| v.is_finite()) {
+            return Err(ScannerError::file(
+                path,
+                Location::File,
+                format!("origin {:?}: expected finite coordinates", header.origin.as_slice()),
+            ));
+        }
+        let tmp = temporary(path);
+        let open = |kind: Kind| -> Result<Sink> {
+            let file = File::create(&tmp).map_err(|e| ScannerError::io(path, e))?;
+            let mut w = BufWriter::with_capacity(1 << 20, Hashed { inner: file, crc: crc32fast::Hasher::new() });
+            match &kind {
+                Kind::Ply(h) => ply::write_header(&mut w, h),
+                Kind::Pcd(data) => pcd::write_header(&mut w, &header, *data),
+                Kind::ThreeDtk | Kind::Xyz => Ok(()),
+            }
+            .map_err(|e| ScannerError::io(path, e))?;
+            Ok(Sink::Stream { w, kind })
+        };
+        let sink = match format {
+            Format::ThreeDtk => open(Kind::ThreeDtk)?,
+            Format::Xyz => open(Kind::Xyz)?,
+            Format::Ply(e) => open(Kind::Ply(ply::cloud_header(&header, e)))?,
+            Format::Pcd(PcdData::BinaryCompressed) => Sink::Gathered(PointCloud {
+                origin: header.origin,
+                crs: header.crs.clone(),
+                intensity: header.intensity.then(Vec::new),
+                source: header.source.then(Vec::new),
+                ..PointCloud::default()
+            }),
+            Format::Pcd(data) => open(Kind::Pcd(data))?,
+            Format::Las => Sink::Las(LasStream::create(&tmp, &header, false).map_err(|e| against(path, e))?),
+            Format::Laz => Sink::Las(LasStream::create(&tmp, &header, true).map_err(|e| against(path, e))?),
+            Format::Copc => {
+                if header.points == 0 {
+                    return Err(ScannerError::file(
+                        path,
+                        Location::File,
+                        "a COPC file needs at least one point; the cloud has none",
+                    ));
+                }
+                let mut name = tmp.file_name().map(|n| n.to_os_string()).unwrap_or_default();
+                name.push(".laz");
+                let laz = tmp.with_file_name(name);
+                let stream = LasStream::create(&laz, &header, true).map_err(|e| against(path, e))?;
+                Sink::Copc { laz, stream }
+            }
+            Format::E57 => Sink::E57(Box::new(E57Stream::create(&tmp, &header).map_err(|e| against(path, e))?)),
+        };
+        Ok(Self { path: path.to_path_buf(), tmp, header, written: 0, sink: Some(sink) })
+    }
+
+    /// Appends `part`: its points (relative to the header's origin), their
+    /// intensities and scans as the header says, and its scans (their
+    /// point ranges within the part).
+    pub fn push(&mut self, part: &PointCloud) -> Result<()> {
+        let path = self.path.clone();
+        let refuse = |message: String| ScannerError::file(&path, Location::File, message);
+        check(part).map_err(&refuse)?;
+        let h = &self.header;
+        if part.origin != h.origin {
+            return Err(refuse(format!(
+                "a part at origin {:?}: expected the cloud's origin {:?}",
+                part.origin.as_slice(),
+                h.origin.as_slice()
+            )));
+        }
+        if part.intensity.is_some() != h.intensity || part.source.is_some() != h.source {
+            return Err(refuse(format!(
+                "a part with{} intensities and with{} scan indices: expected the cloud's fields (intensity {}, scan {})",
+                if part.intensity.is_some() { "" } else { "out" },
+                if part.source.is_some() { "" } else { "out" },
+                h.intensity,
+                h.source
+            )));
+        }
+        if self.written + part.len() > h.points {
+            return Err(refuse(format!(
+                "{} points after this part: expected {} in all (the header's count)",
+                self.written + part.len(),
+                h.points
+            )));
+        }
+        match self.sink.as_mut() {
+            None => return Err(refuse("the file is already finished".into())),
+            Some(Sink::Stream { w, kind }) => match kind {
+                Kind::ThreeDtk => text::write_3dtk(w, part),
+                Kind::Xyz => text::write_xyz(w, part),
+                Kind::Ply(h) => ply::write_points(w, part, h),
+                Kind::Pcd(data) => pcd::write_points(w, part, *data),
+            }
+            .map_err(|e| ScannerError::io(&path, e))?,
+            Some(Sink::Gathered(cloud)) => append(cloud, part),
+            Some(Sink::Las(stream) | Sink::Copc { stream, .. }) => stream.push(part).map_err(|e| against(&path, e))?,
+            Some(Sink::E57(stream)) => stream.push(part).map_err(|e| against(&path, e))?,
+        }
+        self.written += part.len();
+        Ok(())
+    }
+
+    /// Finishes the file and renames it into place; returns the CRC-32 of
+    /// its bytes where they were hashed on the way (3DTK, PLY, XYZ, PCD).
+    pub fn finish(mut self) -> Result<Option<u32>> {
+        let (path, tmp) = (self.path.clone(), self.tmp.clone());
+        let Some(sink) = self.sink.take() else {
+            return Err(ScannerError::file(&path, Location::File, "the file is already finished"));
+        };
+        if self.written != self.header.points {
+            let _ = std::fs::remove_file(&tmp);
+            return Err(ScannerError::file(
+                &path,
+                Location::File,
+                format!("{} points written: expected {} (the header's count)", self.written, self.header.points),
+            ));
+        }
+        let result = match sink {
+            Sink::Stream { mut w, .. } => w.flush().map_err(|e| ScannerError::io(&tmp, e)).and_then(|()| {
+                let hashed = w.get_ref();
+                hashed.inner.sync_all().map_err(|e| ScannerError::io(&tmp, e))?;
+                Ok(Some(hashed.crc.clone().finalize()))
+            }),
+            Sink::Gathered(cloud) => {
+                super::with_writer(&tmp, |w| pcd::write(w, &cloud, PcdData::BinaryCompressed)).map(Some)
+            }
+            Sink::Las(stream) => stream.finish().map(|()| None),
+            Sink::Copc { laz, stream } => {
+                let result = stream.finish().and_then(|()| convert_to_copc(&laz, &tmp)).map(|()| None);
+                let _ = std::fs::remove_file(&laz);
+                result
+            }
+            Sink::E57(stream) => stream.finish(&self.header).map(|()| None),
+        };
+        finish_write(&path, &tmp, result)
+    }
+}
+
+impl Drop for CloudWriter {
+    /// An unfinished file is removed (with COPC's LAZ).
+    fn drop(&mut self) {
+        if let Some(sink) = self.sink.take() {
+            if let Sink::Copc { laz, .. } = &sink {
+                let _ = std::fs::remove_file(laz);
+            }
+            drop(sink);
+            let _ = std::fs::remove_file(&self.tmp);
+        }
+    }
+}
+
+/// `e`, reported against `path` (the file being written) rather than its
+/// temporary file.
+fn against(path: &Path, e: ScannerError) -> ScannerError {
+    match e {
+        ScannerError::Io { source, .. } => ScannerError::io(path, source),
+        ScannerError::File { location, message, .. } => ScannerError::file(path, location, message),
+        other => other,
+    }
+}
+
+/// Appends `part` to `cloud` (same origin and fields).
+fn append(cloud: &mut PointCloud, part: &PointCloud) {
+    let start = cloud.points.len();
+    cloud.points.extend_from_slice(&part.points);
+    if let (Some(all), Some(more)) = (cloud.intensity.as_mut(), part.intensity.as_ref()) {
+        all.extend_from_slice(more);
+    }
+    if let (Some(all), Some(more)) = (cloud.source.as_mut(), part.source.as_ref()) {
+        all.extend_from_slice(more);
+    }
+    cloud.scans.extend(
+        part.scans
+            .iter()
+            .map(|s| super::ScanInfo { points: s.points.start + start..s.points.end + start, ..s.clone() }),
+    );
+}
