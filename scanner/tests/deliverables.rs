@@ -305,6 +305,45 @@ fn a_cloud_written_scan_by_scan_is_the_cloud_written_whole() {
     for (pc, scan) in clouds.iter().zip(&cloud.scans) {
         assert_eq!((pc.name.as_deref(), pc.records), (Some(scan.name.as_str()), 400));
     }
+    // Without the count up front (a run writing scans as they come), PLY
+    // and PCD get it, zero-padded, when finished: readers take it.
+    for (name, format) in [
+        ("u.ply", Format::Ply(PlyEncoding::BinaryLittleEndian)),
+        ("ua.ply", Format::Ply(PlyEncoding::Ascii)),
+        ("u.pcd", Format::Pcd(PcdData::Binary)),
+        ("ua.pcd", Format::Pcd(PcdData::Ascii)),
+        ("uz.pcd", Format::Pcd(PcdData::BinaryCompressed)),
+    ] {
+        let path = dir.path().join(name);
+        let header = CloudHeader { points: None, ..CloudHeader::of(&cloud) };
+        let mut writer = CloudWriter::create(&path, format, header).expect("created");
+        for part in parts(&cloud) {
+            writer.push(&part).expect("pushed");
+        }
+        writer.finish().expect("finished");
+        let text = String::from_utf8_lossy(&std::fs::read(&path).expect("read")).into_owned();
+        let stated = ["element vertex 00000000000000001200", "POINTS 00000000000000001200"];
+        assert!(name == "uz.pcd" || stated.iter().any(|s| text.contains(s)), "{name}: the count, zero-padded");
+        // Our reader takes it (in f32: within a metre at these coordinates)…
+        let back = scanner::io::read(&path).expect("our reader takes it");
+        assert_eq!(back.len(), cloud.len(), "{name}");
+        for i in [0, 399, 400, 1199] {
+            assert!(close(back.coordinates(i), cloud.coordinates(i), 1.0), "{name} point {i}");
+        }
+        // … and after the header the bytes are the whole cloud's.
+        let whole = dir.path().join(format!("w-{name}"));
+        write(&whole, &cloud, format).expect("whole");
+        let (a, b) = (std::fs::read(&path).expect("read"), std::fs::read(&whole).expect("read"));
+        let end = |bytes: &[u8]| {
+            let marker: &[u8] = if name.ends_with(".ply") { b"end_header\n" } else { b"\nDATA " };
+            let at = bytes.windows(marker.len()).position(|w| w == marker).expect("a header") + marker.len();
+            at + bytes[at..]
+                .iter()
+                .position(|&c| c == b'\n')
+                .map_or(0, |k| if name.ends_with(".pcd") { k + 1 } else { 0 })
+        };
+        assert_eq!(a[end(&a)..], b[end(&b)..], "{name}: the points");
+    }
     // Only the finished files are there.
     let mut names: Vec<String> = std::fs::read_dir(dir.path())
         .expect("dir")
@@ -338,7 +377,7 @@ fn a_streamed_cloud_refuses_parts_it_was_not_promised() {
     assert!(!path.exists());
 
     let mut w =
-        CloudWriter::create(&path, Format::Las, CloudHeader { points: 500, ..header.clone() }).expect("created");
+        CloudWriter::create(&path, Format::Las, CloudHeader { points: Some(500), ..header.clone() }).expect("created");
     w.push(&parts[0]).expect("400 of 500");
     let e = w.push(&parts[1]).expect_err("800 > 500").to_string();
     assert!(e.contains("800 points after this part: expected 500"), "{e}");

@@ -80,8 +80,11 @@ pub struct CloudHeader {
     pub origin: Vector3<f64>,
     /// Their CRS.
     pub crs: Option<Crs>,
-    /// Points in all parts together (PLY and PCD headers state it first).
-    pub points: usize,
+    /// Points in all parts together, when known before they are (PLY and
+    /// PCD headers state it first: without it they hold a 20-digit
+    /// placeholder, overwritten with the count, zero-padded, when the file
+    /// is finished).
+    pub points: Option<usize>,
     /// Whether the parts have intensities.
     pub intensity: bool,
     /// Whether the parts have their points' scans (`source`).
@@ -97,7 +100,7 @@ impl CloudHeader {
         Self {
             origin: cloud.origin,
             crs: cloud.crs.clone(),
-            points: cloud.len(),
+            points: Some(cloud.len()),
             intensity: cloud.intensity.is_some(),
             source: cloud.source.is_some(),
             timed: cloud.scans.iter().any(|s| s.gps_time_s.is_some()),

@@ -364,9 +364,11 @@ pub(super) fn write(w: &mut impl Write, cloud: &PointCloud, data: PcdData) -> st
     }
 }
 
-/// The header of a cloud of `header.points` points.
+/// The header of a cloud of `header.points` points (unknown: the
+/// placeholder [`COUNT_PLACEHOLDER`] in WIDTH and POINTS, see
+/// [`patch_count`]).
 pub(super) fn write_header(w: &mut impl Write, header: &super::CloudHeader, data: PcdData) -> std::io::Result<()> {
-    let n = header.points;
+    let n = header.points.map_or_else(|| COUNT_PLACEHOLDER.to_string(), |n| n.to_string());
     // Georeferenced: x, y, z as 8-byte doubles (origin + p).
     let xyz_size = if header.georeferenced() { 8 } else { 4 };
     let (fields, sizes, types, counts) = if header.intensity {
@@ -383,6 +385,22 @@ pub(super) fn write_header(w: &mut impl Write, header: &super::CloudHeader, data
         w,
         "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS {fields}\nSIZE {sizes}\nTYPE {types}\nCOUNT {counts}\nWIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA {encoding}\n"
     )
+}
+
+/// WIDTH and POINTS of a header written before its count was known.
+const COUNT_PLACEHOLDER: &str = "00000000000000000000";
+
+/// The header bytes `header` (written with the placeholder) with the
+/// count `n`, zero-padded to the placeholder's width: the same length.
+pub(super) fn patch_count(header: &[u8], n: usize) -> Option<Vec<u8>> {
+    let text = std::str::from_utf8(header).ok()?;
+    let count = format!("{n:020}");
+    let mut out = text.to_string();
+    for key in ["WIDTH", "POINTS"] {
+        let old = format!("\n{key} {COUNT_PLACEHOLDER}\n");
+        out = out.contains(&old).then(|| out.replacen(&old, &format!("\n{key} {count}\n"), 1))?;
+    }
+    (out.len() == header.len()).then(|| out.into_bytes())
 }
 
 /// Field `f` of point `i` of `cloud`: its little-endian bytes (appended to

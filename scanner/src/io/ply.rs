@@ -241,7 +241,19 @@ pub(super) fn cloud_header(cloud: &super::CloudHeader, encoding: PlyEncoding) ->
         ScalarType::Float
     };
     let names: &[&str] = if cloud.intensity { &["intensity"] } else { &[] };
-    header(xyz, comments, names, encoding, cloud.points)
+    header(xyz, comments, names, encoding, cloud.points.unwrap_or(COUNT_PLACEHOLDER))
+}
+
+/// The vertex count of a header written before it was known (20 digits).
+const COUNT_PLACEHOLDER: usize = 10_000_000_000_000_000_000;
+
+/// The header bytes `header` (written with the placeholder) with the
+/// count `n`, zero-padded to the placeholder's width: the same length.
+pub(super) fn patch_count(header: &[u8], n: usize) -> Option<Vec<u8>> {
+    let text = std::str::from_utf8(header).ok()?;
+    let old = format!("\nelement vertex {COUNT_PLACEHOLDER}\n");
+    let out = text.contains(&old).then(|| text.replacen(&old, &format!("\nelement vertex {n:020}\n"), 1))?;
+    (out.len() == header.len()).then(|| out.into_bytes())
 }
 
 /// Writes the header.

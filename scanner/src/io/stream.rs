@@ -5,7 +5,7 @@
 //! finished; a writer dropped unfinished removes it.
 
 use std::fs::File;
-use std::io::{BufWriter, Write};
+use std::io::{BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
 use super::e57::E57Stream;
@@ -27,10 +27,12 @@ pub struct CloudWriter {
 
 #[derive(Debug)]
 enum Sink {
-    /// One byte stream after its header (hashed on the way).
+    /// One byte stream after its header (hashed on the way); `header` is
+    /// kept when it holds a count placeholder, to be patched.
     Stream {
         w: BufWriter<Hashed<File>>,
         kind: Kind,
+        header: Option<Vec<u8>>,
     },
     /// PCD `binary_compressed`: the parts gathered, compressed at the end.
     Gathered(PointCloud),
@@ -66,13 +68,16 @@ impl CloudWriter {
         let open = |kind: Kind| -> Result<Sink> {
             let file = File::create(&tmp).map_err(|e| ScannerError::io(path, e))?;
             let mut w = BufWriter::with_capacity(1 << 20, Hashed { inner: file, crc: crc32fast::Hasher::new() });
+            let mut bytes = Vec::new();
             match &kind {
-                Kind::Ply(h) => ply::write_header(&mut w, h),
-                Kind::Pcd(data) => pcd::write_header(&mut w, &header, *data),
+                Kind::Ply(h) => ply::write_header(&mut bytes, h),
+                Kind::Pcd(data) => pcd::write_header(&mut bytes, &header, *data),
                 Kind::ThreeDtk | Kind::Xyz => Ok(()),
             }
+            .and_then(|()| w.write_all(&bytes))
             .map_err(|e| ScannerError::io(path, e))?;
-            Ok(Sink::Stream { w, kind })
+            let counted = matches!(kind, Kind::Ply(_) | Kind::Pcd(_));
+            Ok(Sink::Stream { w, kind, header: (counted && header.points.is_none()).then_some(bytes) })
         };
         let sink = match format {
             Format::ThreeDtk => open(Kind::ThreeDtk)?,
@@ -89,7 +94,7 @@ impl CloudWriter {
             Format::Las => Sink::Las(LasStream::create(&tmp, &header, false).map_err(|e| against(path, e))?),
             Format::Laz => Sink::Las(LasStream::create(&tmp, &header, true).map_err(|e| against(path, e))?),
             Format::Copc => {
-                if header.points == 0 {
+                if header.points == Some(0) {
                     return Err(ScannerError::file(
                         path,
                         Location::File,
@@ -131,16 +136,17 @@ impl CloudWriter {
                 h.source
             )));
         }
-        if self.written + part.len() > h.points {
+        if let Some(n) = h.points
+            && self.written + part.len() > n
+        {
             return Err(refuse(format!(
-                "{} points after this part: expected {} in all (the header's count)",
+                "{} points after this part: expected {n} in all (the header's count)",
                 self.written + part.len(),
-                h.points
             )));
         }
         match self.sink.as_mut() {
             None => return Err(refuse("the file is already finished".into())),
-            Some(Sink::Stream { w, kind }) => match kind {
+            Some(Sink::Stream { w, kind, .. }) => match kind {
                 Kind::ThreeDtk => text::write_3dtk(w, part),
                 Kind::Xyz => text::write_xyz(w, part),
                 Kind::Ply(h) => ply::write_points(w, part, h),
@@ -162,20 +168,19 @@ impl CloudWriter {
         let Some(sink) = self.sink.take() else {
             return Err(ScannerError::file(&path, Location::File, "the file is already finished"));
         };
-        if self.written != self.header.points {
+        if let Some(n) = self.header.points
+            && self.written != n
+        {
             let _ = std::fs::remove_file(&tmp);
             return Err(ScannerError::file(
                 &path,
                 Location::File,
-                format!("{} points written: expected {} (the header's count)", self.written, self.header.points),
+                format!("{} points written: expected {n} (the header's count)", self.written),
             ));
         }
+        let written = self.written;
         let result = match sink {
-            Sink::Stream { mut w, .. } => w.flush().map_err(|e| ScannerError::io(&tmp, e)).and_then(|()| {
-                let hashed = w.get_ref();
-                hashed.inner.sync_all().map_err(|e| ScannerError::io(&tmp, e))?;
-                Ok(Some(hashed.crc.clone().finalize()))
-            }),
+            Sink::Stream { w, kind, header } => finish_stream(&tmp, w, &kind, header, written),
             Sink::Gathered(cloud) => {
                 super::with_writer(&tmp, |w| pcd::write(w, &cloud, PcdData::BinaryCompressed)).map(Some)
             }
@@ -202,6 +207,37 @@ impl Drop for CloudWriter {
             let _ = std::fs::remove_file(&self.tmp);
         }
     }
+}
+
+/// Flushes and syncs a byte stream; its header's count placeholder, if
+/// any, overwritten with the count (then the bytes' CRC no longer holds).
+fn finish_stream(
+    tmp: &Path,
+    mut w: BufWriter<Hashed<File>>,
+    kind: &Kind,
+    header: Option<Vec<u8>>,
+    written: usize,
+) -> Result<Option<u32>> {
+    w.flush().map_err(|e| ScannerError::io(tmp, e))?;
+    let Some(header) = header else {
+        let hashed = w.get_ref();
+        hashed.inner.sync_all().map_err(|e| ScannerError::io(tmp, e))?;
+        return Ok(Some(hashed.crc.clone().finalize()));
+    };
+    let patched = match kind {
+        Kind::Ply(_) => ply::patch_count(&header, written),
+        Kind::Pcd(_) => pcd::patch_count(&header, written),
+        Kind::ThreeDtk | Kind::Xyz => None,
+    }
+    .ok_or_else(|| {
+        ScannerError::file(tmp, Location::File, "the header's count placeholder is not where it was written")
+    })?;
+    let mut file = w.into_inner().map_err(|e| ScannerError::io(tmp, e.into_error()))?.inner;
+    file.seek(SeekFrom::Start(0))
+        .and_then(|_| file.write_all(&patched))
+        .and_then(|()| file.sync_all())
+        .map_err(|e| ScannerError::io(tmp, e))?;
+    Ok(None)
 }
 
 /// `e`, reported against `path` (the file being written) rather than its
