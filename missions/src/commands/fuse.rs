@@ -6,7 +6,7 @@
 use std::io::Write;
 use std::path::PathBuf;
 
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 
 use super::Outcome;
 use crate::mission::FusionMode;
@@ -47,12 +47,19 @@ pub fn run(args: &FuseArgs, out: &mut dyn Write) -> Result<Outcome> {
     crate::run::outputs::check_targets(mission, &target, &["fusion.json"])?;
     let frames = target.join("frames");
     crate::run::outputs::check_targets(mission, &frames, &[])?;
+    std::fs::create_dir_all(&frames).with_context(|| format!("creating {}", frames.display()))?;
     let scanner = mission.scan.scanner_in_body();
     let fused = crate::run::fuse::fuse(views, mode, &mission.fusion, scanner, false, &mut |_, _| {})?;
     crate::run::fuse::write_frames(&frames, views, &fused)?;
-    let cloud = crate::run::fuse::merged(views, &fused, &mission.cloud_origin());
-    let written =
-        crate::run::outputs::write(mission, &target, cloud, &mut Recorder::disabled(), &mut Timings::default())?;
+    // The cloud's files, a scan at a time.
+    let (origin, mut timings) = (mission.cloud_origin(), Timings::default());
+    let points = views.iter().map(|v| v.body.len()).sum();
+    let mut cloud = crate::run::outputs::CloudFiles::create(mission, &target, Some(points))?;
+    for (v, f) in views.iter().zip(&fused.scans) {
+        let world = fusion::direct::transform(&v.body, &crate::run::fuse::relative(&origin, &f.world_from_body));
+        cloud.push(&crate::run::fuse::part(world, v, &f.world_from_body, &origin), &mut timings)?;
+    }
+    let written = cloud.finish(mission, &target, &mut Recorder::disabled(), &mut timings)?;
     let mut report = FusionReport::new(views, &fused);
     report.seconds = Some(fused.seconds);
     report.pipe = written.pipe.clone();

@@ -283,39 +283,30 @@ pub fn error_heading(a: &Isometry3<f64>, b: &Isometry3<f64>) -> f64 {
     cps::wrap_angle(xa.y.atan2(xa.x) - xb.y.atan2(xb.x))
 }
 
-/// The merged world-frame cloud of `views` at the `fused` poses, relative
-/// to `origin` (see [`crate::mission::Mission::cloud_origin`]), each point
-/// with its scan.
-pub fn merged(views: &[ScanView], fused: &Fused, origin: &Vector3<f64>) -> PointCloud {
-    let n = views.iter().map(|v| v.body.len()).sum();
-    let mut out = PointCloud {
-        points: Vec::with_capacity(n),
-        source: Some(Vec::with_capacity(n)),
-        origin: *origin,
-        ..PointCloud::default()
-    };
-    for (v, f) in views.iter().zip(&fused.scans) {
-        let points = fusion::direct::transform(&v.body, &relative(origin, &f.world_from_body));
-        extend(&mut out, points, v, &f.world_from_body);
-    }
-    out
-}
-
-/// Appends the points of `view`'s scan (already moved by `world_from_body`
-/// and made relative to `merged`'s origin) to `merged`: each point with the
+/// One scan of the merged cloud: its `points` (already moved by
+/// `world_from_body` and made relative to `origin`), each with the
 /// station's index as its scan (LAS `point_source_id`: 65535 for stations
 /// from 65535 on), the scan with its name, pose and time.
-pub fn extend(merged: &mut PointCloud, points: Vec<Point3<f32>>, view: &ScanView, world_from_body: &Isometry3<f64>) {
+pub fn part(
+    points: Vec<Point3<f32>>,
+    view: &ScanView,
+    world_from_body: &Isometry3<f64>,
+    origin: &Vector3<f64>,
+) -> PointCloud {
     let id = u16::try_from(view.station).unwrap_or(u16::MAX);
-    let start = merged.points.len();
-    merged.source.get_or_insert_with(Vec::new).extend(std::iter::repeat_n(id, points.len()));
-    merged.points.extend(points);
-    merged.scans.push(scanner::io::ScanInfo {
-        name: scan_name(view),
-        points: start..merged.points.len(),
-        world_from_scan: *world_from_body,
-        gps_time_s: view.gps_time_s,
-    });
+    let n = points.len();
+    PointCloud {
+        points,
+        source: Some(vec![id; n]),
+        origin: *origin,
+        scans: vec![scanner::io::ScanInfo {
+            name: scan_name(view),
+            points: 0..n,
+            world_from_scan: *world_from_body,
+            gps_time_s: view.gps_time_s,
+        }],
+        ..PointCloud::default()
+    }
 }
 
 /// A scan's name: its file's stem (`scan003`).

@@ -1,5 +1,6 @@
 //! The one output stage of `run` and `fuse`: the merged cloud in each of
-//! the mission's `[output] formats`, and with `[pipe]` the pipe inspection
+//! the mission's `[output] formats`, written a scan at a time as the scans
+//! come ([`CloudFiles`]), and with `[pipe]` the pipe inspection
 //! of that cloud (its deviation map, the recording's `world/pipe/…`, the
 //! report). A fit that fails is reported ([`PipeReport::Failed`]) after
 //! everything else has been written, not raised — the acceptance fails —
@@ -10,7 +11,7 @@ use std::time::Instant;
 
 use anyhow::Result;
 use nalgebra::Point3;
-use scanner::io::{Format, PointCloud};
+use scanner::io::{CloudHeader, CloudWriter, Format, PointCloud};
 
 use super::inspection::{DEVIATION_FILE, PipeReport};
 use super::report::Timings;
@@ -42,28 +43,99 @@ pub fn cloud_file(format: &str) -> String {
     if format == "copc" { "cloud.copc.laz".into() } else { format!("cloud.{format}") }
 }
 
-/// Checks, before any work, that the output stage can write into `dir`:
-/// creates it (and its parents), and refuses a target of [`write`] — a
-/// cloud file, the deviation map, and `extra` (the caller's own files) —
-/// that exists as something other than a file, naming it. A survey that
-/// cannot be written is refused before it is measured, not after.
+/// Checks, before any work, that the output stage can write into `dir`
+/// (which need not exist yet): refuses a `dir` that is not a directory,
+/// and a target of [`write`] — a cloud file, the deviation map, and
+/// `extra` (the caller's own files) — that exists as something other than
+/// a file, naming it. A survey that cannot be written is refused before it
+/// is measured, not after.
 pub fn check_targets(mission: &Mission, dir: &Path, extra: &[&str]) -> Result<()> {
-    use anyhow::{Context, bail};
+    use anyhow::bail;
     if dir.exists() && !dir.is_dir() {
         bail!("{}: exists and is not a directory; expected the output directory", dir.display());
     }
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let clouds = mission.output.formats.iter().map(|f| cloud_file(f));
     let pipe = mission.pipe.as_ref().map(|_| DEVIATION_FILE.to_string());
     for name in clouds.chain(pipe).chain(extra.iter().map(|e| e.to_string())) {
         let path = dir.join(&name);
+        // (A symbolic link is the run directory's guard's to name.)
         if let Ok(meta) = std::fs::symlink_metadata(&path)
             && !meta.file_type().is_file()
+            && !meta.file_type().is_symlink()
         {
             bail!("{}: exists and is not a file; the outputs write {name} there (remove or rename it)", path.display());
         }
     }
     Ok(())
+}
+
+/// The merged cloud's files, one per `[output] formats`, written a scan
+/// at a time ([`scanner::io::CloudWriter`]): a run holds one scan's
+/// points, not the cloud's (with `[pipe]`, the inspection needs the whole
+/// cloud: its world points are kept). Dropped unfinished, the files go.
+#[derive(Debug)]
+pub struct CloudFiles {
+    files: Vec<(String, CloudWriter)>,
+    /// With `[pipe]`: every point, world coordinates (f32).
+    pipe: Option<Vec<Point3<f32>>>,
+    points: usize,
+}
+
+impl CloudFiles {
+    /// Opens the files in `dir` for the mission's cloud (relative to its
+    /// cloud origin, in its CRS, each point with its scan) of `points`
+    /// points — or an unknown count, stated when finished.
+    pub fn create(mission: &Mission, dir: &Path, points: Option<usize>) -> Result<Self> {
+        let header = CloudHeader {
+            origin: mission.cloud_origin(),
+            crs: Some(mission.crs.clone()),
+            points,
+            intensity: false,
+            source: true,
+            timed: false,
+        };
+        let mut files = Vec::with_capacity(mission.output.formats.len());
+        for format in &mission.output.formats {
+            let name = cloud_file(format);
+            let path = dir.join(&name);
+            files.push((name, CloudWriter::create(&path, Format::from_path(&path)?, header.clone())?));
+        }
+        Ok(Self { files, pipe: mission.pipe.as_ref().map(|_| Vec::new()), points: 0 })
+    }
+
+    /// Appends one scan's points (see [`super::fuse::part`]) to every file.
+    pub fn push(&mut self, part: &PointCloud, timings: &mut Timings) -> Result<()> {
+        let started = Instant::now();
+        for (_, writer) in &mut self.files {
+            writer.push(part)?;
+        }
+        if let Some(world) = &mut self.pipe {
+            // The inspection works in world coordinates (f32).
+            if part.georeferenced() {
+                world.extend((0..part.len()).map(|i| Point3::from(part.coordinates(i)).cast::<f32>()));
+            } else {
+                world.extend_from_slice(&part.points);
+            }
+        }
+        self.points += part.len();
+        timings.cloud_files_s += started.elapsed().as_secs_f64();
+        Ok(())
+    }
+
+    /// Finishes the files in `dir` and, with `[pipe]`, inspects the cloud
+    /// (logging the result to `rec`); the time each takes goes to
+    /// `timings`.
+    pub fn finish(self, mission: &Mission, dir: &Path, rec: &mut Recorder, timings: &mut Timings) -> Result<Written> {
+        let started = Instant::now();
+        let mut files = Vec::with_capacity(self.files.len());
+        for (name, writer) in self.files {
+            writer.finish()?;
+            files.push(name);
+        }
+        timings.cloud_files_s += started.elapsed().as_secs_f64();
+        let pipe = pipe(mission, dir, self.pipe.as_deref().unwrap_or(&[]), &mut files, rec, timings)?;
+        Ok(Written { points: self.points, files, pipe })
+    }
 }
 
 /// Writes the merged `cloud` (relative to the mission's cloud origin, each
@@ -74,50 +146,45 @@ pub fn check_targets(mission: &Mission, dir: &Path, extra: &[&str]) -> Result<()
 pub fn write(
     mission: &Mission,
     dir: &Path,
-    mut cloud: PointCloud,
+    cloud: &PointCloud,
     rec: &mut Recorder,
     timings: &mut Timings,
 ) -> Result<Written> {
+    let mut files = CloudFiles::create(mission, dir, Some(cloud.len()))?;
+    files.push(cloud, timings)?;
+    files.finish(mission, dir, rec, timings)
+}
+
+/// With `[pipe]`, the inspection of the merged cloud's `world` points:
+/// the deviation map (its name added to `files`), the recording's
+/// `world/pipe/…`, the report.
+fn pipe(
+    mission: &Mission,
+    dir: &Path,
+    world: &[Point3<f32>],
+    files: &mut Vec<String>,
+    rec: &mut Recorder,
+    timings: &mut Timings,
+) -> Result<Option<PipeReport>> {
+    let Some(plan) = &mission.pipe else { return Ok(None) };
     let started = Instant::now();
-    cloud.crs = Some(mission.crs.clone());
-    let mut files = Vec::new();
-    for format in &mission.output.formats {
-        let name = cloud_file(format);
-        let path = dir.join(&name);
-        scanner::io::write(&path, &cloud, Format::from_path(&path)?)?;
-        files.push(name);
+    let result = super::inspection::inspect(plan, world);
+    if let Ok(inspection) = &result {
+        super::inspection::write_deviation_map(dir, world, inspection)?;
+        files.push(DEVIATION_FILE.into());
     }
-    timings.cloud_files_s += started.elapsed().as_secs_f64();
-    let pipe = match &mission.pipe {
-        None => None,
-        Some(plan) => {
-            let started = Instant::now();
-            // The inspection works in world coordinates (f32).
-            let world: std::borrow::Cow<'_, [Point3<f32>]> = if cloud.georeferenced() {
-                (0..cloud.len()).map(|i| Point3::from(cloud.coordinates(i)).cast::<f32>()).collect::<Vec<_>>().into()
-            } else {
-                cloud.points.as_slice().into()
-            };
-            let result = super::inspection::inspect(plan, &world);
-            if let Ok(inspection) = &result {
-                super::inspection::write_deviation_map(dir, &world, inspection)?;
-                files.push(DEVIATION_FILE.into());
-            }
-            timings.pipe_s = Some(started.elapsed().as_secs_f64());
-            Some(match result {
-                Ok(inspection) => {
-                    let t = Instant::now();
-                    rec.pipe(&world, &inspection, plan.threshold_m)?;
-                    timings.recording_s += t.elapsed().as_secs_f64();
-                    super::inspection::report(plan, &inspection)
-                }
-                Err(e) => {
-                    let error = format!("{e:#}");
-                    rec.warn(format!("pipe inspection failed: {error}"))?;
-                    PipeReport::Failed { error }
-                }
-            })
+    timings.pipe_s = Some(started.elapsed().as_secs_f64());
+    Ok(Some(match result {
+        Ok(inspection) => {
+            let t = Instant::now();
+            rec.pipe(world, &inspection, plan.threshold_m)?;
+            timings.recording_s += t.elapsed().as_secs_f64();
+            super::inspection::report(plan, &inspection)
         }
-    };
-    Ok(Written { points: cloud.len(), files, pipe })
+        Err(e) => {
+            let error = format!("{e:#}");
+            rec.warn(format!("pipe inspection failed: {error}"))?;
+            PipeReport::Failed { error }
+        }
+    }))
 }

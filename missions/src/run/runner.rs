@@ -25,7 +25,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result, bail};
 use cps::{FixOptions, ParentPose, TeamState, observe};
 use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
-use nalgebra::{Matrix3, Matrix4, Point3};
+use nalgebra::{Matrix3, Matrix4, Point3, Vector3};
 use planner::{CyclePrediction, DanceCycle};
 use scanner::io::{Format, PointCloud};
 use scanner::sim::Robot;
@@ -38,7 +38,7 @@ use super::journal::{
     Derived, DriveKey, Driven, EndKey, EndRecord, Event, FixKey, FixRecord, MeasureKey, Measured, Phase, Scanned,
     StationKey, StepKey, Tilted, matrix_record,
 };
-use super::outputs::Written;
+use super::outputs::{CloudFiles, Written};
 use super::report::{FusionReport, RunReport, StationRecord, Timings};
 use super::steps::Steps;
 use crate::mission::{FusionMode, Mission};
@@ -159,9 +159,10 @@ struct Run<'m> {
     steps: Steps,
     team: TeamState,
     progress: Progress,
-    /// The merged cloud so far, relative to the mission's cloud origin,
-    /// with each point's scan.
-    merged: PointCloud,
+    /// The merged cloud's files, written a scan at a time (taken when
+    /// finished), relative to the mission's cloud `origin`.
+    cloud: Option<CloudFiles>,
+    origin: Vector3<f64>,
     /// Every scan with its poses (body points kept for the ICP modes) and
     /// where it sits on the recording's timelines.
     views: Vec<ScanView>,
@@ -183,6 +184,9 @@ pub fn run(mission: &Mission, planned: &Planned, dir: &Path, options: &RunOption
     super::outputs::check_targets(mission, dir, &["report.json", "stations.csv", "adjustment.txt", "mission.rrd"])?;
     let journal = super::resume::open(mission, planned, dir, options.resume, options.abort_after_events)?;
     std::fs::create_dir_all(dir.join("scans")).with_context(|| format!("creating {}", dir.join("scans").display()))?;
+    // The cloud's files, filled as the scans come (direct fusion) or once
+    // they are fused; their count is stated when they are finished.
+    let cloud = CloudFiles::create(mission, dir, None)?;
 
     let team = Team::new(mission, &planned.dance, options.faults.clone())?;
     let rrd = mission.output.rerun.then(|| dir.join("mission.rrd"));
@@ -216,7 +220,8 @@ pub fn run(mission: &Mission, planned: &Planned, dir: &Path, options: &RunOption
         steps,
         team: state,
         progress,
-        merged: PointCloud { origin: mission.cloud_origin(), source: Some(Vec::new()), ..PointCloud::default() },
+        cloud: Some(cloud),
+        origin: mission.cloud_origin(),
         views: Vec::new(),
         scan_times: Vec::new(),
         stations: Vec::new(),
@@ -537,7 +542,7 @@ impl Run<'_> {
         if cloud.len() != scanned.points {
             bail!("{}: {} points, but the journal recorded {}", scanned.file, cloud.len(), scanned.points);
         }
-        let origin = self.merged.origin;
+        let origin = self.origin;
         let relative_from_body = super::fuse::relative(&origin, &world_from_body);
         let world = timed(&mut self.timings.fusion_s, || fusion::direct::transform(&cloud.points, &relative_from_body));
         self.steps.rec.advance(slices as f64 / (75.0 * self.mission.scan.resolution.degrees()));
@@ -571,7 +576,9 @@ impl Run<'_> {
             gps_time_s: scanned.unix_time_s.map(scanner::io::gps_time_of_unix),
         };
         if self.mission.fusion.mode == FusionMode::Direct {
-            super::fuse::extend(&mut self.merged, world, &view, &world_from_body);
+            let part = super::fuse::part(world, &view, &world_from_body, &origin);
+            let cloud = self.cloud.as_mut().ok_or_else(|| anyhow::anyhow!("the cloud's files are already finished"))?;
+            cloud.push(&part, &mut self.timings)?;
         }
         self.views.push(view);
         self.scan_times.push(self.steps.rec.now());
@@ -597,15 +604,15 @@ impl Run<'_> {
         if mode == FusionMode::Direct {
             return Ok(fused);
         }
-        // Each scan moved once, into the merged cloud and the recording.
+        // Each scan moved once, into the cloud's files and the recording.
         let rec = &mut self.steps.rec;
         if !fused.traces.is_empty() {
             let names: Vec<String> = views.iter().map(|v| format!("scan{:03}", v.station)).collect();
             let bodies: Vec<&[Point3<f32>]> = views.iter().map(|v| v.body.as_slice()).collect();
             timed(&mut self.timings.recording_s, || rec.icp_iterations(&fused.traces, &names, &bodies))?;
         }
-        let (merged, t) = (&mut self.merged, &mut self.timings);
-        let origin = merged.origin;
+        let (cloud, t, origin) = (&mut self.cloud, &mut self.timings, self.origin);
+        let cloud = cloud.as_mut().ok_or_else(|| anyhow::anyhow!("the cloud's files are already finished"))?;
         for ((view, at), f) in views.iter().zip(&self.scan_times).zip(&fused.scans) {
             let relative_from_body = super::fuse::relative(&origin, &f.world_from_body);
             let world = timed(&mut t.fusion_s, || fusion::direct::transform(&view.body, &relative_from_body));
@@ -619,7 +626,7 @@ impl Run<'_> {
                     Ok(())
                 })?;
             }
-            super::fuse::extend(merged, world, view, &f.world_from_body);
+            cloud.push(&super::fuse::part(world, view, &f.world_from_body, &origin), t)?;
         }
         Ok(fused)
     }
@@ -660,9 +667,8 @@ impl Run<'_> {
         super::fuse::write_frames(&self.dir.join("scans"), &self.views, &fused)?;
         self.progress.scans.finish_and_clear();
         let fusion = FusionReport::new(&self.views, &fused);
-        let merged = std::mem::take(&mut self.merged);
-        let written: Written =
-            super::outputs::write(self.mission, &self.dir, merged, &mut self.steps.rec, &mut self.timings)?;
+        let cloud = self.cloud.take().ok_or_else(|| anyhow::anyhow!("the cloud's files are already finished"))?;
+        let written: Written = cloud.finish(self.mission, &self.dir, &mut self.steps.rec, &mut self.timings)?;
         let adjustment = self.adjust()?;
         let adjusted = adjustment.as_ref().and_then(AdjustmentOutcome::report);
         let accepted = mission_accepted(self.mission, &self.stations, &self.views, &fused, adjusted)

@@ -192,11 +192,13 @@ impl LasStream {
         Ok(Self { writer: None, cloud: cloud.clone(), compressed, path: path.to_path_buf() })
     }
 
-    /// The writer, opened with the offset at `points`' lower corner.
-    fn writer(&mut self, points: &[Point3<f32>]) -> Result<&mut Writer<BufWriter<File>>> {
+    /// The writer, opened with the offset at the first part's lower
+    /// corner (its times, if any, are adjusted standard GPS time).
+    fn writer(&mut self, first: &PointCloud) -> Result<&mut Writer<BufWriter<File>>> {
         if self.writer.is_none() {
             let path = &self.path;
-            let lo = points.iter().fold([f64::INFINITY; 3], |m, p| {
+            self.cloud.timed |= first.scans.iter().any(|s| s.gps_time_s.is_some());
+            let lo = first.points.iter().fold([f64::INFINITY; 3], |m, p| {
                 [m[0].min(f64::from(p.x)), m[1].min(f64::from(p.y)), m[2].min(f64::from(p.z))]
             });
             let corner = lo.map(|v| if v.is_finite() { v.floor() } else { 0.0 });
@@ -216,7 +218,7 @@ impl LasStream {
     pub(super) fn push(&mut self, part: &PointCloud) -> Result<()> {
         let path = self.path.clone();
         let path = &path;
-        let writer = self.writer(&part.points)?;
+        let writer = self.writer(part)?;
         let mut scans: Vec<_> = part.scans.iter().filter(|s| !s.points.is_empty()).collect();
         scans.sort_by_key(|s| s.points.start);
         let gps_time = |i: usize| {
@@ -274,7 +276,7 @@ impl LasStream {
 
     /// Writes the header's counts and bounds and syncs the file.
     pub(super) fn finish(mut self) -> Result<()> {
-        self.writer(&[])?;
+        self.writer(&PointCloud::default())?;
         let path = &self.path;
         let Some(mut writer) = self.writer.take() else {
             return Err(ScannerError::whole_file(path, "the LAS writer is not open"));
