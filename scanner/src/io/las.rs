@@ -174,6 +174,11 @@ const FORMAT_6_LEN: usize = 30;
 /// to metres) plus the origin becomes the offset.
 pub(super) struct LasStream {
     writer: Option<Writer<BufWriter<File>>>,
+    /// Encoded records not yet written: LAZ writes them [`BATCH_POINTS`]
+    /// at a time, so that it compresses many chunks at once in parallel
+    /// however small the parts (about 30 MB more than part by part; LAS
+    /// writes each part at once).
+    pending: Vec<u8>,
     cloud: CloudHeader,
     compressed: bool,
     path: PathBuf,
@@ -189,7 +194,7 @@ impl LasStream {
     /// Creates `path` for a cloud of `cloud`'s kind.
     pub(super) fn create(path: &Path, cloud: &CloudHeader, compressed: bool) -> Result<Self> {
         File::create(path).map_err(|e| ScannerError::io(path, e))?;
-        Ok(Self { writer: None, cloud: cloud.clone(), compressed, path: path.to_path_buf() })
+        Ok(Self { writer: None, pending: Vec::new(), cloud: cloud.clone(), compressed, path: path.to_path_buf() })
     }
 
     /// The writer, opened with the offset at the first part's lower
@@ -230,14 +235,17 @@ impl LasStream {
                 .map_or(0.0, |t| t - ADJUSTED_GPS_OFFSET_S)
         };
         let offset = *writer.header().transforms();
-        let slab = PointDataBuilder::new().for_header(writer.header());
         let n = part.points.len();
         for batch in (0..n).step_by(BATCH_POINTS) {
             let end = n.min(batch + BATCH_POINTS);
-            // Encoded in parallel into one buffer, written at once: LAZ
-            // compresses its chunks (50,000 points each) in parallel too.
-            let mut bytes = vec![0u8; (end - batch) * FORMAT_6_LEN];
-            bytes
+            // Encoded in parallel at the end of the pending records.
+            let start = self.pending.len();
+            if self.compressed && self.pending.capacity() == 0 {
+                // A batch and a part: no reallocation before the flush.
+                self.pending.reserve_exact(2 * BATCH_POINTS * FORMAT_6_LEN);
+            }
+            self.pending.resize(start + (end - batch) * FORMAT_6_LEN, 0);
+            self.pending[start..]
                 .par_chunks_mut(FORMAT_6_LEN)
                 .enumerate()
                 .try_for_each(|(k, record)| {
@@ -268,15 +276,36 @@ impl LasStream {
                         ),
                     )
                 })?;
-            let points = slab.clone().build_from_bytes(bytes).map_err(|e| ScannerError::whole_file(path, e))?;
-            writer.write_points(&points).map_err(|e| ScannerError::whole_file(path, e))?;
+            if self.pending.len() >= BATCH_POINTS * FORMAT_6_LEN {
+                self.flush()?;
+            }
+        }
+        // LAS has nothing to gain from waiting.
+        if !self.compressed {
+            self.flush()?;
         }
         Ok(())
+    }
+
+    /// Writes the pending records at once (LAZ compresses their 50,000-point
+    /// chunks in parallel).
+    fn flush(&mut self) -> Result<()> {
+        let path = &self.path;
+        let writer =
+            self.writer.as_mut().ok_or_else(|| ScannerError::whole_file(path, "the LAS writer is not open"))?;
+        if self.pending.is_empty() {
+            return Ok(());
+        }
+        let slab = PointDataBuilder::new().for_header(writer.header());
+        let points =
+            slab.build_from_bytes(std::mem::take(&mut self.pending)).map_err(|e| ScannerError::whole_file(path, e))?;
+        writer.write_points(&points).map_err(|e| ScannerError::whole_file(path, e))
     }
 
     /// Writes the header's counts and bounds and syncs the file.
     pub(super) fn finish(mut self) -> Result<()> {
         self.writer(&PointCloud::default())?;
+        self.flush()?;
         let path = &self.path;
         let Some(mut writer) = self.writer.take() else {
             return Err(ScannerError::whole_file(path, "the LAS writer is not open"));
