@@ -43,6 +43,14 @@ pub struct IcpConfig {
     /// `reject_back_faces` (a scan kept in a robot's body frame has its
     /// scanner at the head's lever arm). Default the origin.
     pub source_viewpoint: Point3<f64>,
+    /// Point-to-plane: leave the directions the matches cannot see where
+    /// the estimate (or the prior) holds them — a direction is unobservable
+    /// when its eigenvalue of the normal matrix, rotation scaled by the
+    /// source's RMS radius, is below this ratio of the largest
+    /// ([`super::degeneracy`]); they are reported in
+    /// [`IcpResult::unobservable`](super::IcpResult::unobservable). Default
+    /// none: a singular normal matrix is an error.
+    pub degeneracy_ratio: Option<f64>,
 }
 
 /// A robust kernel, applied by iteratively reweighted least squares: each
@@ -84,6 +92,7 @@ impl Default for IcpConfig {
             trace: false,
             reject_back_faces: false,
             source_viewpoint: Point3::origin(),
+            degeneracy_ratio: None,
         }
     }
 }

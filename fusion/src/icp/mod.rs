@@ -18,14 +18,17 @@
 //! neighbourhood certificate of a target cloud), [`correspondences`] (one
 //! pass of nearest neighbours into the normal equations' sums) and
 //! [`solve`] (the iteration: Horn's closed form or Gauss–Newton, with an
-//! optional pose prior, and the coarse-to-fine schedule).
+//! optional pose prior, and the coarse-to-fine schedule); [`degeneracy`]
+//! finds the directions the matches cannot see.
 
 pub mod config;
 pub mod correspondences;
+pub mod degeneracy;
 pub mod solve;
 pub mod target;
 
 pub use crate::se3::Prior;
 pub use config::{IcpConfig, Kernel, Method};
+pub use degeneracy::Observability;
 pub use solve::{IcpResult, Stage, align, align_coarse_to_fine, align_with_prior};
 pub use target::{KdTree, Target};

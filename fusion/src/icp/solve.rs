@@ -3,10 +3,13 @@
 //! a pose prior in its normal equations), until an update falls below the
 //! tolerances; and the coarse-to-fine schedule.
 
-use nalgebra::{Isometry3, Matrix3, Matrix4, Matrix6, Point3, SymmetricEigen, Translation3, UnitQuaternion};
+use nalgebra::{
+    Isometry3, Matrix3, Matrix4, Matrix6, Point3, SymmetricEigen, Translation3, UnitQuaternion, Vector3, Vector6,
+};
 
 use super::config::{IcpConfig, Kernel, Method};
 use super::correspondences::{Sums, accumulate};
+use super::degeneracy::Observability;
 use super::target::Target;
 use crate::error::{FusionError, Result};
 use crate::se3::Prior;
@@ -33,6 +36,10 @@ pub struct IcpResult {
     /// With [`IcpConfig::trace`]: `target_from_source` after each
     /// iteration (the last is the estimate); empty otherwise.
     pub trace: Vec<Isometry3<f64>>,
+    /// With [`IcpConfig::degeneracy_ratio`]: the directions of ξ = (ω, v)
+    /// (unit vectors) the last iteration could not see and left where they
+    /// were; empty otherwise.
+    pub unobservable: Vec<Vector6<f64>>,
 }
 
 impl IcpResult {
@@ -136,6 +143,17 @@ fn align_impl(
     // update.
     let mut last = Sums::default();
     let mut partners = vec![u32::MAX; source.len()];
+    let mut unobservable = Vec::new();
+    // The lever arm that makes rotation comparable with translation: the
+    // source's RMS radius about its centroid (at least 1 mm).
+    let lever_arm_m = match config.degeneracy_ratio {
+        None => 1.0,
+        Some(_) => {
+            let n = source.len().max(1) as f64;
+            let c = source.iter().fold(Vector3::zeros(), |a, p| a + p.coords.cast::<f64>()) / n;
+            (source.iter().map(|p| (p.coords.cast::<f64>() - c).norm_squared()).sum::<f64>() / n).sqrt().max(1e-3)
+        }
+    };
     while iterations < config.max_iterations {
         let sums = accumulate(source, target, &estimate, max_sq, config, &mut partners);
         last = sums;
@@ -164,12 +182,19 @@ fn align_impl(
                         (sums.h / sigma2 + p.information, sums.b / sigma2 + p.information * e)
                     }
                 };
-                let delta = h
-                    .cholesky()
-                    .ok_or_else(|| FusionError::Degenerate {
-                        what: format!("point-to-plane normal equations at iteration {iterations}"),
-                    })?
-                    .solve(&(-b));
+                let delta = match config.degeneracy_ratio {
+                    Some(ratio) => {
+                        let o = Observability::new(&h, lever_arm_m, ratio);
+                        unobservable = o.unobservable();
+                        o.solve(&(-b))
+                    }
+                    None => h
+                        .cholesky()
+                        .ok_or_else(|| FusionError::Degenerate {
+                            what: format!("point-to-plane normal equations at iteration {iterations}"),
+                        })?
+                        .solve(&(-b)),
+                };
                 crate::se3::exp(&delta)
             }
         };
@@ -189,7 +214,16 @@ fn align_impl(
     let rmse_m = (sums.sq / sums.n.max(1) as f64).sqrt();
     let information = sums.normal_matrix(config.method) / residual_variance(&sums, config.method)
         + prior.map_or_else(Matrix6::zeros, |p| p.information);
-    Ok(IcpResult { target_from_source: estimate, converged, iterations, inliers: sums.n, rmse_m, information, trace })
+    Ok(IcpResult {
+        target_from_source: estimate,
+        converged,
+        iterations,
+        inliers: sums.n,
+        rmse_m,
+        information,
+        trace,
+        unobservable,
+    })
 }
 
 /// σ̂² per scalar residual: point-to-plane has one per pair, point-to-point three.
@@ -205,6 +239,9 @@ fn check(c: &IcpConfig) -> Result<()> {
     }
     FusionError::require_non_negative("translation tolerance (m)", c.translation_tolerance_m)?;
     FusionError::require_non_negative("rotation tolerance (rad)", c.rotation_tolerance_rad)?;
+    if let Some(ratio) = c.degeneracy_ratio {
+        FusionError::require_positive("degeneracy eigenvalue ratio", ratio)?;
+    }
     if c.max_iterations == 0 {
         return Err(FusionError::OutOfRange { what: "iteration cap".into(), value: 0.0, expected: "≥ 1".into() });
     }

@@ -1,0 +1,88 @@
+//! Directions ICP cannot see (degeneracy-aware ICP, Zhang, Kaess & Singh
+//! 2016): the eigen-analysis of the point-to-plane normal matrix. Rotation
+//! and translation are made comparable by a lever arm L — ξ = (ω, v) as
+//! u = (L·ω, v), metres both — and a direction whose eigenvalue is below
+//! `min_ratio` times the largest is unobservable: a straight corridor's
+//! axis, a pipe's axis and the roll about it. The solve then leaves those
+//! directions where the estimate (or a prior, which is part of the normal
+//! matrix) holds them, instead of letting them slide on noise.
+
+use nalgebra::{Matrix6, SymmetricEigen, Vector6};
+
+/// The normal equations' eigen-analysis in u = (L·ω, v).
+#[derive(Debug, Clone)]
+pub struct Observability {
+    eigen: SymmetricEigen<f64, nalgebra::U6>,
+    lever_arm_m: f64,
+    min_ratio: f64,
+}
+
+impl Observability {
+    /// Analyses the normal matrix `h` (of ξ = (ω, v)) with lever arm
+    /// `lever_arm_m` (> 0) and eigenvalue ratio `min_ratio`.
+    pub fn new(h: &Matrix6<f64>, lever_arm_m: f64, min_ratio: f64) -> Self {
+        let s = scale(lever_arm_m);
+        let hu = s * h * s;
+        let eigen = SymmetricEigen::new((hu + hu.transpose()) * 0.5);
+        Self { eigen, lever_arm_m, min_ratio }
+    }
+
+    fn observed(&self, i: usize) -> bool {
+        let max = self.eigen.eigenvalues.max();
+        max > 0.0 && self.eigen.eigenvalues[i] > self.min_ratio * max
+    }
+
+    /// The unobservable directions, each a unit vector of u = (L·ω, v)
+    /// turned back into ξ = (ω, v) and normalised.
+    pub fn unobservable(&self) -> Vec<Vector6<f64>> {
+        let s = scale(self.lever_arm_m);
+        (0..6).filter(|&i| !self.observed(i)).map(|i| (s * self.eigen.eigenvectors.column(i)).normalize()).collect()
+    }
+
+    /// The solution of `h ξ = rhs` within the observed directions only
+    /// (zero along the others): Zhang et al.'s remapped update.
+    pub fn solve(&self, rhs: &Vector6<f64>) -> Vector6<f64> {
+        let s = scale(self.lever_arm_m);
+        let ru = s * rhs;
+        let mut u = Vector6::zeros();
+        for i in (0..6).filter(|&i| self.observed(i)) {
+            let e = self.eigen.eigenvectors.column(i);
+            u += e * (e.dot(&ru) / self.eigen.eigenvalues[i]);
+        }
+        s * u
+    }
+}
+
+/// diag(1/L, 1/L, 1/L, 1, 1, 1): ξ = S u.
+fn scale(lever_arm_m: f64) -> Matrix6<f64> {
+    let inv = 1.0 / lever_arm_m;
+    Matrix6::from_diagonal(&Vector6::new(inv, inv, inv, 1.0, 1.0, 1.0))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_full_rank_matrix_solves_as_cholesky_does() {
+        let a = Matrix6::from_fn(|i, j| ((i * 7 + j * 3) % 5) as f64 + if i == j { 6.0 } else { 0.0 });
+        let h = a.transpose() * a;
+        let rhs = Vector6::new(1.0, -2.0, 0.5, 3.0, 0.0, -1.0);
+        let o = Observability::new(&h, 4.0, 1e-6);
+        assert!(o.unobservable().is_empty());
+        let want = h.cholesky().expect("positive definite").solve(&rhs);
+        assert!((o.solve(&rhs) - want).norm() < 1e-9 * want.norm());
+    }
+
+    #[test]
+    fn a_missing_direction_is_found_and_left_alone() {
+        // Information about everything but translation along x.
+        let h = Matrix6::from_diagonal(&Vector6::new(50.0, 40.0, 30.0, 0.0, 20.0, 10.0));
+        let o = Observability::new(&h, 3.0, 1e-4);
+        let dirs = o.unobservable();
+        assert_eq!(dirs.len(), 1);
+        assert!((dirs[0].abs() - Vector6::new(0.0, 0.0, 0.0, 1.0, 0.0, 0.0)).norm() < 1e-12);
+        let x = o.solve(&Vector6::new(5.0, 4.0, 3.0, 7.0, 2.0, 1.0));
+        assert!((x - Vector6::new(0.1, 0.1, 0.1, 0.0, 0.1, 0.1)).norm() < 1e-12, "{x}");
+    }
+}
