@@ -382,6 +382,12 @@ fn a_streamed_cloud_refuses_parts_it_was_not_promised() {
     let e = w.push(&parts[1]).expect_err("800 > 500").to_string();
     assert!(e.contains("800 points after this part: expected 500"), "{e}");
     drop(w);
+    // COPC writes a LAZ beside it first: a short count leaves neither.
+    let copc = dir.path().join("c.copc.laz");
+    let mut w = CloudWriter::create(&copc, Format::Copc, header.clone()).expect("created");
+    w.push(&parts[0]).expect("a good part");
+    let e = w.finish().expect_err("two scans missing").to_string();
+    assert!(e.contains("400 points written: expected 1200"), "{e}");
     let left: Vec<_> = std::fs::read_dir(dir.path()).expect("dir").collect();
     assert!(left.is_empty(), "an unfinished writer leaves nothing: {left:?}");
 }

@@ -275,7 +275,6 @@ pub fn file_crc32(path: &Path) -> Result<u32> {
 /// [`write`], with the CRC-32 of what was written when it was hashed on
 /// the way.
 fn write_file(path: &Path, cloud: &PointCloud, format: Format) -> Result<Option<u32>> {
-    check(cloud).map_err(|message| ScannerError::file(path, Location::File, message))?;
     let mut writer = CloudWriter::create(path, format, CloudHeader::of(cloud))?;
     writer.push(cloud)?;
     writer.finish()
@@ -324,12 +323,18 @@ pub(crate) fn finish_write<T>(path: &Path, tmp: &Path, result: Result<T>) -> Res
         Ok(value) => std::fs::rename(tmp, path).map(|()| value).map_err(|e| ScannerError::io(path, e)),
         Err(e) => {
             let _ = std::fs::remove_file(tmp);
-            Err(match e {
-                ScannerError::Io { source, .. } => ScannerError::io(path, source),
-                ScannerError::File { location, message, .. } => ScannerError::file(path, location, message),
-                other => other,
-            })
+            Err(against(path, e))
         }
+    }
+}
+
+/// `e`, reported against `path` (the file being written) rather than its
+/// temporary file.
+pub(crate) fn against(path: &Path, e: ScannerError) -> ScannerError {
+    match e {
+        ScannerError::Io { source, .. } => ScannerError::io(path, source),
+        ScannerError::File { location, message, .. } => ScannerError::file(path, location, message),
+        other => other,
     }
 }
 
@@ -345,9 +350,20 @@ pub(crate) fn with_writer(
     path: &Path,
     f: impl FnOnce(&mut BufWriter<Hashed<File>>) -> std::io::Result<()>,
 ) -> Result<u32> {
+    let mut w = create_hashed(path)?;
+    f(&mut w).map_err(|e| ScannerError::io(path, e))?;
+    finish_hashed(path, w)
+}
+
+/// Creates `path` for writing through a buffer that hashes the bytes.
+pub(crate) fn create_hashed(path: &Path) -> Result<BufWriter<Hashed<File>>> {
     let file = File::create(path).map_err(|e| ScannerError::io(path, e))?;
-    let mut w = BufWriter::with_capacity(1 << 20, Hashed { inner: file, crc: crc32fast::Hasher::new() });
-    f(&mut w).and_then(|()| w.flush()).map_err(|e| ScannerError::io(path, e))?;
+    Ok(BufWriter::with_capacity(1 << 20, Hashed { inner: file, crc: crc32fast::Hasher::new() }))
+}
+
+/// Flushes and syncs `w` (writing `path`); the CRC-32 of its bytes.
+pub(crate) fn finish_hashed(path: &Path, mut w: BufWriter<Hashed<File>>) -> Result<u32> {
+    w.flush().map_err(|e| ScannerError::io(path, e))?;
     let hashed = w.get_ref();
     hashed.inner.sync_all().map_err(|e| ScannerError::io(path, e))?;
     Ok(hashed.crc.clone().finalize())

@@ -10,7 +10,10 @@ use std::path::{Path, PathBuf};
 
 use super::e57::E57Stream;
 use super::las::{LasStream, convert_to_copc};
-use super::{CloudHeader, Format, Hashed, PcdData, PointCloud, check, finish_write, pcd, ply, temporary, text};
+use super::{
+    CloudHeader, Format, Hashed, PcdData, PointCloud, against, check, create_hashed, finish_hashed, finish_write, pcd,
+    ply, temporary, text,
+};
 use crate::error::{Location, Result, ScannerError};
 
 /// A cloud file being written part by part: [`CloudWriter::create`] with
@@ -66,8 +69,7 @@ impl CloudWriter {
         }
         let tmp = temporary(path);
         let open = |kind: Kind| -> Result<Sink> {
-            let file = File::create(&tmp).map_err(|e| ScannerError::io(path, e))?;
-            let mut w = BufWriter::with_capacity(1 << 20, Hashed { inner: file, crc: crc32fast::Hasher::new() });
+            let mut w = create_hashed(&tmp).map_err(|e| against(path, e))?;
             let mut bytes = Vec::new();
             match &kind {
                 Kind::Ply(h) => ply::write_header(&mut bytes, h),
@@ -75,7 +77,10 @@ impl CloudWriter {
                 Kind::ThreeDtk | Kind::Xyz => Ok(()),
             }
             .and_then(|()| w.write_all(&bytes))
-            .map_err(|e| ScannerError::io(path, e))?;
+            .map_err(|e| {
+                let _ = std::fs::remove_file(&tmp);
+                ScannerError::io(path, e)
+            })?;
             let counted = matches!(kind, Kind::Ply(_) | Kind::Pcd(_));
             Ok(Sink::Stream { w, kind, header: (counted && header.points.is_none()).then_some(bytes) })
         };
@@ -165,19 +170,19 @@ impl CloudWriter {
     /// its bytes where they were hashed on the way (3DTK, PLY, XYZ, PCD).
     pub fn finish(mut self) -> Result<Option<u32>> {
         let (path, tmp) = (self.path.clone(), self.tmp.clone());
-        let Some(sink) = self.sink.take() else {
-            return Err(ScannerError::file(&path, Location::File, "the file is already finished"));
-        };
         if let Some(n) = self.header.points
             && self.written != n
         {
-            let _ = std::fs::remove_file(&tmp);
+            // Dropped unfinished: its files go.
             return Err(ScannerError::file(
                 &path,
                 Location::File,
                 format!("{} points written: expected {n} (the header's count)", self.written),
             ));
         }
+        let Some(sink) = self.sink.take() else {
+            return Err(ScannerError::file(&path, Location::File, "the file is already finished"));
+        };
         let written = self.written;
         let result = match sink {
             Sink::Stream { w, kind, header } => finish_stream(&tmp, w, &kind, header, written),
@@ -218,12 +223,10 @@ fn finish_stream(
     header: Option<Vec<u8>>,
     written: usize,
 ) -> Result<Option<u32>> {
-    w.flush().map_err(|e| ScannerError::io(tmp, e))?;
     let Some(header) = header else {
-        let hashed = w.get_ref();
-        hashed.inner.sync_all().map_err(|e| ScannerError::io(tmp, e))?;
-        return Ok(Some(hashed.crc.clone().finalize()));
+        return finish_hashed(tmp, w).map(Some);
     };
+    w.flush().map_err(|e| ScannerError::io(tmp, e))?;
     let patched = match kind {
         Kind::Ply(_) => ply::patch_count(&header, written),
         Kind::Pcd(_) => pcd::patch_count(&header, written),
@@ -238,16 +241,6 @@ fn finish_stream(
         .and_then(|()| file.sync_all())
         .map_err(|e| ScannerError::io(tmp, e))?;
     Ok(None)
-}
-
-/// `e`, reported against `path` (the file being written) rather than its
-/// temporary file.
-fn against(path: &Path, e: ScannerError) -> ScannerError {
-    match e {
-        ScannerError::Io { source, .. } => ScannerError::io(path, source),
-        ScannerError::File { location, message, .. } => ScannerError::file(path, location, message),
-        other => other,
-    }
 }
 
 /// Appends `part` to `cloud` (same origin and fields).
