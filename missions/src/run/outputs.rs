@@ -45,7 +45,7 @@ pub fn cloud_file(format: &str) -> String {
 
 /// Checks, before any work, that the output stage can write into `dir`
 /// (which need not exist yet): refuses a `dir` that is not a directory,
-/// and a target of [`write`] — a cloud file, the deviation map, and
+/// and a target of [`CloudFiles`] — a cloud file, the deviation map, and
 /// `extra` (the caller's own files) — that exists as something other than
 /// a file, naming it. A survey that cannot be written is refused before it
 /// is measured, not after.
@@ -136,23 +136,6 @@ impl CloudFiles {
         let pipe = pipe(mission, dir, self.pipe.as_deref().unwrap_or(&[]), &mut files, rec, timings)?;
         Ok(Written { points: self.points, files, pipe })
     }
-}
-
-/// Writes the merged `cloud` (relative to the mission's cloud origin, each
-/// point's scan in `source`, each scan in `scans`) into `dir` as
-/// [`cloud_file`] for each of the mission's formats, in the mission's CRS,
-/// and, with `[pipe]`, inspects it (logging the result to `rec`); the time
-/// each takes goes to `timings`.
-pub fn write(
-    mission: &Mission,
-    dir: &Path,
-    cloud: &PointCloud,
-    rec: &mut Recorder,
-    timings: &mut Timings,
-) -> Result<Written> {
-    let mut files = CloudFiles::create(mission, dir, Some(cloud.len()))?;
-    files.push(cloud, timings)?;
-    files.finish(mission, dir, rec, timings)
 }
 
 /// With `[pipe]`, the inspection of the merged cloud's `world` points:
