@@ -7,6 +7,10 @@
 //!   [`icp::IcpResult`]);
 //! - [`multiview`]: pairwise, incremental and simultaneous matching of many
 //!   scans ([`multiview::register_views`]);
+//! - [`links`]: a scan set adjusted over all its overlapping pairs, blind
+//!   directions held by the start ([`links::adjust`]);
+//! - [`scanset`]: a user's scan set registered coarse to fine by a
+//!   strategy or the link graph ([`scanset::register_set`]);
 //! - [`graph`]: scan poses adjusted to absolute priors (the CPS poses) and
 //!   relative ICP matches together ([`graph::optimize`], [`graph::cps_prior`]);
 //! - [`se3`]: the shared pose convention (ξ = (ω, v), left perturbation)
@@ -19,8 +23,10 @@ pub mod direct;
 pub mod error;
 pub mod graph;
 pub mod icp;
+pub mod links;
 pub mod multiview;
 pub mod pipe;
+pub mod scanset;
 pub mod se3;
 
 pub use error::{FusionError, Result};

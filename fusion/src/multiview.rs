@@ -141,11 +141,11 @@ pub struct MultiviewResult {
 }
 
 /// A scan prepared for matching, in its own frame.
-struct Prepared {
+pub(crate) struct Prepared {
     /// Reduced points: the data set D.
-    source: Vec<Point3<f32>>,
+    pub(crate) source: Vec<Point3<f32>>,
     /// The finer model points with their normals.
-    local: Target,
+    pub(crate) local: Target,
 }
 
 /// Registers `scans` (each in its own frame) given a guess of each one's
@@ -371,7 +371,7 @@ fn gate(r: &IcpResult, prior: &JointPrior, j: usize, c: usize, factor: f64) -> R
 }
 
 /// Reduced points and the model target of every scan, in parallel.
-fn prepare<S: AsRef<[Point3<f32>]> + Sync>(scans: &[S], config: &MultiviewConfig) -> Result<Vec<Prepared>> {
+pub(crate) fn prepare<S: AsRef<[Point3<f32>]> + Sync>(scans: &[S], config: &MultiviewConfig) -> Result<Vec<Prepared>> {
     let k = if config.icp.method == Method::PointToPlane { config.icp.normal_neighbours.max(3) } else { 0 };
     scans
         .par_iter()
@@ -504,11 +504,11 @@ impl Matcher<'_> {
     }
 }
 
-fn in_scan(scan: usize, e: FusionError) -> FusionError {
+pub(crate) fn in_scan(scan: usize, e: FusionError) -> FusionError {
     FusionError::InScan { scan, source: Box::new(e) }
 }
 
-fn check<S>(scans: &[S], guesses: &[Isometry3<f64>], c: &MultiviewConfig) -> Result<()> {
+pub(crate) fn check<S>(scans: &[S], guesses: &[Isometry3<f64>], c: &MultiviewConfig) -> Result<()> {
     if scans.len() != guesses.len() {
         return Err(FusionError::OutOfRange {
             what: "number of pose guesses".into(),

@@ -7,7 +7,15 @@
 //! directions where the estimate (or a prior, which is part of the normal
 //! matrix) holds them, instead of letting them slide on noise.
 
-use nalgebra::{Matrix6, SymmetricEigen, Vector6};
+use nalgebra::{Matrix6, Point3, SymmetricEigen, Vector3, Vector6};
+
+/// The lever arm of a point set: its RMS distance from its centroid (at
+/// least 1 mm).
+pub fn lever_arm(points: &[Point3<f32>]) -> f64 {
+    let n = points.len().max(1) as f64;
+    let c = points.iter().fold(Vector3::zeros(), |a, p| a + p.coords.cast::<f64>()) / n;
+    (points.iter().map(|p| (p.coords.cast::<f64>() - c).norm_squared()).sum::<f64>() / n).sqrt().max(1e-3)
+}
 
 /// The normal equations' eigen-analysis in u = (L·ω, v).
 #[derive(Debug, Clone)]
@@ -37,6 +45,21 @@ impl Observability {
     pub fn unobservable(&self) -> Vec<Vector6<f64>> {
         let s = scale(self.lever_arm_m);
         (0..6).filter(|&i| !self.observed(i)).map(|i| (s * self.eigen.eigenvectors.column(i)).normalize()).collect()
+    }
+
+    /// The normal matrix with its unobservable directions taken out (the
+    /// information a match actually carries): Σ over the observed
+    /// eigenpairs of λ·e·eᵀ in u, mapped back to ξ.
+    pub fn observed_part(&self) -> Matrix6<f64> {
+        let inv =
+            Matrix6::from_diagonal(&Vector6::new(self.lever_arm_m, self.lever_arm_m, self.lever_arm_m, 1.0, 1.0, 1.0));
+        let mut hu = Matrix6::zeros();
+        for i in (0..6).filter(|&i| self.observed(i)) {
+            let e = self.eigen.eigenvectors.column(i);
+            hu += e * e.transpose() * self.eigen.eigenvalues[i];
+        }
+        let h = inv * hu * inv;
+        0.5 * (h + h.transpose())
     }
 
     /// The solution of `h ξ = rhs` within the observed directions only
@@ -84,5 +107,27 @@ mod tests {
         assert!((dirs[0].abs() - Vector6::new(0.0, 0.0, 0.0, 1.0, 0.0, 0.0)).norm() < 1e-12);
         let x = o.solve(&Vector6::new(5.0, 4.0, 3.0, 7.0, 2.0, 1.0));
         assert!((x - Vector6::new(0.1, 0.1, 0.1, 0.0, 0.1, 0.1)).norm() < 1e-12, "{x}");
+        let kept = o.observed_part();
+        assert!((kept - h).amax() < 1e-9, "nothing observed is lost: {kept}");
+        // A little information along the blind axis (noise) is taken out.
+        let mut noisy = h;
+        noisy[(3, 3)] = 1e-3;
+        let o = Observability::new(&noisy, 3.0, 1e-4);
+        assert_eq!(o.unobservable().len(), 1);
+        assert!((o.observed_part() - h).amax() < 1e-12, "{}", o.observed_part());
+    }
+
+    #[test]
+    fn the_observed_part_drops_a_coupled_blind_direction() {
+        // Blind along d = (ω, v) mixing a turn about z with a slide in y
+        // (a pipe's roll about an axis off the origin).
+        let d = Vector6::new(0.0, 0.0, 0.5, 0.0, 2.0, 0.0).normalize();
+        let a = Matrix6::from_fn(|i, j| ((i * 5 + j * 11) % 7) as f64 + if i == j { 4.0 } else { 0.0 });
+        let p = Matrix6::identity() - d * d.transpose();
+        let h = p * a.transpose() * a * p;
+        let o = Observability::new(&h, 2.0, 1e-8);
+        assert_eq!(o.unobservable().len(), 1);
+        assert!((o.unobservable()[0].dot(&d)).abs() > 1.0 - 1e-9);
+        assert!((o.observed_part() - h).amax() < 1e-9 * h.amax());
     }
 }

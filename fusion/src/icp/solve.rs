@@ -3,9 +3,7 @@
 //! a pose prior in its normal equations), until an update falls below the
 //! tolerances; and the coarse-to-fine schedule.
 
-use nalgebra::{
-    Isometry3, Matrix3, Matrix4, Matrix6, Point3, SymmetricEigen, Translation3, UnitQuaternion, Vector3, Vector6,
-};
+use nalgebra::{Isometry3, Matrix3, Matrix4, Matrix6, Point3, SymmetricEigen, Translation3, UnitQuaternion, Vector6};
 
 use super::config::{IcpConfig, Kernel, Method};
 use super::correspondences::{Sums, accumulate};
@@ -31,14 +29,17 @@ pub struct IcpResult {
     /// distances or point-to-point distances), metres.
     pub rmse_m: f64,
     /// 6×6 information of ξ = (ω, v) at the last linearisation point, see
-    /// the module docs.
+    /// the module docs; with [`IcpConfig::degeneracy_ratio`], zero along
+    /// the [`unobservable`](Self::unobservable) directions.
     pub information: Matrix6<f64>,
     /// With [`IcpConfig::trace`]: `target_from_source` after each
     /// iteration (the last is the estimate); empty otherwise.
     pub trace: Vec<Isometry3<f64>>,
     /// With [`IcpConfig::degeneracy_ratio`]: the directions of ξ = (ω, v)
-    /// (unit vectors) the last iteration could not see and left where they
-    /// were; empty otherwise.
+    /// (unit vectors, target frame) the match cannot see at the estimate
+    /// (the last iteration left them where they were, and
+    /// [`information`](Self::information) carries nothing along them);
+    /// empty otherwise.
     pub unobservable: Vec<Vector6<f64>>,
 }
 
@@ -146,14 +147,7 @@ fn align_impl(
     let mut unobservable = Vec::new();
     // The lever arm that makes rotation comparable with translation: the
     // source's RMS radius about its centroid (at least 1 mm).
-    let lever_arm_m = match config.degeneracy_ratio {
-        None => 1.0,
-        Some(_) => {
-            let n = source.len().max(1) as f64;
-            let c = source.iter().fold(Vector3::zeros(), |a, p| a + p.coords.cast::<f64>()) / n;
-            (source.iter().map(|p| (p.coords.cast::<f64>() - c).norm_squared()).sum::<f64>() / n).sqrt().max(1e-3)
-        }
-    };
+    let lever_arm_m = config.degeneracy_ratio.map_or(1.0, |_| super::degeneracy::lever_arm(source));
     while iterations < config.max_iterations {
         let sums = accumulate(source, target, &estimate, max_sq, config, &mut partners);
         last = sums;
@@ -212,8 +206,16 @@ fn align_impl(
     }
     let sums = last;
     let rmse_m = (sums.sq / sums.n.max(1) as f64).sqrt();
-    let information = sums.normal_matrix(config.method) / residual_variance(&sums, config.method)
+    let mut information = sums.normal_matrix(config.method) / residual_variance(&sums, config.method)
         + prior.map_or_else(Matrix6::zeros, |p| p.information);
+    if let Some(ratio) = config.degeneracy_ratio {
+        // What the match cannot see it does not know: its information
+        // leaves those directions out (to the prior, another match, or
+        // odometry in a pose graph).
+        let o = Observability::new(&information, lever_arm_m, ratio);
+        unobservable = o.unobservable();
+        information = o.observed_part();
+    }
     Ok(IcpResult {
         target_from_source: estimate,
         converged,

@@ -1,0 +1,284 @@
+//! A scan set adjusted over every overlapping pair: each pair is matched
+//! (ICP from the current poses) and becomes a relative measurement — a
+//! *link* — and the links are adjusted together in a pose graph
+//! ([`crate::graph`]) with the first scan holding the frame. This is the
+//! cps-icp machinery without CPS priors, for scans that come with nothing
+//! but a guess of their poses (odometry, a scanner's registration, or
+//! none).
+//!
+//! - **Blind directions.** With [`IcpConfig::degeneracy_ratio`] a link
+//!   carries no information along the directions its pair cannot see (a
+//!   corridor's axis, a pipe's roll: [`crate::icp::degeneracy`]). What
+//!   holds the graph there is the start: consecutive scans are tied by the
+//!   start's increment `start[i−1]⁻¹ · start[i]` with σ
+//!   [`step_sigma_m`](LinkConfig::step_sigma_m) /
+//!   [`step_sigma_rad`](LinkConfig::step_sigma_rad) per step — weak beside
+//!   any match, so it decides only what no match sees, and the covariance
+//!   there is the start's. Each scan's unobservable directions are those
+//!   of the information its accepted links give it (the other scans held).
+//! - **Rejected links.** A match that fails (too few correspondences, a
+//!   singular system), or whose correspondences fall to
+//!   [`min_pairs`](crate::multiview::MultiviewConfig::min_pairs) or fewer,
+//!   is no link. After the adjustment the link that disagrees most with
+//!   the others — χ² of its residual over the variance factor of the rest
+//!   above [`gate_chi2`](LinkConfig::gate_chi2) — is left out and the graph
+//!   solved again, while each of its scans keeps another link.
+//! - **Variance factor.** ICP's covariance treats point errors as
+//!   independent, and is optimistic; the adjustment's σ̂₀² = χ²/redundancy
+//!   (when there is redundancy and it exceeds 1) scales every pose's
+//!   covariance.
+
+use nalgebra::{Isometry3, Matrix6, Point3, Vector6};
+use rayon::prelude::*;
+
+use crate::error::{FusionError, Result};
+use crate::graph::Edge;
+use crate::icp::degeneracy::{Observability, lever_arm};
+use crate::icp::{IcpConfig, IcpResult, align};
+use crate::multiview::{GATE_CHI2, MultiviewConfig, check, in_scan, prepare};
+use crate::se3::{Prior, adjoint, left_difference};
+
+/// The link graph's settings (documented defaults).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LinkConfig {
+    /// Matching: the ICP settings, the voxels of the data and model sets,
+    /// `min_pairs` and `overlap_m` (two scans are a candidate pair when
+    /// more than `min_pairs` correspondences lie within `overlap_m`, or
+    /// the ICP distance, at the current poses).
+    pub multiview: MultiviewConfig,
+    /// σ of the start's increment between consecutive scans, metres.
+    /// Default 0.1.
+    pub step_sigma_m: f64,
+    /// … and radians. Default 1°.
+    pub step_sigma_rad: f64,
+    /// A link is an outlier above this normalised χ² (6 degrees of
+    /// freedom). Default [`GATE_CHI2`] (99.9 %).
+    pub gate_chi2: f64,
+    /// Eigenvalue ratio below which a scan's direction is unobservable
+    /// (see [`IcpConfig::degeneracy_ratio`]). Default 1e-4.
+    pub degeneracy_ratio: f64,
+}
+
+impl Default for LinkConfig {
+    fn default() -> Self {
+        let multiview = MultiviewConfig::default();
+        Self {
+            multiview: MultiviewConfig {
+                icp: IcpConfig { degeneracy_ratio: Some(1e-4), ..multiview.icp },
+                ..multiview
+            },
+            step_sigma_m: 0.1,
+            step_sigma_rad: 1f64.to_radians(),
+            gate_chi2: GATE_CHI2,
+            degeneracy_ratio: 1e-4,
+        }
+    }
+}
+
+/// One candidate pair of scans and its match.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Link {
+    /// The scan whose frame the match is in.
+    pub target: usize,
+    /// The scan matched onto it.
+    pub source: usize,
+    /// Correspondences at the start poses (the overlap that made the pair).
+    pub overlap: usize,
+    /// The match, when ICP ran to the end.
+    pub result: Option<IcpResult>,
+    /// Why the link is not used; `None` when it is.
+    pub rejected: Option<String>,
+}
+
+/// What [`adjust`] returns.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LinkGraph {
+    /// Every scan's adjusted `world_from_scan`; scan 0 stays at its pose.
+    pub world_from_scan: Vec<Isometry3<f64>>,
+    /// Each pose's 6×6 covariance (ξ = (ω, v), left perturbation, world
+    /// frame), scaled by the variance factor when it exceeds 1.
+    pub covariance: Vec<Matrix6<f64>>,
+    /// Every candidate pair, used or not, in order of (source, target).
+    pub links: Vec<Link>,
+    /// Each scan's directions its links do not see (unit ξ = (ω, v), world
+    /// frame): held by the start's increments.
+    pub unobservable: Vec<Vec<Vector6<f64>>>,
+    /// σ̂₀² = χ² / redundancy of the final adjustment (1 without redundancy).
+    pub variance_factor: f64,
+    /// Redundancy of the final adjustment.
+    pub redundancy: usize,
+}
+
+/// Matches every overlapping pair of `scans` from `poses` (their current
+/// `world_from_scan`, e.g. simultaneous matching's result) and adjusts
+/// the links in a pose graph, the start increments of `starts` (the
+/// guesses the set came with) holding what no link sees. `progress(done,
+/// total)` is called as pairs are matched.
+pub fn adjust<S: AsRef<[Point3<f32>]> + Sync>(
+    scans: &[S],
+    poses: &[Isometry3<f64>],
+    starts: &[Isometry3<f64>],
+    config: &LinkConfig,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<LinkGraph> {
+    check(scans, poses, &config.multiview)?;
+    check(scans, starts, &config.multiview)?;
+    FusionError::require_positive("step σ (m)", config.step_sigma_m)?;
+    FusionError::require_positive("step σ (rad)", config.step_sigma_rad)?;
+    FusionError::require_positive("link gate χ²", config.gate_chi2)?;
+    FusionError::require_positive("degeneracy eigenvalue ratio", config.degeneracy_ratio)?;
+    let mv = &config.multiview;
+    let prepared = prepare(scans, mv)?;
+    let n = scans.len();
+    let overlap_m = mv.overlap_m.unwrap_or(mv.icp.max_correspondence_m);
+    let pairs: Vec<(usize, usize)> = (0..n).flat_map(|c| (0..c).map(move |j| (j, c))).collect();
+    let overlaps: Vec<usize> = pairs
+        .par_iter()
+        .map(|&(j, c)| {
+            let j_from_c = poses[j].inverse() * poses[c];
+            prepared[j].local.correspondences(&prepared[c].source, &j_from_c, overlap_m)
+        })
+        .collect();
+    let candidates: Vec<((usize, usize), usize)> =
+        pairs.into_iter().zip(overlaps).filter(|&(_, overlap)| overlap > mv.min_pairs).collect();
+    let total = candidates.len();
+    let mut done = 0;
+    progress(0, total);
+    let mut links = Vec::with_capacity(total);
+    // Matched in chunks so that progress moves while every core works.
+    for chunk in candidates.chunks(rayon::current_num_threads().max(1)) {
+        let found: Vec<Link> = chunk
+            .par_iter()
+            .map(|&((j, c), overlap)| {
+                let init = poses[j].inverse() * poses[c];
+                let r = align(&prepared[c].source, &prepared[j].local, &init, &mv.icp).map_err(|e| in_scan(c, e));
+                let (result, rejected) = match r {
+                    Ok(r) if r.inliers <= mv.min_pairs => {
+                        let why = format!(
+                            "{} correspondences after matching: expected more than {}",
+                            r.inliers, mv.min_pairs
+                        );
+                        (Some(r), Some(why))
+                    }
+                    Ok(r) => (Some(r), None),
+                    Err(e) => (None, Some(format!("the match failed: {e}"))),
+                };
+                Link { target: j, source: c, overlap, result, rejected }
+            })
+            .collect();
+        done += found.len();
+        links.extend(found);
+        progress(done, total);
+    }
+    let lever_arm: Vec<f64> = prepared.iter().map(|p| lever_arm(&p.source)).collect();
+    solve(poses, starts, links, &lever_arm, config)
+}
+
+/// Adjusts the accepted links, leaving out outliers one at a time.
+fn solve(
+    poses: &[Isometry3<f64>],
+    starts: &[Isometry3<f64>],
+    mut links: Vec<Link>,
+    lever_arm: &[f64],
+    config: &LinkConfig,
+) -> Result<LinkGraph> {
+    let n = poses.len();
+    let step_information = step_information(config);
+    let steps: Vec<Edge> = (1..n)
+        .map(|i| Edge {
+            target: i - 1,
+            source: i,
+            target_from_source: starts[i - 1].inverse() * starts[i],
+            information: step_information,
+        })
+        .collect();
+    // Scan 0 holds the frame: a prior of 1 µm / 1 µrad.
+    let mut priors = vec![None; n];
+    priors[0] = Some(Prior { target_from_source: poses[0], information: Matrix6::identity() * 1e12 });
+    loop {
+        let used: Vec<usize> = (0..links.len()).filter(|&k| links[k].rejected.is_none()).collect();
+        let mut edges = steps.clone();
+        edges.extend(used.iter().map(|&k| {
+            let r = links[k].result.as_ref().expect("an accepted link has its match");
+            Edge {
+                target: links[k].target,
+                source: links[k].source,
+                target_from_source: r.target_from_source,
+                information: r.information,
+            }
+        }));
+        let g = crate::graph::optimize(poses, &priors, &edges, 20)?;
+        let chi2: Vec<f64> = used
+            .iter()
+            .map(|&k| {
+                let (l, r) = (&links[k], links[k].result.as_ref().expect("accepted"));
+                let predicted = g.world_from_scan[l.target].inverse() * g.world_from_scan[l.source];
+                let e = left_difference(&predicted, &r.target_from_source);
+                (e.transpose() * r.information * e)[(0, 0)]
+            })
+            .collect();
+        let variance_factor = if g.redundancy > 0 { g.chi2 / g.redundancy as f64 } else { 1.0 };
+        // The worst link, judged by the variance factor of the rest.
+        let mut degree = vec![0usize; n];
+        for &k in &used {
+            degree[links[k].target] += 1;
+            degree[links[k].source] += 1;
+        }
+        let worst = used
+            .iter()
+            .zip(&chi2)
+            .filter(|(k, _)| degree[links[**k].target] > 1 && degree[links[**k].source] > 1)
+            .max_by(|a, b| a.1.total_cmp(b.1));
+        if let Some((&k, &c)) = worst
+            && g.redundancy > 6
+        {
+            let rest = ((g.chi2 - c) / (g.redundancy - 6) as f64).max(1.0);
+            if c / rest > config.gate_chi2 {
+                links[k].rejected = Some(format!(
+                    "disagrees with the other links (χ² = {:.1} > {:.1} after the variance factor {rest:.3})",
+                    c / rest,
+                    config.gate_chi2
+                ));
+                continue;
+            }
+        }
+        let unobservable = (0..n)
+            .map(|i| {
+                let t = &g.world_from_scan[i];
+                // The scan's information from its links, in its own frame
+                // (rotation about its scanner, as ICP's lever arm assumes).
+                let mut h = Matrix6::zeros();
+                for &k in &used {
+                    let l = &links[k];
+                    if l.target == i || l.source == i {
+                        let j = adjoint(&g.world_from_scan[l.target].inverse()) * adjoint(t);
+                        h += j.transpose() * links[k].result.as_ref().expect("accepted").information * j;
+                    }
+                }
+                let to_world = adjoint(t);
+                Observability::new(&h, lever_arm[i], config.degeneracy_ratio)
+                    .unobservable()
+                    .into_iter()
+                    .map(|d| (to_world * d).normalize())
+                    .collect()
+            })
+            .collect();
+        let scale = variance_factor.max(1.0);
+        // Scan 0's prior leaves it within 1e-20 m of its pose: put it there.
+        let shift = poses[0] * g.world_from_scan[0].inverse();
+        return Ok(LinkGraph {
+            world_from_scan: g.world_from_scan.iter().map(|p| shift * p).collect(),
+            covariance: g.covariance.into_iter().map(|c| c * scale).collect(),
+            links,
+            unobservable,
+            variance_factor,
+            redundancy: g.redundancy,
+        });
+    }
+}
+
+/// The information of one step of the start (see [`LinkConfig`]).
+pub(crate) fn step_information(c: &LinkConfig) -> Matrix6<f64> {
+    let (r, t) = (c.step_sigma_rad.powi(-2), c.step_sigma_m.powi(-2));
+    Matrix6::from_diagonal(&Vector6::new(r, r, r, t, t, t))
+}

@@ -1,0 +1,242 @@
+//! A user's scan set registered into one frame: multi-view matching
+//! ([`crate::multiview`]) stage by stage of a coarse-to-fine schedule,
+//! each stage starting from the last one's poses; for [`Mode::Graph`] the
+//! finest stage is the link graph over every overlapping pair
+//! ([`crate::links`]), and the coarser stages match pairwise — the graph
+//! makes the set consistent, so they need only bring each scan within the
+//! finer stage's reach. On the three 3DTK scans that lands where
+//! simultaneous stages before the graph land (to 0.002° and 0.1 mm) in a
+//! third of the time.
+//!
+//! The first scan stays where its start puts it and defines the frame.
+
+use nalgebra::{Isometry3, Matrix6, Point3, Vector6};
+
+use crate::error::{FusionError, Result};
+use crate::icp::{IcpResult, Stage};
+use crate::links::{LinkConfig, LinkGraph};
+use crate::multiview::{MultiviewConfig, Strategy, register_views};
+
+/// How the set is registered.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mode {
+    /// Each scan against the earlier scan with the most overlap.
+    Pairwise,
+    /// Each scan against the metascan of all earlier ones.
+    Incremental,
+    /// The seed's simultaneous matching.
+    Simultaneous,
+    /// Simultaneous matching, then the link graph over every pair.
+    Graph,
+}
+
+/// The settings of [`register_set`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct SetConfig {
+    /// The mode. Default graph.
+    pub mode: Mode,
+    /// The coarse-to-fine stages (voxel of both sets, correspondence
+    /// distance). Default 0.5/2, 0.25/1, 0.1/0.5, 0.05/0.2 m.
+    pub stages: Vec<Stage>,
+    /// Everything else: the ICP settings (point-to-plane, Huber 2 cm, 50
+    /// iterations, converged below 0.1 mm and 1e-4 rad, back faces
+    /// rejected, blind directions held: ratio 1e-4), `min_pairs` (250 at
+    /// the finest stage, scaled by the cell's area at coarser ones), the
+    /// step σ of the start and the link gate. The voxels and distances are
+    /// the stages'.
+    pub link: LinkConfig,
+}
+
+impl Default for SetConfig {
+    fn default() -> Self {
+        Self {
+            mode: Mode::Graph,
+            stages: [(0.5, 2.0), (0.25, 1.0), (0.1, 0.5), (0.05, 0.2)]
+                .map(|(voxel_m, max_correspondence_m)| Stage { voxel_m, max_correspondence_m })
+                .to_vec(),
+            link: {
+                let link = LinkConfig::default();
+                LinkConfig {
+                    multiview: MultiviewConfig {
+                        icp: crate::icp::IcpConfig {
+                            kernel: crate::icp::Kernel::Huber { width_m: 0.02 },
+                            translation_tolerance_m: 1e-4,
+                            rotation_tolerance_rad: 1e-4,
+                            ..link.multiview.icp
+                        },
+                        ..link.multiview
+                    },
+                    ..link
+                }
+            },
+        }
+    }
+}
+
+/// What [`register_set`] returns.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SetResult {
+    /// Every scan's registered `world_from_scan`.
+    pub world_from_scan: Vec<Isometry3<f64>>,
+    /// Each pose's 6×6 covariance (ξ = (ω, v), left perturbation, world
+    /// frame): the link graph's, or for the other modes the last match's
+    /// (its partners held) with the start's step σ along what it cannot
+    /// see; zero for the first scan.
+    pub covariance: Vec<Matrix6<f64>>,
+    /// Each scan's directions the matches do not see (unit ξ, world frame).
+    pub unobservable: Vec<Vec<Vector6<f64>>>,
+    /// The final stage's matches: the link graph's pairs, or each scan's
+    /// last match against its partners.
+    pub links: Vec<SetLink>,
+    /// ICP runs in all.
+    pub matches: usize,
+    /// False when a simultaneous queue was abandoned at its cap.
+    pub settled: bool,
+    /// The link graph's variance factor (graph mode).
+    pub variance_factor: Option<f64>,
+}
+
+/// One match of the final stage.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SetLink {
+    /// The scan that was matched.
+    pub source: usize,
+    /// The scans it was matched against.
+    pub targets: Vec<usize>,
+    /// Correspondences at the start of the match (graph mode).
+    pub overlap: Option<usize>,
+    /// The match, when ICP ran to the end.
+    pub result: Option<IcpResult>,
+    /// Why it is not used; `None` when it is.
+    pub rejected: Option<String>,
+}
+
+/// Registers `scans` (each in its own frame) from `starts`, their guessed
+/// `world_from_scan`. `progress(stage, stages, done, total)` is called as
+/// scans (and, in graph mode, pairs: stage = stages) are matched.
+pub fn register_set<S: AsRef<[Point3<f32>]> + Sync>(
+    scans: &[S],
+    starts: &[Isometry3<f64>],
+    config: &SetConfig,
+    progress: &mut dyn FnMut(usize, usize, usize, usize),
+) -> Result<SetResult> {
+    if config.stages.is_empty() {
+        return Err(FusionError::OutOfRange {
+            what: "stages of the schedule".into(),
+            value: 0.0,
+            expected: "at least one VOXEL/DISTANCE".into(),
+        });
+    }
+    let strategy = match config.mode {
+        Mode::Pairwise => Strategy::Pairwise,
+        Mode::Incremental => Strategy::Incremental,
+        Mode::Simultaneous => Strategy::Simultaneous,
+        // The link graph at the finest stage makes the set consistent: its
+        // coarser stages only need to bring each scan into the finer
+        // stage's reach (see the module docs).
+        Mode::Graph => Strategy::Pairwise,
+    };
+    let finest = config.stages.last().map_or(1.0, |s| s.voxel_m);
+    let stage_config = |s: &Stage| MultiviewConfig {
+        strategy,
+        source_voxel_m: s.voxel_m,
+        target_voxel_m: s.voxel_m,
+        icp: crate::icp::IcpConfig { max_correspondence_m: s.max_correspondence_m, ..config.link.multiview.icp },
+        // Fewer reduced points at a coarse stage give fewer pairs: the
+        // overlap threshold scales with the cell's area.
+        min_pairs: scaled_min_pairs(config.link.multiview.min_pairs, s.voxel_m, finest),
+        ..config.link.multiview
+    };
+    let stages = config.stages.len();
+    // Graph mode matches its finest stage in the link graph.
+    let multiview_stages = &config.stages[..stages - usize::from(config.mode == Mode::Graph)];
+    let mut poses = starts.to_vec();
+    let mut matches = 0;
+    let mut settled = true;
+    let mut last = None;
+    for (k, stage) in multiview_stages.iter().enumerate() {
+        let r = register_views(scans, &poses, &stage_config(stage), &mut |done, total| {
+            progress(k + 1, stages, done, total)
+        })?;
+        poses.clone_from(&r.world_from_scan);
+        matches += r.matches;
+        settled &= r.settled;
+        last = Some(r);
+    }
+    if config.mode == Mode::Graph {
+        let link = LinkConfig { multiview: stage_config(config.stages.last().expect("a stage")), ..config.link };
+        let g = crate::links::adjust(scans, &poses, starts, &link, &mut |done, total| {
+            progress(stages, stages, done, total)
+        })?;
+        return Ok(from_graph(g, matches, settled));
+    }
+    let last = last.expect("at least one stage");
+    let step = crate::links::step_information(&config.link);
+    let n = scans.len();
+    let covariance = (0..n)
+        .map(|i| match &last.last_match[i] {
+            None => Matrix6::zeros(),
+            Some(m) => {
+                let blind: Matrix6<f64> = m.unobservable.iter().map(|d| d * d.transpose()).sum();
+                let filled = m.information + blind.transpose() * step * blind;
+                filled
+                    .try_inverse()
+                    .map_or(Matrix6::from_diagonal_element(f64::INFINITY), |c| 0.5 * (c + c.transpose()))
+            }
+        })
+        .collect();
+    let links = (0..n)
+        .filter_map(|i| {
+            last.last_match[i].as_ref().map(|m| SetLink {
+                source: i,
+                targets: last.partners[i].clone(),
+                overlap: None,
+                result: Some(m.clone()),
+                rejected: None,
+            })
+        })
+        .collect();
+    Ok(SetResult {
+        world_from_scan: poses,
+        covariance,
+        unobservable: last
+            .last_match
+            .iter()
+            .map(|m| m.as_ref().map_or_else(Vec::new, |m| m.unobservable.clone()))
+            .collect(),
+        links,
+        matches,
+        settled,
+        variance_factor: None,
+    })
+}
+
+fn from_graph(g: LinkGraph, matches: usize, settled: bool) -> SetResult {
+    let matches = matches + g.links.iter().filter(|l| l.result.is_some()).count();
+    SetResult {
+        world_from_scan: g.world_from_scan,
+        covariance: g.covariance,
+        unobservable: g.unobservable,
+        links: g
+            .links
+            .into_iter()
+            .map(|l| SetLink {
+                source: l.source,
+                targets: vec![l.target],
+                overlap: Some(l.overlap),
+                result: l.result,
+                rejected: l.rejected,
+            })
+            .collect(),
+        matches,
+        settled,
+        variance_factor: Some(g.variance_factor),
+    }
+}
+
+/// `min_pairs` at a stage of cell `voxel_m` when it holds at the finest
+/// cell `finest_m` (at least 6, the unknowns of a pose).
+fn scaled_min_pairs(min_pairs: usize, voxel_m: f64, finest_m: f64) -> usize {
+    let ratio = (finest_m / voxel_m).min(1.0);
+    ((min_pairs as f64 * ratio * ratio).round() as usize).max(6)
+}

@@ -1,0 +1,121 @@
+//! Scan sets registered into one frame ([`fusion::scanset`]) on real
+//! points: the three 3DTK scans from their odometry against the reference
+//! transforms, and a real scan cut into overlapping parts under known
+//! transforms.
+
+use std::path::PathBuf;
+
+use fusion::scanset::{Mode, SetConfig, register_set};
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use scanner::io::{from_3dtk_axes, read, read_3dtk_pose, read_matrix4};
+
+fn data(rel: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data").join(rel)
+}
+
+/// (rotation error in degrees, translation error in metres).
+fn error(estimate: &Isometry3<f64>, reference: &Isometry3<f64>) -> (f64, f64) {
+    let d = reference.inverse() * estimate;
+    (d.rotation.angle().to_degrees(), d.translation.vector.norm())
+}
+
+fn threedtk(k: usize) -> Vec<Point3<f32>> {
+    let c = read(&data(&format!("3dtk_dat/scan{k:03}.3d"))).expect("scan");
+    c.points.into_iter().filter(|p| (0.5..32.5).contains(&p.coords.norm())).collect()
+}
+
+fn threedtk_reference(a: usize, b: usize) -> Isometry3<f64> {
+    from_3dtk_axes(&read_matrix4(&data(&format!("3dtk_dat/reference_T_scan{a:03}_scan{b:03}.txt"))).expect("m"))
+}
+
+#[test]
+fn the_three_3dtk_scans_land_on_the_references() {
+    let scans: Vec<Vec<Point3<f32>>> = (0..3).map(threedtk).collect();
+    let starts: Vec<Isometry3<f64>> =
+        (0..3).map(|k| read_3dtk_pose(&data(&format!("3dtk_dat/scan{k:03}.pose"))).expect("pose")).collect();
+    for mode in [Mode::Graph, Mode::Simultaneous, Mode::Pairwise, Mode::Incremental] {
+        let config = SetConfig { mode, ..SetConfig::default() };
+        let r = register_set(&scans, &starts, &config, &mut |_, _, _, _| ()).expect("registers");
+        assert_eq!(r.world_from_scan[0], starts[0], "the first scan holds the frame");
+        for (a, b) in [(0, 1), (1, 2)] {
+            let relative = r.world_from_scan[a].inverse() * r.world_from_scan[b];
+            let (deg, m) = error(&relative, &threedtk_reference(a, b));
+            // The default (graph) within the references' own accuracy; the
+            // single strategies land where their matches put them (the
+            // seed's simultaneous matching ≈ 1° off on 0←1: README).
+            let (max_deg, max_m) = if mode == Mode::Graph { (0.35, 0.03) } else { (1.2, 0.05) };
+            assert!(deg < max_deg && m < max_m, "{mode:?} {a}←{b}: {deg}° {m} m");
+        }
+        assert!(r.unobservable.iter().all(Vec::is_empty), "{mode:?}: {:?}", r.unobservable);
+        for (i, c) in r.covariance.iter().enumerate().skip(1) {
+            let (rot, pos) = ((c[(0, 0)] + c[(1, 1)] + c[(2, 2)]).sqrt(), (c[(3, 3)] + c[(4, 4)] + c[(5, 5)]).sqrt());
+            assert!(rot.is_finite() && rot > 0.0 && rot < 0.5f64.to_radians(), "{mode:?} scan {i}: σ {rot} rad");
+            assert!(pos > 0.0 && pos < 0.05, "{mode:?} scan {i}: σ {pos} m");
+        }
+        if mode == Mode::Graph {
+            assert_eq!(r.links.len(), 3, "every pair overlaps: {:?}", r.links.len());
+            assert!(
+                r.links.iter().all(|l| l.rejected.is_none()),
+                "{:?}",
+                r.links.iter().map(|l| &l.rejected).collect::<Vec<_>>()
+            );
+        }
+    }
+}
+
+/// Scan 1 cut into four overlapping parts — each a different half of its
+/// points, drawn by a hash — each kept in its own frame under a known
+/// transform (turned about the scanner, which stays at each frame's
+/// origin as in a real scan); the starts off by up to 0.5 m and 5°: every
+/// part comes back to 0.1° / 1 cm of the truth. (Parts cut by azimuth
+/// into wedges are not used: where a wedge ends, its neighbour's points
+/// beyond the cut pair with the cut's edge and pull the match by 0.1–0.4°
+/// on this scan — the partial-overlap bias noted in the README.)
+#[test]
+fn a_real_scan_cut_into_parts_comes_back_together() {
+    let points = threedtk(1);
+    let truth: Vec<Isometry3<f64>> = (0..4)
+        .map(|k| {
+            let k = k as f64;
+            Isometry3::from_parts(
+                Translation3::identity(),
+                UnitQuaternion::from_euler_angles(0.02 * k, -0.01 * k, 0.4 * k),
+            )
+        })
+        .collect();
+    let parts: Vec<Vec<Point3<f32>>> = (0..4u64)
+        .map(|k| {
+            points
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| (((*i as u64) ^ (k << 32)).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 63) == 0)
+                .map(|(_, p)| (truth[k as usize].inverse() * p.cast::<f64>()).cast::<f32>())
+                .collect()
+        })
+        .collect();
+    for (k, p) in parts.iter().enumerate() {
+        assert!((0.45..0.55).contains(&(p.len() as f64 / points.len() as f64)), "part {k}: {} points", p.len());
+    }
+    let offsets = [
+        (Vector3::<f64>::zeros(), Vector3::<f64>::zeros()),
+        (Vector3::new(0.5, 0.0, 0.0), Vector3::new(0.0, 0.0, 5.0)),
+        (Vector3::new(-0.3, 0.4, 0.0), Vector3::new(2.0, -3.0, -4.0)),
+        (Vector3::new(0.0, -0.35, 0.35), Vector3::new(-3.0, 3.0, 2.5)),
+    ];
+    let starts: Vec<Isometry3<f64>> = truth
+        .iter()
+        .zip(offsets)
+        .map(|(t, (dt, dr))| {
+            let r = UnitQuaternion::from_euler_angles(dr.x.to_radians(), dr.y.to_radians(), dr.z.to_radians());
+            Isometry3::from_parts(Translation3::from(dt), r) * t
+        })
+        .collect();
+    for mode in [Mode::Graph, Mode::Simultaneous] {
+        let config = SetConfig { mode, ..SetConfig::default() };
+        let r = register_set(&parts, &starts, &config, &mut |_, _, _, _| ()).expect("registers");
+        for (k, (pose, truth)) in r.world_from_scan.iter().zip(&truth).enumerate().skip(1) {
+            let (deg, m) = error(pose, truth);
+            assert!(deg < 0.1 && m < 0.01, "{mode:?} part {k}: {deg}° {m} m");
+        }
+    }
+}
