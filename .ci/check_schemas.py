@@ -11,6 +11,7 @@ import json
 import pathlib
 import subprocess
 import sys
+import tempfile
 
 import jsonschema
 
@@ -77,6 +78,10 @@ def main():
                 "--json"),
         "register --json",
     )
+    with tempfile.TemporaryDirectory() as out:
+        check("match", command(cps, "match", DATA / "3dtk_dat", "--out", out, "--json"), "match --json")
+        poses = pathlib.Path(out) / "poses.json"
+        check("match", json.loads(poses.read_text()), poses)
     check("emulate", command(cps, "emulate", hall, "--json", "--seconds", "1"), "emulate --json")
 
 

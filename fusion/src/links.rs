@@ -96,7 +96,8 @@ pub struct LinkGraph {
     /// Every scan's adjusted `world_from_scan`; scan 0 stays at its pose.
     pub world_from_scan: Vec<Isometry3<f64>>,
     /// Each pose's 6×6 covariance (ξ = (ω, v), left perturbation, world
-    /// frame), scaled by the variance factor when it exceeds 1.
+    /// frame) relative to scan 0 (zero: it is the frame), scaled by the
+    /// variance factor when it exceeds 1.
     pub covariance: Vec<Matrix6<f64>>,
     /// Every candidate pair, used or not, in order of (source, target).
     pub links: Vec<Link>,
@@ -268,7 +269,13 @@ fn solve(
         let shift = poses[0] * g.world_from_scan[0].inverse();
         return Ok(LinkGraph {
             world_from_scan: g.world_from_scan.iter().map(|p| shift * p).collect(),
-            covariance: g.covariance.into_iter().map(|c| c * scale).collect(),
+            // Scan 0 is the frame: the others' covariances are relative to it.
+            covariance: g
+                .covariance
+                .into_iter()
+                .enumerate()
+                .map(|(i, c)| if i == 0 { Matrix6::zeros() } else { c * scale })
+                .collect(),
             links,
             unobservable,
             variance_factor,

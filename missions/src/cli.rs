@@ -55,6 +55,10 @@ pub enum Command {
     Adjust(commands::adjust::AdjustArgs),
     /// Align one scan file to another with ICP.
     Register(commands::register::RegisterArgs),
+    /// Register a set of your own scans into one frame (a 3DTK directory,
+    /// a multi-scan E57, or scan files): poses, merged cloud, link table,
+    /// match.rrd.
+    Match(commands::match_set::MatchArgs),
     /// Serve a mission's instruments on pseudo-terminals (total station,
     /// tilt sensor, LMS-2xx, scan head, drives), answering from the
     /// simulated world; prints the [backend.serial] table with the ports and
@@ -87,6 +91,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> anyhow::Result<Outcome> {
         Command::Fuse(args) => commands::fuse::run(args, out),
         Command::Adjust(args) => commands::adjust::run(args, out),
         Command::Register(args) => commands::register::run(args, out),
+        Command::Match(args) => commands::match_set::run(args, out),
         Command::Emulate(args) => commands::emulate::run(args, out),
         Command::Schemas(args) => commands::schemas::run(args, out),
     }?;

@@ -12,6 +12,9 @@
 //!   killed run resumes from ([`run::resume`]), the fusion of the scans
 //!   ([`run::fuse`]), the pipe inspection, the one output stage
 //!   ([`run::outputs`]) and the reports ([`run::report`]);
+//! - [`scans`]: a user's own scans outside a mission (files, 3DTK
+//!   directories, multi-scan E57) with their start poses, for `register`
+//!   and `match`;
 //! - [`view`]: what the user sees — terminal tables, JSON documents, plots
 //!   and the Rerun recording;
 //! - [`commands`]: one file per subcommand, [`cli`] the command line.
@@ -22,6 +25,7 @@ pub mod commands;
 pub mod mission;
 pub mod planning;
 pub mod run;
+pub mod scans;
 pub mod view;
 
 pub use mission::diagnostics::{Diagnostic, Diagnostics};

@@ -6,6 +6,7 @@
 pub mod adjust;
 pub mod emulate;
 pub mod fuse;
+pub mod match_set;
 pub mod montecarlo;
 pub mod plan;
 pub mod predict;

@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use anyhow::{Context, bail};
 use fusion::icp::{IcpConfig, IcpResult, Kernel, Method, Stage, align_coarse_to_fine};
-use nalgebra::{Isometry3, Matrix4, Point3, Rotation3, Translation3, UnitQuaternion};
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
 use serde::Serialize;
 
 /// The error metric on the command line.
@@ -102,9 +102,7 @@ pub fn run(args: &RegisterArgs, out: &mut dyn Write) -> anyhow::Result<super::Ou
         kernel: args.huber.map_or(Kernel::None, |k| Kernel::Huber { width_m: k }),
         ..IcpConfig::default()
     };
-    if !(args.min_range >= 0.0 && args.max_range > args.min_range) {
-        bail!("--min-range {} / --max-range {}: expected 0 ≤ min < max", args.min_range, args.max_range);
-    }
+    crate::scans::settings::check_range(args.min_range, args.max_range)?;
     let source = load(&args.source, args.min_range, args.max_range)?;
     let target = load(&args.target, args.min_range, args.max_range)?;
     // Start the worker threads now: spawning the pool is neither
@@ -124,25 +122,16 @@ pub fn run(args: &RegisterArgs, out: &mut dyn Write) -> anyhow::Result<super::Ou
 }
 
 fn stages(args: &RegisterArgs) -> anyhow::Result<Vec<Stage>> {
-    let Some(text) = &args.schedule else {
-        return Ok(vec![Stage { voxel_m: args.voxel, max_correspondence_m: args.max_dist }]);
-    };
-    text.split(',')
-        .map(|s| {
-            let parse = |v: Option<&str>| v.and_then(|v| v.trim().parse::<f64>().ok());
-            let mut parts = s.split('/');
-            match (parse(parts.next()), parse(parts.next()), parts.next()) {
-                (Some(voxel_m), Some(max_correspondence_m), None) => Ok(Stage { voxel_m, max_correspondence_m }),
-                _ => bail!("--schedule stage \"{s}\": expected VOXEL/MAXDIST in metres, e.g. 0.1/0.5"),
-            }
-        })
-        .collect()
+    match &args.schedule {
+        Some(text) => crate::scans::settings::schedule(text),
+        None => Ok(vec![Stage { voxel_m: args.voxel, max_correspondence_m: args.max_dist }]),
+    }
 }
 
 fn initial_guess(args: &RegisterArgs) -> anyhow::Result<Isometry3<f64>> {
     if let Some(path) = &args.init_file {
         let m = scanner::io::read_matrix4(path)?;
-        return isometry(&m).with_context(|| format!("{}: the initial guess", path.display()));
+        return crate::scans::settings::rigid(&m).with_context(|| format!("{}: the initial guess", path.display()));
     }
     let Some(text) = &args.init else { return Ok(Isometry3::identity()) };
     let v: Vec<f64> = text.split_whitespace().map(str::parse).collect::<Result<_, _>>().map_err(|_| {
@@ -157,28 +146,8 @@ fn initial_guess(args: &RegisterArgs) -> anyhow::Result<Isometry3<f64>> {
     }
 }
 
-/// A rigid transform from a 4×4 matrix, which must be one (orthonormal
-/// rotation within 1e-6, last row 0 0 0 1).
-fn isometry(m: &Matrix4<f64>) -> anyhow::Result<Isometry3<f64>> {
-    let r = m.fixed_view::<3, 3>(0, 0).into_owned();
-    let off = (r.transpose() * r - nalgebra::Matrix3::identity()).amax();
-    if !(off < 1e-6 && r.determinant() > 0.0) {
-        bail!("the upper-left 3×3 is not a rotation (|RᵀR − I| = {off:.2e}, det = {:.6})", r.determinant());
-    }
-    if m.fixed_view::<1, 4>(3, 0) != nalgebra::RowVector4::new(0.0, 0.0, 0.0, 1.0) {
-        bail!("the last row is {:?}: expected 0 0 0 1", m.fixed_view::<1, 4>(3, 0).iter().collect::<Vec<_>>());
-    }
-    Ok(Isometry3::from_parts(
-        Translation3::from(m.fixed_view::<3, 1>(0, 3).into_owned()),
-        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r)),
-    ))
-}
-
 fn load(path: &Path, min_m: f64, max_m: f64) -> anyhow::Result<Vec<Point3<f32>>> {
-    let cloud = scanner::io::read(path)?;
-    let (min2, max2) = ((min_m * min_m) as f32, (max_m * max_m) as f32);
-    let points: Vec<_> =
-        cloud.points.into_iter().filter(|p| (min2..=max2).contains(&p.coords.norm_squared())).collect();
+    let points = crate::scans::settings::within_range(scanner::io::read(path)?.points, min_m, max_m);
     if points.is_empty() {
         bail!("{}: no points between {min_m} m and {max_m} m from the scan origin", path.display());
     }

@@ -14,7 +14,8 @@ use crate::view::document::{Document, schema};
 #[derive(Debug, Clone, clap::Args)]
 pub struct SchemasArgs {
     /// One document's schema to print (`report`, `fusion`, `adjust`,
-    /// `predict`, `plan`, `montecarlo`, `register`, `emulate`); without it,
+    /// `predict`, `plan`, `montecarlo`, `register`, `match`, `emulate`);
+    /// without it,
     /// the list.
     pub name: Option<String>,
     /// Write every schema into DIR as `<name>.schema.json`.
@@ -36,6 +37,7 @@ pub fn documents() -> Vec<(&'static str, u32, &'static str, schemars::Schema)> {
         of::<crate::view::json::PlanJson>("plan --json"),
         of::<crate::view::json::MonteCarloJson>("montecarlo --json"),
         of::<super::register::Report>("register --json"),
+        of::<super::match_set::MatchReport>("match --json, OUT/poses.json"),
         of::<super::emulate::PortsJson>("emulate --json"),
     ]
 }

@@ -3,7 +3,9 @@
 //! name, acquisition time and a GUID of its own; points in no scan in one
 //! more `data3D` of world coordinates (f64 when georeferenced); intensity
 //! as a unit float when present; the CRS's WKT in `coordinateMetadata`.
-//! Reading takes every point cloud in the file with its pose applied.
+//! Reading takes every point cloud in the file with its pose applied
+//! ([`read`]), or each one in its own frame with its pose
+//! ([`read_e57_scans`]).
 
 use std::path::Path;
 
@@ -45,6 +47,62 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
         cloud.intensity = Some(intensity);
     }
     Ok(cloud)
+}
+
+/// One `data3D` of an E57 file, in its own frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct E57Scan {
+    /// Its name (`data3D[k]` when it has none).
+    pub name: String,
+    /// Its pose (identity when the file gives none).
+    pub world_from_scan: Isometry3<f64>,
+    /// Its valid Cartesian points in its own frame.
+    pub points: Vec<Point3<f32>>,
+}
+
+/// Reads every `data3D` of an E57 file in its own frame with its pose —
+/// a terrestrial scanner's scans with their registration.
+pub fn read_e57_scans(path: &Path) -> Result<Vec<E57Scan>> {
+    let mut reader = E57Reader::from_file(path).map_err(|e| ScannerError::whole_file(path, e))?;
+    let mut scans = Vec::new();
+    for (k, pc) in reader.pointclouds().into_iter().enumerate() {
+        let world_from_scan = pc.transform.as_ref().map_or(Ok(Isometry3::identity()), |t| {
+            let q = nalgebra::Quaternion::new(t.rotation.w, t.rotation.x, t.rotation.y, t.rotation.z);
+            let values = [q.w, q.i, q.j, q.k, t.translation.x, t.translation.y, t.translation.z];
+            if !values.iter().all(|v| v.is_finite()) || q.norm() < 1e-9 {
+                return Err(ScannerError::whole_file(
+                    path,
+                    format!("data3D[{k}]: pose {values:?}: expected a finite unit quaternion and translation"),
+                ));
+            }
+            Ok(Isometry3::from_parts(
+                nalgebra::Translation3::new(t.translation.x, t.translation.y, t.translation.z),
+                nalgebra::UnitQuaternion::from_quaternion(q),
+            ))
+        })?;
+        let name = pc.name.clone().unwrap_or_else(|| format!("data3D[{k}]"));
+        let mut iter = reader.pointcloud_simple(&pc).map_err(|e| ScannerError::whole_file(path, e))?;
+        iter.apply_pose(false);
+        let mut points = Vec::new();
+        for (i, p) in iter.enumerate() {
+            let p = p.map_err(|e| ScannerError::whole_file(path, format!("data3D[{k}] point {i}: {e}")))?;
+            if let CartesianCoordinate::Valid { x, y, z } = p.cartesian {
+                let point = Point3::new(x as f32, y as f32, z as f32);
+                if !point.iter().all(|v| v.is_finite()) {
+                    return Err(ScannerError::whole_file(
+                        path,
+                        format!(
+                            "data3D[{k}] point {i}: ({x}, {y}, {z}) m: expected coordinates within ±{:e}",
+                            f32::MAX
+                        ),
+                    ));
+                }
+                points.push(point);
+            }
+        }
+        scans.push(E57Scan { name, world_from_scan, points });
+    }
+    Ok(scans)
 }
 
 /// An E57 file written part by part: one `data3D` per scan of each part,

@@ -9,6 +9,7 @@ mod georeferenced;
 mod hostile;
 mod journal_v1;
 mod malformed;
+mod match_set;
 mod montecarlo;
 mod network;
 mod odometry;

@@ -7,7 +7,8 @@
 use serde_json::Value;
 use tests::{cps_survey, example, workspace};
 
-const DOCUMENTS: [&str; 8] = ["report", "fusion", "adjust", "predict", "plan", "montecarlo", "register", "emulate"];
+const DOCUMENTS: [&str; 9] =
+    ["report", "fusion", "adjust", "predict", "plan", "montecarlo", "register", "match", "emulate"];
 
 #[test]
 fn docs_schemas_are_the_generated_ones() {

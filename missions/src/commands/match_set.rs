@@ -1,0 +1,425 @@
+//! `cps-survey match INPUT…`: registers a user's own scans into one frame
+//! ([`fusion::scanset`]) and writes their poses (`poses.json`, 3DTK
+//! `.frames`), the merged cloud, the link table and `match.rrd`.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use fusion::icp::{Kernel, Method};
+use fusion::scanset::{Mode, SetConfig, SetResult};
+use nalgebra::{Isometry3, Matrix6, Vector3, Vector6};
+use serde::Serialize;
+
+use super::Outcome;
+use super::register::MethodArg;
+use crate::scans::inputs::InputScan;
+use crate::view::recording::{Recorder, Viewer};
+
+/// How the set is registered (`--mode`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ModeArg {
+    /// Each scan against the earlier scan with the most overlap.
+    Pairwise,
+    /// Each scan against the union of the earlier ones.
+    Incremental,
+    /// The seed's simultaneous matching.
+    Simultaneous,
+    /// Every overlapping pair matched and adjusted as a pose graph.
+    Graph,
+}
+
+/// `match`'s arguments.
+#[derive(Debug, Clone, clap::Args)]
+pub struct MatchArgs {
+    /// Scans: a 3DTK directory (scanNNN.3d + scanNNN.pose), a multi-scan
+    /// E57 (its poses the start), or scan files of any supported format.
+    #[arg(required = true)]
+    pub inputs: Vec<PathBuf>,
+    /// How the set is registered.
+    #[arg(long, value_enum, default_value = "graph")]
+    pub mode: ModeArg,
+    /// JSON [{"file": "…", "world_from_scan": [[4×4 row-major]]}] for scans
+    /// that carry no pose (default identity; the first scan defines the
+    /// frame).
+    #[arg(long, value_name = "FILE")]
+    pub init_poses: Option<PathBuf>,
+    /// Coarse-to-fine stages "VOXEL/MAXDIST,…" in metres.
+    #[arg(long, default_value = "0.5/2,0.25/1,0.1/0.5,0.05/0.2")]
+    pub schedule: String,
+    /// Error metric.
+    #[arg(long, value_enum, default_value = "point-to-plane")]
+    pub method: MethodArg,
+    /// Huber kernel width, metres (0: plain least squares).
+    #[arg(long, default_value_t = 0.02)]
+    pub huber: f64,
+    /// Drop points nearer than this to their scan's origin, metres.
+    #[arg(long, default_value_t = 0.0)]
+    pub min_range: f64,
+    /// Drop points farther than this from their scan's origin, metres.
+    #[arg(long, default_value_t = f64::INFINITY)]
+    pub max_range: f64,
+    /// Where the outputs go (created if missing).
+    #[arg(long, default_value = "match")]
+    pub out: PathBuf,
+    /// Cloud formats, comma separated: ply, las, laz, copc, e57, pcd, xyz.
+    #[arg(long, default_value = "ply", value_delimiter = ',')]
+    pub formats: Vec<String>,
+    /// Print one JSON object instead of the tables.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// `match --json` and `poses.json`.
+#[derive(Debug, Serialize, schemars::JsonSchema)]
+pub(crate) struct MatchReport {
+    /// The mode.
+    mode: String,
+    /// Every scan in input order.
+    scans: Vec<ScanReport>,
+    /// The final stage's matches, used or not.
+    links: Vec<LinkReport>,
+    /// ICP runs in all.
+    matches: usize,
+    /// The link graph's variance factor σ̂₀² (graph mode).
+    variance_factor: Option<f64>,
+    /// Registration time, seconds (reading the scans and writing excluded).
+    seconds: f64,
+}
+
+/// One scan in a [`MatchReport`].
+#[derive(Debug, Serialize, schemars::JsonSchema)]
+struct ScanReport {
+    /// The scan as given (`FILE.e57#NAME` for an E57's scans).
+    file: String,
+    /// Its registered pose, 4×4 row-major, metres.
+    world_from_scan: [[f64; 4]; 4],
+    /// 6×6, order (ωx, ωy, ωz, x, y, z), radians and metres, left
+    /// perturbation in the world frame (as `register`'s); zero for the
+    /// first scan, which holds the frame.
+    covariance: [[f64; 6]; 6],
+    /// Directions the matches cannot see (unit vectors in the order of
+    /// the covariance, world frame): held where the start put them, their
+    /// σ the start's.
+    degenerate_directions: Vec<[f64; 6]>,
+}
+
+/// One match in a [`MatchReport`].
+#[derive(Debug, Serialize, schemars::JsonSchema)]
+struct LinkReport {
+    /// The matched scan (index into `scans`).
+    source: usize,
+    /// The scans it was matched against.
+    targets: Vec<usize>,
+    /// Correspondences at the start of the match (graph mode).
+    overlap: Option<usize>,
+    /// Correspondences at the end, when ICP ran.
+    correspondences: Option<usize>,
+    /// RMS residual, metres, when ICP ran.
+    rmse_m: Option<f64>,
+    /// Whether ICP converged.
+    converged: bool,
+    /// Whether the match is used.
+    accepted: bool,
+    /// Why not, when rejected.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    reason: Option<String>,
+    /// Directions this match cannot see (order of the covariance, the
+    /// first target's frame).
+    degenerate_directions: Vec<[f64; 6]>,
+}
+
+impl crate::view::document::Document for MatchReport {
+    const NAME: &'static str = "match";
+    const VERSION: u32 = 1;
+}
+
+/// Runs `match`.
+pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
+    crate::scans::settings::check_range(args.min_range, args.max_range)?;
+    let stages = crate::scans::settings::schedule(&args.schedule)?;
+    if !(args.huber.is_finite() && args.huber >= 0.0) {
+        bail!("--huber {}: expected a width ≥ 0 in metres (0: least squares)", args.huber);
+    }
+    for f in &args.formats {
+        if !crate::mission::OUTPUT_FORMATS.contains(&f.as_str()) {
+            bail!("--formats {f}: expected some of {}", crate::mission::OUTPUT_FORMATS.join(", "));
+        }
+    }
+    if args.out.exists() && !args.out.is_dir() {
+        bail!("--out {}: exists and is not a directory", args.out.display());
+    }
+    crate::view::recording::available()?;
+    let mut config = SetConfig { mode: mode(args.mode), stages, ..SetConfig::default() };
+    let icp = &mut config.link.multiview.icp;
+    icp.kernel = if args.huber > 0.0 { Kernel::Huber { width_m: args.huber } } else { Kernel::None };
+    if args.method == MethodArg::PointToPoint {
+        icp.method = Method::PointToPoint;
+        // Back faces need the target's normals, which point-to-point does not estimate.
+        icp.reject_back_faces = false;
+    }
+    let min_points = config.link.multiview.min_pairs;
+    let scans = crate::scans::inputs::read(
+        &args.inputs,
+        args.init_poses.as_deref(),
+        (args.min_range, args.max_range),
+        min_points,
+    )?;
+    if scans.len() < 2 {
+        bail!("{}: one scan: expected at least two to match", scans[0].file);
+    }
+    let points: Vec<&[nalgebra::Point3<f32>]> = scans.iter().map(|s| s.points.as_slice()).collect();
+    let starts: Vec<Isometry3<f64>> = scans.iter().map(|s| s.start).collect();
+    rayon::broadcast(|_| ());
+    let started = Instant::now();
+    let bar = progress_bar(args.json);
+    let result = fusion::scanset::register_set(&points, &starts, &config, &mut |stage, stages, done, total| {
+        bar.set_message(format!("stage {stage}/{stages}"));
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    });
+    bar.finish_and_clear();
+    let result = result.map_err(|e| named(e, &scans))?;
+    let seconds = started.elapsed().as_secs_f64();
+    let report = report(args.mode, &scans, &result, seconds);
+    let written = write_outputs(args, &scans, &result, &report)?;
+    if args.json {
+        crate::view::document::write_line(out, &report)?;
+    } else {
+        write_text(out, &scans, &report)?;
+        writeln!(out, "outputs in {}: {}", args.out.display(), written.join(", "))?;
+    }
+    Ok(Outcome::Success)
+}
+
+fn mode(m: ModeArg) -> Mode {
+    match m {
+        ModeArg::Pairwise => Mode::Pairwise,
+        ModeArg::Incremental => Mode::Incremental,
+        ModeArg::Simultaneous => Mode::Simultaneous,
+        ModeArg::Graph => Mode::Graph,
+    }
+}
+
+fn progress_bar(hidden: bool) -> indicatif::ProgressBar {
+    if hidden {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new(0);
+    if let Ok(style) = indicatif::ProgressStyle::with_template("matching {msg} [{bar:30}] {pos}/{len}") {
+        bar.set_style(style);
+    }
+    bar
+}
+
+/// A fusion error with the scans' indices turned into their files.
+fn named(e: fusion::FusionError, scans: &[InputScan]) -> anyhow::Error {
+    let file = |i: usize| scans.get(i).map_or_else(|| format!("scan {i}"), |s| s.file.clone());
+    match e {
+        fusion::FusionError::NoOverlap { scan, pairs, needed, against } => {
+            let partner = against
+                .rsplit_once('(')
+                .and_then(|(_, n)| n.trim_end_matches(')').parse::<usize>().ok())
+                .map_or(against.clone(), file);
+            anyhow::anyhow!(
+                "{} and {partner} do not overlap at their start poses: {pairs} correspondences, expected at least {needed} (are the start poses within the schedule's first distance, and do the scans overlap?)",
+                file(scan)
+            )
+        }
+        fusion::FusionError::InScan { scan, source } => anyhow::anyhow!("{}: {source}", file(scan)),
+        e => anyhow::Error::new(e).context("matching the scans"),
+    }
+}
+
+fn matrix<const R: usize, const C: usize>(f: impl Fn(usize, usize) -> f64) -> [[f64; C]; R] {
+    std::array::from_fn(|r| std::array::from_fn(|c| f(r, c)))
+}
+
+fn directions(d: &[Vector6<f64>]) -> Vec<[f64; 6]> {
+    d.iter().map(|v| std::array::from_fn(|i| v[i])).collect()
+}
+
+fn report(mode: ModeArg, scans: &[InputScan], r: &SetResult, seconds: f64) -> MatchReport {
+    let name = match mode {
+        ModeArg::Pairwise => "pairwise",
+        ModeArg::Incremental => "incremental",
+        ModeArg::Simultaneous => "simultaneous",
+        ModeArg::Graph => "graph",
+    };
+    MatchReport {
+        mode: name.into(),
+        scans: scans
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                let m = r.world_from_scan[i].to_homogeneous();
+                let c: Matrix6<f64> = r.covariance[i];
+                ScanReport {
+                    file: s.file.clone(),
+                    world_from_scan: matrix(|a, b| m[(a, b)]),
+                    covariance: matrix(|a, b| c[(a, b)]),
+                    degenerate_directions: directions(&r.unobservable[i]),
+                }
+            })
+            .collect(),
+        links: r
+            .links
+            .iter()
+            .map(|l| LinkReport {
+                source: l.source,
+                targets: l.targets.clone(),
+                overlap: l.overlap,
+                correspondences: l.result.as_ref().map(|m| m.inliers),
+                rmse_m: l.result.as_ref().map(|m| m.rmse_m),
+                converged: l.result.as_ref().is_some_and(|m| m.converged),
+                accepted: l.rejected.is_none(),
+                reason: l.rejected.clone(),
+                degenerate_directions: l.result.as_ref().map_or_else(Vec::new, |m| directions(&m.unobservable)),
+            })
+            .collect(),
+        matches: r.matches,
+        variance_factor: r.variance_factor,
+        seconds,
+    }
+}
+
+/// poses.json, frames/NAME.frames, links.csv, the clouds and match.rrd.
+fn write_outputs(args: &MatchArgs, scans: &[InputScan], r: &SetResult, report: &MatchReport) -> Result<Vec<String>> {
+    let dir = &args.out;
+    let frames = dir.join("frames");
+    std::fs::create_dir_all(&frames).with_context(|| format!("creating {}", frames.display()))?;
+    crate::view::document::write_file(&dir.join("poses.json"), report)?;
+    let mut names = std::collections::HashSet::new();
+    for (i, s) in scans.iter().enumerate() {
+        // Unique, file-system-safe names (E57 scans may share theirs).
+        let mut name: String =
+            s.name.chars().map(|c| if c.is_ascii_alphanumeric() || "-_.".contains(c) { c } else { '_' }).collect();
+        if !names.insert(name.clone()) {
+            name = format!("{name}_{i}");
+            names.insert(name.clone());
+        }
+        scanner::io::write_3dtk_frames(&frames.join(format!("{name}.frames")), &r.world_from_scan[i])?;
+    }
+    write_links(&dir.join("links.csv"), scans, report)?;
+    let mut written = vec!["poses.json".to_string(), "frames/".into(), "links.csv".into()];
+    written.extend(write_clouds(dir, &args.formats, scans, r)?);
+    let rrd = dir.join("match.rrd");
+    let mut rec = Recorder::new("match", Some(&rrd), &Viewer::None, Vec::new())?;
+    if rec.enabled() {
+        for (i, s) in scans.iter().enumerate() {
+            rec.scan("before", &s.name, fusion::direct::transform(&s.points, &s.start))?;
+            rec.scan("after", &s.name, fusion::direct::transform(&s.points, &r.world_from_scan[i]))?;
+        }
+        rec.finish()?;
+        written.push("match.rrd".into());
+    }
+    Ok(written)
+}
+
+fn write_links(path: &Path, scans: &[InputScan], report: &MatchReport) -> Result<()> {
+    let mut text = String::from("source,targets,overlap,correspondences,rmse_m,converged,accepted,reason\n");
+    let quote = |s: &str| format!("\"{}\"", s.replace('"', "\"\""));
+    for l in &report.links {
+        let targets: Vec<&str> = l.targets.iter().map(|&t| scans[t].file.as_str()).collect();
+        let opt = |v: Option<String>| v.unwrap_or_default();
+        text.push_str(&format!(
+            "{},{},{},{},{},{},{},{}\n",
+            quote(&scans[l.source].file),
+            quote(&targets.join(";")),
+            opt(l.overlap.map(|v| v.to_string())),
+            opt(l.correspondences.map(|v| v.to_string())),
+            opt(l.rmse_m.map(|v| format!("{v:.6}"))),
+            l.converged,
+            l.accepted,
+            quote(l.reason.as_deref().unwrap_or("")),
+        ));
+    }
+    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+}
+
+/// The merged cloud in every format, a scan at a time, relative to the
+/// first pose's position rounded to the kilometre (64-bit coordinates when
+/// that is not zero).
+fn write_clouds(dir: &Path, formats: &[String], scans: &[InputScan], r: &SetResult) -> Result<Vec<String>> {
+    let first = r.world_from_scan[0].translation.vector;
+    let origin: Vector3<f64> = first.map(|v| (v / 1000.0).round() * 1000.0);
+    let header = scanner::io::CloudHeader {
+        origin,
+        crs: None,
+        points: Some(scans.iter().map(|s| s.points.len()).sum()),
+        intensity: false,
+        source: true,
+        timed: false,
+    };
+    let mut files = Vec::new();
+    for format in formats {
+        let name = crate::run::outputs::cloud_file(format);
+        let path = dir.join(&name);
+        let mut writer =
+            scanner::io::CloudWriter::create(&path, scanner::io::Format::from_path(&path)?, header.clone())?;
+        for (i, s) in scans.iter().enumerate() {
+            let pose = r.world_from_scan[i];
+            let relative = Isometry3::from_parts((pose.translation.vector - origin).into(), pose.rotation);
+            let n = s.points.len();
+            writer.push(&scanner::io::PointCloud {
+                points: fusion::direct::transform(&s.points, &relative),
+                source: Some(vec![u16::try_from(i).unwrap_or(u16::MAX); n]),
+                origin,
+                scans: vec![scanner::io::ScanInfo {
+                    name: s.name.clone(),
+                    points: 0..n,
+                    world_from_scan: pose,
+                    gps_time_s: None,
+                }],
+                ..scanner::io::PointCloud::default()
+            })?;
+        }
+        writer.finish()?;
+        files.push(name);
+    }
+    Ok(files)
+}
+
+fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &MatchReport) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "{:<32} {:>10} {:>10} {:>10} {:>9} {:>9}  unseen",
+        "scan", "x m", "y m", "z m", "σ xyz mm", "σ rot °"
+    )?;
+    for (s, r) in scans.iter().zip(&report.scans) {
+        let m = &r.world_from_scan;
+        let c = &r.covariance;
+        let (rot, pos) = ((c[0][0] + c[1][1] + c[2][2]).max(0.0).sqrt(), (c[3][3] + c[4][4] + c[5][5]).max(0.0).sqrt());
+        writeln!(
+            out,
+            "{:<32} {:>10.4} {:>10.4} {:>10.4} {:>9.2} {:>9.4}  {}",
+            s.name,
+            m[0][3],
+            m[1][3],
+            m[2][3],
+            pos * 1e3,
+            rot.to_degrees(),
+            r.degenerate_directions.len()
+        )?;
+    }
+    let accepted = report.links.iter().filter(|l| l.accepted).count();
+    writeln!(
+        out,
+        "{} links, {accepted} used; {} ICP runs; {:.3} s",
+        report.links.len(),
+        report.matches,
+        report.seconds
+    )?;
+    for l in report.links.iter().filter(|l| !l.accepted) {
+        let targets: Vec<&str> = l.targets.iter().map(|&t| scans[t].name.as_str()).collect();
+        writeln!(
+            out,
+            "  rejected {} → {}: {}",
+            scans[l.source].name,
+            targets.join(", "),
+            l.reason.as_deref().unwrap_or("")
+        )?;
+    }
+    Ok(())
+}

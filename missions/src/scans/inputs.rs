@@ -1,0 +1,180 @@
+//! The scans `match` registers, each with a start pose: a 3DTK directory
+//! (`scanNNN.3d` with its `scanNNN.pose` odometry, converted to our axes
+//! and metres at the boundary), a multi-scan E57 (each `data3D` in its own
+//! frame, its pose the start), or single scan files (identity, or the pose
+//! `--init-poses` gives).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use nalgebra::{Isometry3, Point3};
+use serde::Deserialize;
+
+/// One scan of the set.
+#[derive(Debug, Clone)]
+pub struct InputScan {
+    /// What the user calls it: the file as given, or `FILE.e57#NAME`.
+    pub file: String,
+    /// A short name for frames and the recording (the file's stem, or the
+    /// E57 scan's name).
+    pub name: String,
+    /// Its points in its own frame (within the range limits).
+    pub points: Vec<Point3<f32>>,
+    /// Its start `world_from_scan`.
+    pub start: Isometry3<f64>,
+    /// Whether the start came from the input (a `.pose`, the E57, or
+    /// `--init-poses`) rather than identity.
+    pub posed: bool,
+}
+
+/// One entry of an `--init-poses` file.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct InitPose {
+    file: String,
+    world_from_scan: [[f64; 4]; 4],
+}
+
+/// Reads `inputs` in order, every scan's points between `min_m` and
+/// `max_m` from its origin; each needs more than `min_points` of them.
+pub fn read(
+    inputs: &[PathBuf],
+    init_poses: Option<&Path>,
+    (min_m, max_m): (f64, f64),
+    min_points: usize,
+) -> Result<Vec<InputScan>> {
+    let mut scans = Vec::new();
+    for input in inputs {
+        if input.is_dir() {
+            scans.extend(threedtk_directory(input)?);
+        } else if scanner::io::Format::from_path(input).ok() == Some(scanner::io::Format::E57) {
+            let found = scanner::io::read_e57_scans(input)?;
+            if found.is_empty() {
+                bail!("{}: no scans (data3D) in the file", input.display());
+            }
+            scans.extend(found.into_iter().map(|s| InputScan {
+                file: format!("{}#{}", input.display(), s.name),
+                name: s.name,
+                points: s.points,
+                start: s.world_from_scan,
+                posed: true,
+            }));
+        } else {
+            let cloud = scanner::io::read(input)?;
+            if cloud.origin != nalgebra::Vector3::zeros() {
+                bail!("{}: a georeferenced cloud: expected a scan in its own frame", input.display());
+            }
+            scans.push(InputScan {
+                file: input.display().to_string(),
+                name: stem(input),
+                points: cloud.points,
+                start: Isometry3::identity(),
+                posed: false,
+            });
+        }
+    }
+    if scans.is_empty() {
+        bail!("no scans given: expected scan files, a 3DTK directory or an E57 file");
+    }
+    if let Some(path) = init_poses {
+        apply_init_poses(path, &mut scans)?;
+    }
+    for s in &mut scans {
+        let all = s.points.len();
+        s.points = super::settings::within_range(std::mem::take(&mut s.points), min_m, max_m);
+        if s.points.len() <= min_points {
+            bail!(
+                "{}: {} points between {min_m} m and {max_m} m from its origin ({all} in the file): expected more than {min_points} to match",
+                s.file,
+                s.points.len()
+            );
+        }
+    }
+    Ok(scans)
+}
+
+/// A 3DTK directory: every `scanNNN.3d` in order, each with its `.pose`.
+fn threedtk_directory(dir: &Path) -> Result<Vec<InputScan>> {
+    let entries = std::fs::read_dir(dir).with_context(|| format!("reading the directory {}", dir.display()))?;
+    let mut scans = Vec::new();
+    let mut poses = Vec::new();
+    for entry in entries {
+        let path = entry.with_context(|| format!("reading the directory {}", dir.display()))?.path();
+        let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        let number = |ext: &str| {
+            name.strip_prefix("scan")
+                .and_then(|n| n.strip_suffix(ext))
+                .filter(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()))
+                .map(str::to_owned)
+        };
+        if let Some(n) = number(".3d") {
+            scans.push((n, path));
+        } else if let Some(n) = number(".pose") {
+            poses.push(n);
+        }
+    }
+    if scans.is_empty() {
+        bail!("{}: no 3DTK scans (scanNNN.3d) in the directory", dir.display());
+    }
+    scans.sort_by(|a, b| (a.0.len(), &a.0).cmp(&(b.0.len(), &b.0)));
+    let without: Vec<String> =
+        scans.iter().filter(|(n, _)| !poses.contains(n)).map(|(n, _)| format!("scan{n}.3d")).collect();
+    let orphans: Vec<String> =
+        poses.iter().filter(|n| !scans.iter().any(|(s, _)| s == *n)).map(|n| format!("scan{n}.pose")).collect();
+    if !without.is_empty() || !orphans.is_empty() {
+        bail!(
+            "{}: the scans and .pose files do not match ({}{}{}): expected a scanNNN.pose beside every scanNNN.3d",
+            dir.display(),
+            if without.is_empty() { String::new() } else { format!("no pose for {}", without.join(", ")) },
+            if without.is_empty() || orphans.is_empty() { "" } else { "; " },
+            if orphans.is_empty() { String::new() } else { format!("no scan for {}", orphans.join(", ")) },
+        );
+    }
+    scans
+        .into_iter()
+        .map(|(_, path)| {
+            let start = scanner::io::read_3dtk_pose(&path.with_extension("pose"))?;
+            let cloud = scanner::io::read(&path)?;
+            Ok(InputScan {
+                file: path.display().to_string(),
+                name: stem(&path),
+                points: cloud.points,
+                start,
+                posed: true,
+            })
+        })
+        .collect()
+}
+
+/// `--init-poses FILE`: JSON `[{"file", "world_from_scan"}]`, each entry
+/// naming a scan by the file as given, its file name or (E57) its
+/// `FILE#NAME`; every entry must match a scan and be rigid.
+fn apply_init_poses(path: &Path, scans: &mut [InputScan]) -> Result<()> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let entries: Vec<InitPose> = serde_json::from_str(&text).with_context(|| {
+        format!("{}: expected JSON [{{\"file\": \"…\", \"world_from_scan\": [[4×4 row-major]]}}, …]", path.display())
+    })?;
+    for (k, e) in entries.iter().enumerate() {
+        let m = nalgebra::Matrix4::from_fn(|r, c| e.world_from_scan[r][c]);
+        let pose = super::settings::rigid(&m)
+            .with_context(|| format!("{}: entry {k} (\"{}\"): world_from_scan", path.display(), e.file))?;
+        let matches = |s: &InputScan| {
+            s.file == e.file || Path::new(&s.file).file_name().is_some_and(|n| n.to_string_lossy() == e.file)
+        };
+        let Some(scan) = scans.iter_mut().find(|s| matches(s)) else {
+            bail!(
+                "{}: entry {k} names \"{}\", which is not among the scans: expected one of {}",
+                path.display(),
+                e.file,
+                scans.iter().map(|s| format!("\"{}\"", s.file)).collect::<Vec<_>>().join(", ")
+            );
+        };
+        scan.start = pose;
+        scan.posed = true;
+    }
+    Ok(())
+}
+
+fn stem(path: &Path) -> String {
+    path.file_stem().map_or_else(|| path.display().to_string(), |s| s.to_string_lossy().into_owned())
+}

@@ -1,0 +1,187 @@
+//! `cps-survey match` end to end on the shared real scans: the 3DTK set
+//! from its odometry against the reference transforms, the PCL room scans
+//! from their odometry guess, the outputs, and bad input.
+
+use std::ffi::OsString;
+use std::path::Path;
+
+use nalgebra::{Isometry3, Matrix4};
+use serde_json::Value;
+use tests::{cps_survey, workspace};
+
+fn data(rel: &str) -> OsString {
+    workspace().join("../shared/data").join(rel).into_os_string()
+}
+
+fn pose(v: &Value) -> Isometry3<f64> {
+    let m: Vec<Vec<f64>> = serde_json::from_value(v.clone()).expect("4×4");
+    rigid(&Matrix4::from_fn(|r, c| m[r][c]))
+}
+
+fn rigid(m: &Matrix4<f64>) -> Isometry3<f64> {
+    Isometry3::from_parts(
+        nalgebra::Translation3::from(m.fixed_view::<3, 1>(0, 3).into_owned()),
+        nalgebra::Rotation3::from_matrix(&m.fixed_view::<3, 3>(0, 0).into_owned()).into(),
+    )
+}
+
+/// (rotation error in degrees, translation error in metres).
+fn error(estimate: &Isometry3<f64>, reference: &Isometry3<f64>) -> (f64, f64) {
+    let d = reference.inverse() * estimate;
+    (d.rotation.angle().to_degrees(), d.translation.vector.norm())
+}
+
+fn matrix_file(rel: &str) -> Matrix4<f64> {
+    scanner::io::read_matrix4(Path::new(&data(rel))).expect("matrix")
+}
+
+fn run(args: &[OsString], out: &Path) -> (tests::Run, Option<Value>) {
+    let mut all: Vec<OsString> = vec!["match".into()];
+    all.extend(args.iter().cloned());
+    all.extend(["--out".into(), out.as_os_str().to_owned(), "--json".into()]);
+    let run = cps_survey(all);
+    let json = serde_json::from_str(&run.stdout).ok();
+    (run, json)
+}
+
+#[test]
+fn the_3dtk_set_lands_on_the_references_from_its_odometry() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = dir.path().join("out");
+    let (run, v) = run(&[data("3dtk_dat"), "--formats".into(), "ply,las".into()], &out);
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    let v = v.expect("one JSON object");
+    assert_eq!(v["schema_version"], 1);
+    assert_eq!(v["mode"], "graph");
+    let scans = v["scans"].as_array().expect("scans");
+    assert_eq!(scans.len(), 3);
+    let poses: Vec<Isometry3<f64>> = scans.iter().map(|s| pose(&s["world_from_scan"])).collect();
+    assert_eq!(poses[0], Isometry3::identity(), "scan000's pose (identity) is the frame");
+    for (a, b) in [(0, 1), (1, 2)] {
+        let reference =
+            scanner::io::from_3dtk_axes(&matrix_file(&format!("3dtk_dat/reference_T_scan{a:03}_scan{b:03}.txt")));
+        let (deg, m) = error(&(poses[a].inverse() * poses[b]), &reference);
+        assert!(deg < 0.35 && m < 0.03, "{a}←{b}: {deg}° {m} m off the reference");
+    }
+    for s in scans {
+        assert!(s["degenerate_directions"].as_array().expect("list").is_empty(), "{s}");
+        assert_eq!(s["covariance"].as_array().expect("6×6").len(), 6);
+    }
+    let links = v["links"].as_array().expect("links");
+    assert_eq!(links.len(), 3, "every pair of the three overlaps");
+    assert!(links.iter().all(|l| l["accepted"] == true && l["rmse_m"].as_f64().expect("rmse") < 0.1), "{links:?}");
+    // The outputs: poses.json is the JSON printed; the frames are the poses
+    // (3DTK axes, cm); the cloud holds every point once; the link table.
+    let saved: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("poses.json")).expect("poses.json")).expect("JSON");
+    assert_eq!(saved["scans"], v["scans"]);
+    for (k, p) in poses.iter().enumerate() {
+        let frames = scanner::io::read_3dtk_frames(&out.join(format!("frames/scan{k:03}.frames"))).expect("frames");
+        let (deg, m) = error(&frames, p);
+        assert!(deg < 1e-6 && m < 1e-6, "scan{k:03}.frames: {deg}° {m} m from poses.json");
+    }
+    let cloud = scanner::io::read(&out.join("cloud.las")).expect("LAS");
+    let points: usize = (0..3)
+        .map(|k| scanner::io::read(Path::new(&data(&format!("3dtk_dat/scan{k:03}.3d")))).expect("scan").len())
+        .sum();
+    assert_eq!(cloud.len(), points);
+    assert_eq!(scanner::io::read(&out.join("cloud.ply")).expect("PLY").len(), points);
+    let csv = std::fs::read_to_string(out.join("links.csv")).expect("links.csv");
+    assert_eq!(csv.lines().count(), 4, "{csv}");
+    assert!(csv.starts_with("source,targets,overlap,correspondences,rmse_m,converged,accepted,reason"));
+    assert!(out.join("match.rrd").metadata().expect("match.rrd").len() > 1000);
+}
+
+#[test]
+fn the_room_scans_land_on_the_reference_from_their_odometry_guess() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let odometry = matrix_file("pcl_room_scans/odometry_T_scan1_scan2.txt");
+    let init = dir.path().join("init.json");
+    let rows: Vec<Vec<f64>> = (0..4).map(|r| (0..4).map(|c| odometry[(r, c)]).collect()).collect();
+    let entries = serde_json::json!([{ "file": "room_scan2.pcd", "world_from_scan": rows }]);
+    std::fs::write(&init, entries.to_string()).expect("init poses");
+    let (run, v) = run(
+        &[
+            data("pcl_room_scans/room_scan1.pcd"),
+            data("pcl_room_scans/room_scan2.pcd"),
+            "--init-poses".into(),
+            init.into_os_string(),
+        ],
+        &dir.path().join("out"),
+    );
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    let v = v.expect("JSON");
+    let reference = rigid(&matrix_file("pcl_room_scans/reference_T_scan1_scan2.txt"));
+    let poses: Vec<Isometry3<f64>> =
+        v["scans"].as_array().expect("scans").iter().map(|s| pose(&s["world_from_scan"])).collect();
+    let (deg, m) = error(&(poses[0].inverse() * poses[1]), &reference);
+    assert!(deg < 0.3 && m < 0.02, "{deg}° {m} m off the reference");
+}
+
+#[test]
+fn bad_input_is_named_and_exits_2() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = dir.path().join("out");
+    let expect = |args: Vec<OsString>, wanted: &[&str]| {
+        let (run, _) = run(&args, &out);
+        assert_eq!(run.code, 2, "{args:?}: {}", run.stderr);
+        for w in wanted {
+            assert!(run.stderr.contains(w), "{args:?}: expected \"{w}\" in {}", run.stderr);
+        }
+    };
+    // A directory without scans.
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).expect("dir");
+    expect(vec![empty.clone().into_os_string()], &["no 3DTK scans (scanNNN.3d)"]);
+    // .3d and .pose files that do not pair up.
+    let mismatched = dir.path().join("mismatched");
+    std::fs::create_dir(&mismatched).expect("dir");
+    for f in ["scan000.3d", "scan000.pose", "scan001.3d", "scan002.pose"] {
+        let from = if f.ends_with(".3d") { "3dtk_dat/scan000.3d" } else { "3dtk_dat/scan000.pose" };
+        std::fs::copy(Path::new(&data(from)), mismatched.join(f)).expect("copy");
+    }
+    expect(vec![mismatched.into_os_string()], &["no pose for scan001.3d", "no scan for scan002.pose"]);
+    // A scan with too few points.
+    let few = dir.path().join("few.xyz");
+    std::fs::write(&few, "1 0 0\n0 1 0\n0 0 1\n").expect("xyz");
+    expect(
+        vec![data("pcl_room_scans/room_scan1.pcd"), few.clone().into_os_string()],
+        &["few.xyz", "3 points", "expected more than 250"],
+    );
+    // Scans that do not overlap at their starts: the pair is named.
+    let far = dir.path().join("far.json");
+    std::fs::write(
+        &far,
+        r#"[{"file": "room_scan2.pcd", "world_from_scan": [[1,0,0,500],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}]"#,
+    )
+    .expect("init");
+    expect(
+        vec![
+            data("pcl_room_scans/room_scan1.pcd"),
+            data("pcl_room_scans/room_scan2.pcd"),
+            "--init-poses".into(),
+            far.into_os_string(),
+        ],
+        &["room_scan2.pcd and", "room_scan1.pcd do not overlap"],
+    );
+    // An init pose that is not rigid.
+    let sheared = dir.path().join("sheared.json");
+    std::fs::write(
+        &sheared,
+        r#"[{"file": "room_scan2.pcd", "world_from_scan": [[1,0.2,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}]"#,
+    )
+    .expect("init");
+    expect(
+        vec![
+            data("pcl_room_scans/room_scan1.pcd"),
+            data("pcl_room_scans/room_scan2.pcd"),
+            "--init-poses".into(),
+            sheared.into_os_string(),
+        ],
+        &["sheared.json", "entry 0", "room_scan2.pcd", "not a rotation"],
+    );
+    // A missing file, and one scan alone.
+    expect(vec![dir.path().join("missing.ply").into_os_string()], &["missing.ply"]);
+    expect(vec![data("pcl_room_scans/room_scan1.pcd")], &["one scan: expected at least two"]);
+    assert!(!out.exists(), "nothing written for input refused");
+}
