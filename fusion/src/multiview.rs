@@ -351,7 +351,15 @@ fn gate(r: &IcpResult, prior: &JointPrior, j: usize, c: usize, factor: f64) -> R
     let predicted = inv_j * prior.mean(c);
     let e = crate::se3::left_difference(&r.target_from_source, &predicted);
     let ad = crate::se3::adjoint(&inv_j);
-    let match_cov = r.covariance().map(|c| c * factor).unwrap_or_else(|| Matrix6::from_diagonal_element(f64::INFINITY));
+    // A match blind along some directions (degeneracy-aware ICP) says
+    // nothing there: its pseudo-inverse leaves them to the priors.
+    let match_cov = match r.covariance() {
+        Some(c) => c * factor,
+        None if !r.unobservable.is_empty() => {
+            r.information.pseudo_inverse(1e-12 * r.information.amax()).unwrap_or_else(|_| Matrix6::zeros()) * factor
+        }
+        None => Matrix6::from_diagonal_element(f64::INFINITY),
+    };
     let relative = prior.covariance_block(j, j) + prior.covariance_block(c, c)
         - prior.covariance_block(j, c)
         - prior.covariance_block(c, j);

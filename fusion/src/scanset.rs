@@ -40,7 +40,7 @@ pub struct SetConfig {
     pub stages: Vec<Stage>,
     /// Everything else: the ICP settings (point-to-plane, Huber 2 cm, 50
     /// iterations, converged below 0.1 mm and 1e-4 rad, back faces
-    /// rejected, blind directions held: ratio 1e-4), `min_pairs` (250 at
+    /// rejected, blind directions held: ratio 1e-3), `min_pairs` (250 at
     /// the finest stage, scaled by the cell's area at coarser ones), the
     /// step σ of the start and the link gate. The voxels and distances are
     /// the stages'.

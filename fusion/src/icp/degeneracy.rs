@@ -6,6 +6,17 @@
 //! axis, a pipe's axis and the roll about it. The solve then leaves those
 //! directions where the estimate (or a prior, which is part of the normal
 //! matrix) holds them, instead of letting them slide on noise.
+//!
+//! Noise in the normals couples a blind direction weakly between rotation
+//! and translation (a corridor's axis comes out as the axis and a
+//! hundredth of a degree of yaw per metre): a blind direction's rotation
+//! or translation part below [`SNAP`] (of the unit vector in u) is taken
+//! as that noise and dropped, so that the information a match keeps
+//! ([`Observability::observed_part`]) says nothing along the axis itself —
+//! otherwise the coupling, times the large eigenvalues, leaves
+//! centimetre-level "information" along the axis that a pose graph then
+//! believes. (A pipe's roll about an axis well off the frame's origin keeps
+//! its translation part: that coupling is geometry.)
 
 use nalgebra::{Matrix6, Point3, SymmetricEigen, Vector3, Vector6};
 
@@ -17,9 +28,14 @@ pub fn lever_arm(points: &[Point3<f32>]) -> f64 {
     (points.iter().map(|p| (p.coords.cast::<f64>() - c).norm_squared()).sum::<f64>() / n).sqrt().max(1e-3)
 }
 
+/// A blind direction's rotation or translation part (of its unit vector in
+/// u) below this is noise.
+pub const SNAP: f64 = 0.05;
+
 /// The normal equations' eigen-analysis in u = (L·ω, v).
 #[derive(Debug, Clone)]
 pub struct Observability {
+    hu: Matrix6<f64>,
     eigen: SymmetricEigen<f64, nalgebra::U6>,
     lever_arm_m: f64,
     min_ratio: f64,
@@ -31,8 +47,9 @@ impl Observability {
     pub fn new(h: &Matrix6<f64>, lever_arm_m: f64, min_ratio: f64) -> Self {
         let s = scale(lever_arm_m);
         let hu = s * h * s;
-        let eigen = SymmetricEigen::new((hu + hu.transpose()) * 0.5);
-        Self { eigen, lever_arm_m, min_ratio }
+        let hu = (hu + hu.transpose()) * 0.5;
+        let eigen = SymmetricEigen::new(hu);
+        Self { hu, eigen, lever_arm_m, min_ratio }
     }
 
     fn observed(&self, i: usize) -> bool {
@@ -40,24 +57,46 @@ impl Observability {
         max > 0.0 && self.eigen.eigenvalues[i] > self.min_ratio * max
     }
 
+    /// The blind directions in u: the eigenvectors below the ratio, a
+    /// rotation or translation part under [`SNAP`] dropped, orthonormalised.
+    fn blind(&self) -> Vec<Vector6<f64>> {
+        let mut basis: Vec<Vector6<f64>> = Vec::new();
+        for i in (0..6).filter(|&i| !self.observed(i)) {
+            let mut b: Vector6<f64> = self.eigen.eigenvectors.column(i).into_owned();
+            for part in [0, 3] {
+                if b.fixed_rows::<3>(part).norm() < SNAP {
+                    b.fixed_rows_mut::<3>(part).fill(0.0);
+                }
+            }
+            for q in &basis {
+                b -= q * q.dot(&b);
+            }
+            if b.norm() > 1e-6 {
+                basis.push(b.normalize());
+            }
+        }
+        basis
+    }
+
     /// The unobservable directions, each a unit vector of u = (L·ω, v)
-    /// turned back into ξ = (ω, v) and normalised.
+    /// (noise components dropped) turned back into ξ = (ω, v) and
+    /// normalised.
     pub fn unobservable(&self) -> Vec<Vector6<f64>> {
         let s = scale(self.lever_arm_m);
-        (0..6).filter(|&i| !self.observed(i)).map(|i| (s * self.eigen.eigenvectors.column(i)).normalize()).collect()
+        self.blind().into_iter().map(|b| (s * b).normalize()).collect()
     }
 
     /// The normal matrix with its unobservable directions taken out (the
-    /// information a match actually carries): Σ over the observed
-    /// eigenpairs of λ·e·eᵀ in u, mapped back to ξ.
+    /// information a match actually carries): P·H·P in u, P the projector
+    /// off the blind directions, mapped back to ξ.
     pub fn observed_part(&self) -> Matrix6<f64> {
+        let mut p = Matrix6::identity();
+        for b in self.blind() {
+            p -= b * b.transpose();
+        }
+        let hu = p * self.hu * p;
         let inv =
             Matrix6::from_diagonal(&Vector6::new(self.lever_arm_m, self.lever_arm_m, self.lever_arm_m, 1.0, 1.0, 1.0));
-        let mut hu = Matrix6::zeros();
-        for i in (0..6).filter(|&i| self.observed(i)) {
-            let e = self.eigen.eigenvectors.column(i);
-            hu += e * e.transpose() * self.eigen.eigenvalues[i];
-        }
         let h = inv * hu * inv;
         0.5 * (h + h.transpose())
     }

@@ -54,6 +54,15 @@ pub struct MatchArgs {
     /// Huber kernel width, metres (0: plain least squares).
     #[arg(long, default_value_t = 0.02)]
     pub huber: f64,
+    /// graph: each scan is linked to at most this many earlier scans, those
+    /// it overlaps most.
+    #[arg(long, default_value_t = 10)]
+    pub max_partners: usize,
+    /// Directions a match cannot see — eigenvalue of its normal matrix
+    /// (rotation scaled by the scan's radius) below this ratio of the
+    /// largest — are held where the start put them and reported (0: off).
+    #[arg(long, default_value_t = 1e-3)]
+    pub degeneracy_ratio: f64,
     /// Drop points nearer than this to their scan's origin, metres.
     #[arg(long, default_value_t = 0.0)]
     pub min_range: f64,
@@ -151,8 +160,19 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
         bail!("--out {}: exists and is not a directory", args.out.display());
     }
     crate::view::recording::available()?;
+    if !(args.degeneracy_ratio.is_finite() && (0.0..0.1).contains(&args.degeneracy_ratio)) {
+        bail!("--degeneracy-ratio {}: expected a ratio in [0, 0.1) (0: off)", args.degeneracy_ratio);
+    }
+    if args.max_partners == 0 {
+        bail!("--max-partners 0: expected at least 1");
+    }
     let mut config = SetConfig { mode: mode(args.mode), stages, ..SetConfig::default() };
+    config.link.max_partners = args.max_partners;
+    if args.degeneracy_ratio > 0.0 {
+        config.link.degeneracy_ratio = args.degeneracy_ratio;
+    }
     let icp = &mut config.link.multiview.icp;
+    icp.degeneracy_ratio = (args.degeneracy_ratio > 0.0).then_some(args.degeneracy_ratio);
     icp.kernel = if args.huber > 0.0 { Kernel::Huber { width_m: args.huber } } else { Kernel::None };
     if args.method == MethodArg::PointToPoint {
         icp.method = Method::PointToPoint;

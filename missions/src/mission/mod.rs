@@ -272,6 +272,13 @@ pub struct FusionPlan {
     /// adjustment (`icp_variance_factor`, default 1; raise it when the
     /// scans' errors are correlated, e.g. by a miscalibrated scanner).
     pub icp_variance_factor: f64,
+    /// `icp`: a match leaves a direction where odometry put the scan when
+    /// its eigenvalue of the normal matrix is below this ratio of the
+    /// largest — a pipe's axis and the roll about it — and reports it in
+    /// the links (`degeneracy_ratio`, default 0: off; the sewer uses 1e-3,
+    /// see the README). `cps-icp` does not need it: the CPS prior holds
+    /// the scans and its gate leaves out a match that slid.
+    pub degeneracy_ratio: f64,
 }
 
 impl Default for FusionPlan {
@@ -286,6 +293,7 @@ impl Default for FusionPlan {
             min_pairs: 250,
             max_partners: 4,
             icp_variance_factor: 1.0,
+            degeneracy_ratio: 0.0,
         }
     }
 }

@@ -424,6 +424,7 @@ fn read_fusion(r: &mut Reader<'_>, root: &mut Table<'_, '_>, solo: bool) -> Opti
     let min_pairs = fu.optional(r, "min_pairs", |r, v, f| r.integer_in(v, f, 6, 100_000_000));
     let partners = fu.optional(r, "max_partners", |r, v, f| r.integer_in(v, f, 1, 1000));
     let variance_factor = fu.optional(r, "icp_variance_factor", positive_at_most(1e6));
+    let degeneracy = fu.optional(r, "degeneracy_ratio", within(0.0, 0.1));
     let fd = FusionPlan::default();
     let (max_corr, fine_corr) = (max_corr?, fine_corr?);
     let coarse = max_corr.unwrap_or(fd.max_correspondence_m);
@@ -447,6 +448,7 @@ fn read_fusion(r: &mut Reader<'_>, root: &mut Table<'_, '_>, solo: bool) -> Opti
         min_pairs: min_pairs?.map_or(fd.min_pairs, |n| n as usize),
         max_partners: partners?.map_or(fd.max_partners, |n| n as usize),
         icp_variance_factor: variance_factor?.unwrap_or(fd.icp_variance_factor),
+        degeneracy_ratio: degeneracy?.unwrap_or(fd.degeneracy_ratio),
     })
 }
 

@@ -98,6 +98,10 @@ pub struct Link {
     pub converged: bool,
     /// Whether the match is used, and if not why.
     pub rejected: Option<String>,
+    /// `icp` with `[fusion] degeneracy_ratio`: the directions the match
+    /// could not see (unit ξ = (ω, v), world frame), held where the start
+    /// put them.
+    pub unobservable: Vec<nalgebra::Vector6<f64>>,
 }
 
 impl Link {
@@ -110,6 +114,7 @@ impl Link {
             rmse_m: Some(m.rmse_m),
             converged: m.converged,
             rejected: None,
+            unobservable: m.unobservable.clone(),
         }
     }
 }
@@ -187,6 +192,9 @@ pub fn fuse(
             let shift = views[0].direct() * guesses[0].inverse();
             guesses.iter_mut().for_each(|g| *g = shift * *g);
             let mut config = traced(multiview_config(plan, Strategy::Simultaneous, scanner_in_body));
+            // Nothing but the start holds a scan here: what the matches
+            // cannot see is left where odometry put it.
+            config.icp.degeneracy_ratio = (plan.degeneracy_ratio > 0.0).then_some(plan.degeneracy_ratio);
             let coarse = fusion::multiview::register_views(&scans, &guesses, &config, progress)
                 .context("ICP fusion (simultaneous matching, coarse pass)")?;
             config.overlap_m = Some(plan.max_correspondence_m);
@@ -227,6 +235,7 @@ pub fn fuse(
                     rmse_m: None,
                     converged: false,
                     rejected: Some(why.clone()),
+                    unobservable: Vec::new(),
                 });
             }
             covariance = r.covariance.iter().copied().map(Some).collect();

@@ -192,6 +192,12 @@ pub struct LinkReport {
     /// Why not, when rejected.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reason: Option<String>,
+    /// `icp` with `[fusion] degeneracy_ratio`: the directions the match
+    /// could not see, held where odometry put the scan — unit vectors in
+    /// the order (ω_x, ω_y, ω_z, x, y, z) of the covariance, world frame;
+    /// empty when it saw everything (and in the other modes).
+    #[serde(default)]
+    pub degenerate_directions: Vec<[f64; 6]>,
 }
 
 /// One scan in a [`FusionReport`].
@@ -289,6 +295,7 @@ impl FusionReport {
                     converged: l.converged,
                     accepted: l.rejected.is_none(),
                     reason: l.rejected.clone(),
+                    degenerate_directions: l.unobservable.iter().map(|d| std::array::from_fn(|i| d[i])).collect(),
                 })
                 .collect(),
         }

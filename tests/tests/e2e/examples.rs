@@ -430,6 +430,19 @@ fn sewer_example_fits_the_pipe_and_finds_the_brick() {
     assert!(f(&j["rms_error_xy_m"]) <= f(&j["direct_rms_error_xy_m"]), "{j}");
     assert_eq!(j["pipe"]["anomalies"].as_array().map(Vec::len), Some(2));
     assert!(dir.path().join("fusion/cps-icp/pipe_deviation.ply").exists());
+
+    // ICP alone (`[fusion] degeneracy_ratio`): every match says it cannot
+    // see along the pipe and leaves that to odometry instead of sliding
+    // the scans out of overlap.
+    let j = fuse_json(dir.path(), "icp");
+    let links = j["links"].as_array().expect("links");
+    assert_eq!(links.len(), 8, "{j}");
+    for l in links {
+        let along_axis =
+            l["degenerate_directions"].as_array().expect("directions").iter().any(|d| f(&d[3]).abs() > 0.95);
+        assert!(along_axis, "link {}: the axis is not among {}", l["source"], l["degenerate_directions"]);
+    }
+    assert!(f(&j["rms_error_xy_m"]) < 0.01, "{j}");
 }
 
 /// A pipe fit with nothing to fit (the nominal tube far from every point)
