@@ -129,6 +129,8 @@ struct LinkReport {
     rmse_m: Option<f64>,
     /// Whether ICP converged.
     converged: bool,
+    /// ICP iterations of the match (0 when it did not run).
+    iterations: usize,
     /// Whether the match is used.
     accepted: bool,
     /// Why not, when rejected.
@@ -293,6 +295,7 @@ fn report(mode: ModeArg, scans: &[InputScan], r: &SetResult, seconds: f64) -> Ma
                 correspondences: l.result.as_ref().map(|m| m.inliers),
                 rmse_m: l.result.as_ref().map(|m| m.rmse_m),
                 converged: l.result.as_ref().is_some_and(|m| m.converged),
+                iterations: l.result.as_ref().map_or(0, |m| m.iterations),
                 accepted: l.rejected.is_none(),
                 reason: l.rejected.clone(),
                 degenerate_directions: l.result.as_ref().map_or_else(Vec::new, |m| directions(&m.unobservable)),

@@ -180,8 +180,50 @@ fn bad_input_is_named_and_exits_2() {
         ],
         &["sheared.json", "entry 0", "room_scan2.pcd", "not a rotation"],
     );
+    // An init pose for a scan that is not there.
+    let stray = dir.path().join("stray.json");
+    std::fs::write(
+        &stray,
+        r#"[{"file": "room_scan3.pcd", "world_from_scan": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}]"#,
+    )
+    .expect("init");
+    expect(
+        vec![
+            data("pcl_room_scans/room_scan1.pcd"),
+            data("pcl_room_scans/room_scan2.pcd"),
+            "--init-poses".into(),
+            stray.into_os_string(),
+        ],
+        &["stray.json", "room_scan3.pcd", "not among the scans"],
+    );
     // A missing file, and one scan alone.
     expect(vec![dir.path().join("missing.ply").into_os_string()], &["missing.ply"]);
     expect(vec![data("pcl_room_scans/room_scan1.pcd")], &["one scan: expected at least two"]);
     assert!(!out.exists(), "nothing written for input refused");
+}
+
+/// A multi-scan E57 (here the one `match` writes: each scan in its own
+/// frame with its registered pose) is a scan set whose poses are the
+/// start: matched again it stays where it is, every scan named by its
+/// `data3D`.
+#[test]
+fn a_multi_scan_e57_starts_from_its_poses() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let first = dir.path().join("first");
+    let (run1, v1) = run(&[data("3dtk_dat"), "--formats".into(), "e57".into()], &first);
+    assert_eq!(run1.code, 0, "{}", run1.stderr);
+    let e57 = first.join("cloud.e57");
+    let scans = scanner::io::read_e57_scans(&e57).expect("E57");
+    assert_eq!(scans.iter().map(|s| s.name.as_str()).collect::<Vec<_>>(), ["scan000", "scan001", "scan002"]);
+    let (run2, v2) = run(&[e57.into_os_string()], &dir.path().join("second"));
+    assert_eq!(run2.code, 0, "{}", run2.stderr);
+    let (v1, v2) = (v1.expect("JSON"), v2.expect("JSON"));
+    let files: Vec<&str> =
+        v2["scans"].as_array().expect("scans").iter().map(|s| s["file"].as_str().expect("file")).collect();
+    assert!(files[1].ends_with("cloud.e57#scan001"), "{files:?}");
+    for k in 0..3 {
+        let (a, b) = (pose(&v1["scans"][k]["world_from_scan"]), pose(&v2["scans"][k]["world_from_scan"]));
+        let (deg, m) = error(&b, &a);
+        assert!(deg < 0.01 && m < 0.001, "scan {k}: moved {deg}° {m} m from where the E57 put it");
+    }
 }
