@@ -387,7 +387,11 @@ pub(crate) fn prepare<S: AsRef<[Point3<f32>]> + Sync>(scans: &[S], config: &Mult
         .map(|(i, points)| -> Result<Prepared> {
             let points = points.as_ref();
             let source = scanner::reduced_points(points, config.source_voxel_m).map_err(|e| in_scan(i, e.into()))?;
-            let model = scanner::reduced_points(points, config.target_voxel_m).map_err(|e| in_scan(i, e.into()))?;
+            let model = if config.target_voxel_m == config.source_voxel_m {
+                source.clone()
+            } else {
+                scanner::reduced_points(points, config.target_voxel_m).map_err(|e| in_scan(i, e.into()))?
+            };
             let mut local = Target::new(&model, k).map_err(|e| in_scan(i, e))?;
             // Every scan of a rig has its scanner at the same place in its frame.
             local.orient_normals_towards(&config.icp.source_viewpoint);

@@ -80,6 +80,10 @@ pub struct FusedScan {
     /// translation, left perturbation, world frame), where the fusion
     /// estimates one (`cps-icp`).
     pub covariance: Option<nalgebra::Matrix6<f64>>,
+    /// `icp` with `[fusion] degeneracy_ratio`: the directions its last
+    /// match could not see (unit ξ = (ω, v), world frame), left where
+    /// odometry put the scan.
+    pub unobservable: Vec<nalgebra::Vector6<f64>>,
 }
 
 /// One ICP match of a fusion: a scan (the source) against its partners.
@@ -177,6 +181,7 @@ pub fn fuse(
     let mut traces = Vec::new();
     let mut links = Vec::new();
     let mut covariance = vec![None; views.len()];
+    let mut unobservable = vec![Vec::new(); views.len()];
     let station = |k: usize| views[k].station;
     let traced = |mut c: MultiviewConfig| {
         c.icp.trace = trace;
@@ -208,6 +213,8 @@ pub fn fuse(
                 }
             }
             let rmse = r.last_match.iter().map(|m| m.as_ref().map(|m| m.rmse_m)).collect();
+            unobservable =
+                r.last_match.iter().map(|m| m.as_ref().map_or_else(Vec::new, |m| m.unobservable.clone())).collect();
             (r.world_from_scan, rmse, coarse.matches + r.matches)
         }
         FusionMode::CpsIcp => {
@@ -248,11 +255,13 @@ pub fn fuse(
         .zip(poses)
         .zip(rmse)
         .zip(covariance)
-        .map(|(((v, world_from_body), rmse_m), covariance)| FusedScan {
+        .zip(unobservable)
+        .map(|((((v, world_from_body), rmse_m), covariance), unobservable)| FusedScan {
             station: v.station,
             world_from_body,
             rmse_m,
             covariance,
+            unobservable,
         })
         .collect();
     Ok(Fused { mode, scans, matches, seconds: started.elapsed().as_secs_f64(), traces, links })

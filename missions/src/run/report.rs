@@ -223,6 +223,11 @@ pub struct FusedScanReport {
     /// as `register`'s — where the fusion estimates one (`cps-icp`).
     #[serde(default)]
     pub covariance: Option<[[f64; 6]; 6]>,
+    /// `icp` with `[fusion] degeneracy_ratio`: the directions the scan's
+    /// last match could not see, left where odometry put it (unit vectors,
+    /// order of the covariance, world frame); empty otherwise.
+    #[serde(default)]
+    pub degenerate_directions: Vec<[f64; 6]>,
     /// Horizontal error of the fused pose (simulator).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub error_xy_m: Option<f64>,
@@ -257,6 +262,7 @@ impl FusionReport {
                     world_from_body: std::array::from_fn(|r| std::array::from_fn(|c| m[(r, c)])),
                     roll_pitch_yaw_rad: [roll, pitch, yaw],
                     covariance: f.covariance.map(|c| std::array::from_fn(|r| std::array::from_fn(|k| c[(r, k)]))),
+                    degenerate_directions: f.unobservable.iter().map(|d| std::array::from_fn(|i| d[i])).collect(),
                     error_xy_m: None,
                     direct_error_xy_m: None,
                     error_heading_rad: None,

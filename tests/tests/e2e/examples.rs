@@ -443,6 +443,11 @@ fn sewer_example_fits_the_pipe_and_finds_the_brick() {
         assert!(along_axis, "link {}: the axis is not among {}", l["source"], l["degenerate_directions"]);
     }
     assert!(f(&j["rms_error_xy_m"]) < 0.01, "{j}");
+    for s in j["scans"].as_array().expect("scans").iter().skip(1) {
+        let along_axis =
+            s["degenerate_directions"].as_array().expect("directions").iter().any(|d| f(&d[3]).abs() > 0.95);
+        assert!(along_axis, "scan {}: {}", s["station"], s["degenerate_directions"]);
+    }
 }
 
 /// A pipe fit with nothing to fit (the nominal tube far from every point)

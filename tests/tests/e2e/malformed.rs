@@ -355,6 +355,13 @@ const CASES: &[Case] = &[
     ("unknown fusion mode", ("[plan]", "[fusion]\nmode = \"slam\"\n[plan]"), "15:8", "fusion.mode", "unknown value"),
     ("zero voxel", ("[plan]", "[fusion]\nvoxel_m = 0\n[plan]"), "15:11", "fusion.voxel_m", "out of range"),
     (
+        "degeneracy ratio above 0.1",
+        ("[plan]", "[fusion]\ndegeneracy_ratio = 0.5\n[plan]"),
+        "15:20",
+        "fusion.degeneracy_ratio",
+        "out of range",
+    ),
+    (
         "fine distance above the coarse one",
         ("[plan]", "[fusion]\nmax_correspondence_m = 0.2\nfine_correspondence_m = 0.5\n[plan]"),
         "16:25",
