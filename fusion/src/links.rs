@@ -147,7 +147,26 @@ pub fn adjust<S: AsRef<[Point3<f32>]> + Sync>(
     let prepared = prepare(scans, mv)?;
     let n = scans.len();
     let overlap_m = mv.overlap_m.unwrap_or(mv.icp.max_correspondence_m);
-    let pairs: Vec<(usize, usize)> = (0..n).flat_map(|c| (0..c).map(move |j| (j, c))).collect();
+    // Pairs whose world boxes (grown by the overlap distance) meet: the
+    // correspondences are counted only for those.
+    let boxes: Vec<(Point3<f64>, Point3<f64>)> = prepared
+        .par_iter()
+        .zip(poses)
+        .map(|(p, pose)| {
+            p.source.iter().fold(
+                (Point3::from([f64::INFINITY; 3]), Point3::from([f64::NEG_INFINITY; 3])),
+                |(lo, hi), q| {
+                    let w = pose * q.cast::<f64>();
+                    (lo.inf(&w), hi.sup(&w))
+                },
+            )
+        })
+        .collect();
+    let meet = |a: usize, b: usize| {
+        (0..3).all(|k| boxes[a].0[k] - overlap_m <= boxes[b].1[k] && boxes[b].0[k] - overlap_m <= boxes[a].1[k])
+    };
+    let pairs: Vec<(usize, usize)> =
+        (0..n).flat_map(|c| (0..c).map(move |j| (j, c))).filter(|&(j, c)| meet(j, c)).collect();
     let overlaps: Vec<usize> = pairs
         .par_iter()
         .map(|&(j, c)| {
