@@ -27,14 +27,7 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
         points.normalize_intensity(false);
         for (i, p) in points.enumerate() {
             let p = p.map_err(|e| ScannerError::whole_file(path, format!("point {i}: {e}")))?;
-            if let CartesianCoordinate::Valid { x, y, z } = p.cartesian {
-                let point = Point3::new(x as f32, y as f32, z as f32);
-                if !point.iter().all(|v| v.is_finite()) {
-                    return Err(ScannerError::whole_file(
-                        path,
-                        format!("point {i}: ({x}, {y}, {z}) m: expected coordinates within ±{:e}", f32::MAX),
-                    ));
-                }
+            if let Some(point) = cartesian(path, &format!("point {i}"), &p.cartesian)? {
                 cloud.points.push(point);
                 match p.intensity {
                     Some(v) => intensity.push(v),
@@ -47,6 +40,20 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
         cloud.intensity = Some(intensity);
     }
     Ok(cloud)
+}
+
+/// A valid Cartesian coordinate as f32 (`None` for an invalid one), or an
+/// error naming `what` when it does not fit.
+fn cartesian(path: &Path, what: &str, c: &CartesianCoordinate) -> Result<Option<Point3<f32>>> {
+    let CartesianCoordinate::Valid { x, y, z } = *c else { return Ok(None) };
+    let point = Point3::new(x as f32, y as f32, z as f32);
+    if !point.iter().all(|v| v.is_finite()) {
+        return Err(ScannerError::whole_file(
+            path,
+            format!("{what}: ({x}, {y}, {z}) m: expected coordinates within ±{:e}", f32::MAX),
+        ));
+    }
+    Ok(Some(point))
 }
 
 /// One `data3D` of an E57 file, in its own frame.
@@ -86,17 +93,7 @@ pub fn read_e57_scans(path: &Path) -> Result<Vec<E57Scan>> {
         let mut points = Vec::new();
         for (i, p) in iter.enumerate() {
             let p = p.map_err(|e| ScannerError::whole_file(path, format!("data3D[{k}] point {i}: {e}")))?;
-            if let CartesianCoordinate::Valid { x, y, z } = p.cartesian {
-                let point = Point3::new(x as f32, y as f32, z as f32);
-                if !point.iter().all(|v| v.is_finite()) {
-                    return Err(ScannerError::whole_file(
-                        path,
-                        format!(
-                            "data3D[{k}] point {i}: ({x}, {y}, {z}) m: expected coordinates within ±{:e}",
-                            f32::MAX
-                        ),
-                    ));
-                }
+            if let Some(point) = cartesian(path, &format!("data3D[{k}] point {i}"), &p.cartesian)? {
                 points.push(point);
             }
         }

@@ -148,52 +148,27 @@ fn bad_input_is_named_and_exits_2() {
         vec![data("pcl_room_scans/room_scan1.pcd"), few.clone().into_os_string()],
         &["few.xyz", "3 points", "expected more than 250"],
     );
-    // Scans that do not overlap at their starts: the pair is named.
-    let far = dir.path().join("far.json");
-    std::fs::write(
-        &far,
+    // Init poses: scans that do not overlap at their starts (the pair is
+    // named), a pose that is not rigid, a scan that is not there.
+    let init_case = |name: &str, json: &str, wanted: &[&str]| {
+        let file = dir.path().join(name);
+        std::fs::write(&file, json).expect("init poses");
+        let rooms = [data("pcl_room_scans/room_scan1.pcd"), data("pcl_room_scans/room_scan2.pcd")];
+        expect([&rooms[..], &["--init-poses".into(), file.into_os_string()]].concat(), wanted);
+    };
+    init_case(
+        "far.json",
         r#"[{"file": "room_scan2.pcd", "world_from_scan": [[1,0,0,500],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}]"#,
-    )
-    .expect("init");
-    expect(
-        vec![
-            data("pcl_room_scans/room_scan1.pcd"),
-            data("pcl_room_scans/room_scan2.pcd"),
-            "--init-poses".into(),
-            far.into_os_string(),
-        ],
         &["room_scan2.pcd and", "room_scan1.pcd do not overlap"],
     );
-    // An init pose that is not rigid.
-    let sheared = dir.path().join("sheared.json");
-    std::fs::write(
-        &sheared,
+    init_case(
+        "sheared.json",
         r#"[{"file": "room_scan2.pcd", "world_from_scan": [[1,0.2,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}]"#,
-    )
-    .expect("init");
-    expect(
-        vec![
-            data("pcl_room_scans/room_scan1.pcd"),
-            data("pcl_room_scans/room_scan2.pcd"),
-            "--init-poses".into(),
-            sheared.into_os_string(),
-        ],
         &["sheared.json", "entry 0", "room_scan2.pcd", "not a rotation"],
     );
-    // An init pose for a scan that is not there.
-    let stray = dir.path().join("stray.json");
-    std::fs::write(
-        &stray,
+    init_case(
+        "stray.json",
         r#"[{"file": "room_scan3.pcd", "world_from_scan": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}]"#,
-    )
-    .expect("init");
-    expect(
-        vec![
-            data("pcl_room_scans/room_scan1.pcd"),
-            data("pcl_room_scans/room_scan2.pcd"),
-            "--init-poses".into(),
-            stray.into_os_string(),
-        ],
         &["stray.json", "room_scan3.pcd", "not among the scans"],
     );
     // A missing file, and one scan alone.
