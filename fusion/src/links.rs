@@ -63,11 +63,6 @@ pub struct LinkConfig {
     /// overlaps most. Default 10 (on the simulated corridor's 20 scans, 2,
     /// 4, 6, 10 and all partners give 24, 24, 17, 12 and 12 mm RMS).
     pub max_partners: usize,
-    /// Eigenvalue ratio below which a scan's direction is unobservable
-    /// (see [`IcpConfig::degeneracy_ratio`]). Default 1e-3: noise in the normals (1 mm on a 5 cm grid) gives a blind
-    /// direction a spurious ratio of ~1e-4–1e-3; the real scans here have none
-    /// below 3e-3.
-    pub degeneracy_ratio: f64,
 }
 
 impl Default for LinkConfig {
@@ -75,6 +70,9 @@ impl Default for LinkConfig {
         let multiview = MultiviewConfig::default();
         Self {
             multiview: MultiviewConfig {
+                // Noise in the normals (1 mm on a 5 cm grid) gives a blind
+                // direction a spurious ratio of ~1e-4–1e-3; the real scans
+                // here have no direction below 3e-3.
                 icp: IcpConfig { degeneracy_ratio: Some(1e-3), ..multiview.icp },
                 ..multiview
             },
@@ -82,7 +80,6 @@ impl Default for LinkConfig {
             step_sigma_rad: 1f64.to_radians(),
             gate_chi2: GATE_CHI2,
             max_partners: 10,
-            degeneracy_ratio: 1e-3,
         }
     }
 }
@@ -114,7 +111,8 @@ pub struct LinkGraph {
     /// Every candidate pair, used or not, in order of (source, target).
     pub links: Vec<Link>,
     /// Each scan's directions its links do not see (unit ξ = (ω, v), world
-    /// frame): held by the start's increments.
+    /// frame), by the ICP settings' `degeneracy_ratio` (none without it):
+    /// held by the start's increments.
     pub unobservable: Vec<Vec<Vector6<f64>>>,
     /// σ̂₀² = χ² / redundancy of the final adjustment (1 without redundancy).
     pub variance_factor: f64,
@@ -139,7 +137,6 @@ pub fn adjust<S: AsRef<[Point3<f32>]> + Sync>(
     FusionError::require_positive("step σ (m)", config.step_sigma_m)?;
     FusionError::require_positive("step σ (rad)", config.step_sigma_rad)?;
     FusionError::require_positive("link gate χ²", config.gate_chi2)?;
-    FusionError::require_positive("degeneracy eigenvalue ratio", config.degeneracy_ratio)?;
     if config.max_partners == 0 {
         return Err(FusionError::OutOfRange { what: "partners per scan".into(), value: 0.0, expected: "≥ 1".into() });
     }
@@ -301,11 +298,13 @@ fn solve(
                     }
                 }
                 let to_world = adjoint(t);
-                Observability::new(&h, lever_arm[i], config.degeneracy_ratio)
-                    .unobservable()
-                    .into_iter()
-                    .map(|d| (to_world * d).normalize())
-                    .collect()
+                config.multiview.icp.degeneracy_ratio.map_or_else(Vec::new, |ratio| {
+                    Observability::new(&h, lever_arm[i], ratio)
+                        .unobservable()
+                        .into_iter()
+                        .map(|d| (to_world * d).normalize())
+                        .collect()
+                })
             })
             .collect();
         let scale = variance_factor.max(1.0);

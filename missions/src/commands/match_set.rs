@@ -170,9 +170,6 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
     }
     let mut config = SetConfig { mode: mode(args.mode), stages, ..SetConfig::default() };
     config.link.max_partners = args.max_partners;
-    if args.degeneracy_ratio > 0.0 {
-        config.link.degeneracy_ratio = args.degeneracy_ratio;
-    }
     let icp = &mut config.link.multiview.icp;
     icp.degeneracy_ratio = (args.degeneracy_ratio > 0.0).then_some(args.degeneracy_ratio);
     icp.kernel = if args.huber > 0.0 { Kernel::Huber { width_m: args.huber } } else { Kernel::None };
