@@ -187,8 +187,10 @@ pub fn adjust<S: AsRef<[Point3<f32>]> + Sync>(
     let mut done = 0;
     progress(0, total);
     let mut links = Vec::with_capacity(total);
-    // Matched in chunks so that progress moves while every core works.
-    for chunk in candidates.chunks(rayon::current_num_threads().max(1)) {
+    // Matched in chunks so that progress moves while every core works
+    // (several matches per core: they differ in length, and a chunk waits
+    // for its longest).
+    for chunk in candidates.chunks(4 * rayon::current_num_threads().max(1)) {
         let found: Vec<Link> = chunk
             .par_iter()
             .map(|&((j, c), overlap)| {

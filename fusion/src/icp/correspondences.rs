@@ -57,31 +57,61 @@ impl Sums {
     }
 }
 
+/// What one pass keeps of each source point for the next: its nearest
+/// target point (where the next search starts; `u32::MAX` before the
+/// first pass) and a lower bound on its distance to the target, metres.
+pub(crate) struct Partners {
+    nearest: Vec<u32>,
+    lower_m: Vec<f32>,
+}
+
+impl Partners {
+    /// Nothing known of `n` source points.
+    pub(crate) fn new(n: usize) -> Self {
+        Self { nearest: vec![u32::MAX; n], lower_m: vec![0.0; n] }
+    }
+}
+
 /// One pass over the source: nearest neighbours within the distance and
-/// the sums both metrics need. `partners` holds each source point's
-/// nearest target point of the last pass (`u32::MAX` before the first),
-/// where its search starts, and is updated.
+/// the sums both metrics need, updating `partners`. `moved` is how the
+/// estimate changed since the last pass — (rotation angle, translation
+/// length) of `estimate · last⁻¹` in the source's terms: a point moved by
+/// at most angle·|p| + length — or `None` on the first pass. A point whose
+/// distance bound, less that motion, still exceeds the correspondence
+/// distance cannot have a partner and is not searched (where scans overlap
+/// partly, that is most of the points beyond the overlap).
 pub(crate) fn accumulate(
     source: &[Point3<f32>],
     target: &Target,
     estimate: &Isometry3<f64>,
     max_sq: f64,
     config: &IcpConfig,
-    partners: &mut [u32],
+    partners: &mut Partners,
+    moved: Option<(f64, f64)>,
 ) -> Sums {
     let r: Matrix3<f64> = estimate.rotation.to_rotation_matrix().into_inner();
     let t = estimate.translation.vector;
     // The source scanner in the target frame.
     let back_faces = config.reject_back_faces.then(|| r * config.source_viewpoint.coords + t);
+    let max_m = max_sq.sqrt();
     source
         .par_chunks(4096)
-        .zip(partners.par_chunks_mut(4096))
-        .map(|(chunk, partners)| {
+        .zip(partners.nearest.par_chunks_mut(4096).zip(partners.lower_m.par_chunks_mut(4096)))
+        .map(|(chunk, (partners, lower))| {
             let mut s = Sums::default();
-            for (p, partner) in chunk.iter().zip(partners) {
+            for ((p, partner), lower) in chunk.iter().zip(partners).zip(lower) {
+                if let Some((angle, length)) = moved {
+                    // The bound less the motion (and a margin for f32).
+                    let bound = f64::from(*lower) - angle * f64::from(p.coords.norm()) - length - 1e-4;
+                    *lower = bound.max(0.0) as f32;
+                    if bound > max_m {
+                        continue;
+                    }
+                }
                 let pt = r * p.coords.cast::<f64>() + t;
                 let (i, d2) = target.nearest_from(&[pt.x as f32, pt.y as f32, pt.z as f32], *partner);
                 *partner = i as u32;
+                *lower = d2.sqrt() as f32;
                 if d2 > max_sq {
                     continue;
                 }
@@ -127,6 +157,42 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
 
     use super::*;
+
+    /// Points left out by the distance bound are exactly those with no
+    /// target point within the distance: a pass after a move, with the
+    /// bounds of the pass before, sums what a pass that searches every
+    /// point sums — here with most of the source beyond the target's edge.
+    #[test]
+    fn the_distance_bound_leaves_out_only_points_without_a_partner() {
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let plane = |rng: &mut ChaCha8Rng, x0: f32, x1: f32| -> Vec<Point3<f32>> {
+            (0..4000)
+                .map(|_| {
+                    let (x, y) = (rng.random_range(x0..x1), rng.random_range(-3.0..3.0));
+                    Point3::new(x, y, 0.02 * (x * 1.3).sin() + 0.01 * y)
+                })
+                .collect()
+        };
+        let target = Target::new(&plane(&mut rng, -3.0, 3.0), 10).expect("target");
+        let source = plane(&mut rng, -2.0, 9.0);
+        let config = IcpConfig { max_correspondence_m: 0.3, ..IcpConfig::default() };
+        let max_sq = 0.09;
+        let first = Isometry3::translation(0.05, 0.02, 0.01);
+        let second =
+            Isometry3::rotation(Vector3::new(0.0, 0.0, 0.004)) * Isometry3::translation(0.02, -0.03, 0.0) * first;
+        let mut kept = Partners::new(source.len());
+        accumulate(&source, &target, &first, max_sq, &config, &mut kept, None);
+        let step = second * first.inverse();
+        let moved = (step.rotation.angle(), (second.translation.vector - first.translation.vector).norm());
+        let bounded = accumulate(&source, &target, &second, max_sq, &config, &mut kept, Some(moved));
+        let skipped = kept.lower_m.iter().filter(|&&l| f64::from(l) > 0.3).count();
+        let full = accumulate(&source, &target, &second, max_sq, &config, &mut Partners::new(source.len()), None);
+        assert!(skipped > source.len() / 3, "{skipped} of {} points known to be beyond the distance", source.len());
+        assert_eq!(bounded.n, full.n);
+        assert!((bounded.h - full.h).amax() <= 1e-9 * full.h.amax());
+        assert!((bounded.b - full.b).amax() <= 1e-9 * full.b.amax().max(1e-12));
+        assert!((bounded.sq - full.sq).abs() <= 1e-9 * full.sq);
+    }
 
     /// The point-to-point normal matrix derived from the sums equals Σ JᵀJ
     /// with J = [−[p]×, I] built point by point.

@@ -143,13 +143,15 @@ fn align_impl(
     // a sixth of a typical run and change them by the last, sub-tolerance
     // update.
     let mut last = Sums::default();
-    let mut partners = vec![u32::MAX; source.len()];
+    let mut partners = super::correspondences::Partners::new(source.len());
+    // How the estimate moved since the last pass (none before the first).
+    let mut moved = None;
     let mut unobservable = Vec::new();
     // The lever arm that makes rotation comparable with translation: the
     // source's RMS radius about its centroid (at least 1 mm).
     let lever_arm_m = config.degeneracy_ratio.map_or(1.0, |_| super::degeneracy::lever_arm(source));
     while iterations < config.max_iterations {
-        let sums = accumulate(source, target, &estimate, max_sq, config, &mut partners);
+        let sums = accumulate(source, target, &estimate, max_sq, config, &mut partners, moved);
         last = sums;
         if sums.n < 6 {
             return Err(FusionError::TooFewCorrespondences {
@@ -192,7 +194,11 @@ fn align_impl(
                 crate::se3::exp(&delta)
             }
         };
+        let last = estimate;
         estimate = update * estimate;
+        // T_new·p − T_last·p = (R_new − R_last)·p + (t_new − t_last).
+        let step = estimate * last.inverse();
+        moved = Some((step.rotation.angle(), (estimate.translation.vector - last.translation.vector).norm()));
         iterations += 1;
         if config.trace {
             trace.push(estimate);
