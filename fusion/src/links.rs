@@ -121,9 +121,9 @@ pub struct LinkGraph {
 }
 
 /// Matches every overlapping pair of `scans` from `poses` (their current
-/// `world_from_scan`, e.g. simultaneous matching's result) and adjusts
-/// the links in a pose graph, the start increments of `starts` (the
-/// guesses the set came with) holding what no link sees. `progress(done,
+/// `world_from_scan`, e.g. a coarser stage's result) and adjusts the links
+/// in a pose graph, the increments of `starts` (the guesses the set came
+/// with, or the coarser stage's poses) holding what no link sees. `progress(done,
 /// total)` is called as pairs are matched.
 pub fn adjust<S: AsRef<[Point3<f32>]> + Sync>(
     scans: &[S],

@@ -165,7 +165,11 @@ pub fn register_set<S: AsRef<[Point3<f32>]> + Sync>(
     }
     if config.mode == Mode::Graph {
         let link = LinkConfig { multiview: stage_config(config.stages.last().expect("a stage")), ..config.link };
-        let g = crate::links::adjust(scans, &poses, starts, &link, &mut |done, total| {
+        // The coarse stages' poses hold what no link sees: along a blind
+        // direction the (degeneracy-aware) coarse matches left each scan
+        // where the start put it, and a scan no fine link reaches keeps
+        // the coarse registration.
+        let g = crate::links::adjust(scans, &poses, &poses, &link, &mut |done, total| {
             progress(stages, stages, done, total)
         })?;
         return Ok(from_graph(g, matches, settled));

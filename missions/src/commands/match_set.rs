@@ -431,6 +431,18 @@ fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &MatchReport) ->
         report.matches,
         report.seconds
     )?;
+    if report.mode == "graph" {
+        for (i, s) in scans.iter().enumerate().skip(1) {
+            let linked = report.links.iter().any(|l| l.accepted && (l.source == i || l.targets.contains(&i)));
+            if !linked {
+                writeln!(
+                    out,
+                    "  warning: {} has no accepted link at the last stage: it keeps the coarser stages' pose, blind in every direction",
+                    s.name
+                )?;
+            }
+        }
+    }
     for l in report.links.iter().filter(|l| !l.accepted) {
         let targets: Vec<&str> = l.targets.iter().map(|&t| scans[t].name.as_str()).collect();
         writeln!(

@@ -177,6 +177,43 @@ fn bad_input_is_named_and_exits_2() {
     assert!(!out.exists(), "nothing written for input refused");
 }
 
+/// A scan that no link reaches at the last stage (here: a last stage of
+/// 1 mm, which no pair of real scans meets) keeps the coarser stages'
+/// registration, is blind in every direction, and the text says so.
+#[test]
+fn a_scan_without_links_is_reported() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let odometry = matrix_file("pcl_room_scans/odometry_T_scan1_scan2.txt");
+    let init = dir.path().join("init.json");
+    let rows: Vec<Vec<f64>> = (0..4).map(|r| (0..4).map(|c| odometry[(r, c)]).collect()).collect();
+    std::fs::write(&init, serde_json::json!([{ "file": "room_scan2.pcd", "world_from_scan": rows }]).to_string())
+        .expect("init poses");
+    let mut args: Vec<OsString> = vec![
+        "match".into(),
+        data("pcl_room_scans/room_scan1.pcd"),
+        data("pcl_room_scans/room_scan2.pcd"),
+        "--init-poses".into(),
+        init.into_os_string(),
+        "--schedule".into(),
+        "0.5/2,0.25/1,0.1/0.001".into(),
+        "--out".into(),
+        dir.path().join("text").into_os_string(),
+    ];
+    let text = cps_survey(args.clone());
+    assert_eq!(text.code, 0, "{}", text.stderr);
+    assert!(text.stdout.contains("room_scan2 has no accepted link at the last stage"), "{}", text.stdout);
+    args.truncate(args.len() - 1);
+    args.extend([dir.path().join("json").into_os_string(), "--json".into()]);
+    let run = cps_survey(args);
+    let v: Value = serde_json::from_str(&run.stdout).expect("JSON");
+    assert_eq!(v["links"].as_array().map(Vec::len), Some(0));
+    assert_eq!(v["scans"][1]["degenerate_directions"].as_array().map(Vec::len), Some(6));
+    // The coarse stages' registration is kept (the odometry guess is 0.69 m off).
+    let reference = rigid(&matrix_file("pcl_room_scans/reference_T_scan1_scan2.txt"));
+    let (deg, m) = error(&pose(&v["scans"][1]["world_from_scan"]), &reference);
+    assert!(deg < 0.5 && m < 0.05, "{deg}° {m} m");
+}
+
 /// A multi-scan E57 (here the one `match` writes: each scan in its own
 /// frame with its registered pose) is a scan set whose poses are the
 /// start: matched again it stays where it is, every scan named by its
