@@ -35,6 +35,17 @@ fn matrix_file(rel: &str) -> Matrix4<f64> {
     scanner::io::read_matrix4(Path::new(&data(rel))).expect("matrix")
 }
 
+/// `--init-poses` for the PCL room pair: room_scan2 at its odometry guess,
+/// written into `dir`.
+fn room_odometry(dir: &Path) -> std::path::PathBuf {
+    let odometry = matrix_file("pcl_room_scans/odometry_T_scan1_scan2.txt");
+    let rows: Vec<Vec<f64>> = (0..4).map(|r| (0..4).map(|c| odometry[(r, c)]).collect()).collect();
+    let init = dir.join("init.json");
+    std::fs::write(&init, serde_json::json!([{ "file": "room_scan2.pcd", "world_from_scan": rows }]).to_string())
+        .expect("init poses");
+    init
+}
+
 fn run(args: &[OsString], out: &Path) -> (tests::Run, Option<Value>) {
     let mut all: Vec<OsString> = vec!["match".into()];
     all.extend(args.iter().cloned());
@@ -95,11 +106,7 @@ fn the_3dtk_set_lands_on_the_references_from_its_odometry() {
 #[test]
 fn the_room_scans_land_on_the_reference_from_their_odometry_guess() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let odometry = matrix_file("pcl_room_scans/odometry_T_scan1_scan2.txt");
-    let init = dir.path().join("init.json");
-    let rows: Vec<Vec<f64>> = (0..4).map(|r| (0..4).map(|c| odometry[(r, c)]).collect()).collect();
-    let entries = serde_json::json!([{ "file": "room_scan2.pcd", "world_from_scan": rows }]);
-    std::fs::write(&init, entries.to_string()).expect("init poses");
+    let init = room_odometry(dir.path());
     let (run, v) = run(
         &[
             data("pcl_room_scans/room_scan1.pcd"),
@@ -183,11 +190,7 @@ fn bad_input_is_named_and_exits_2() {
 #[test]
 fn a_scan_without_links_is_reported() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let odometry = matrix_file("pcl_room_scans/odometry_T_scan1_scan2.txt");
-    let init = dir.path().join("init.json");
-    let rows: Vec<Vec<f64>> = (0..4).map(|r| (0..4).map(|c| odometry[(r, c)]).collect()).collect();
-    std::fs::write(&init, serde_json::json!([{ "file": "room_scan2.pcd", "world_from_scan": rows }]).to_string())
-        .expect("init poses");
+    let init = room_odometry(dir.path());
     let mut args: Vec<OsString> = vec![
         "match".into(),
         data("pcl_room_scans/room_scan1.pcd"),
