@@ -49,6 +49,8 @@ pub enum FusionError {
         needed: usize,
         /// What it was matched against.
         against: String,
+        /// That scan's index, when it was one scan (pairwise).
+        partner: Option<usize>,
     },
     /// An error while matching one scan of a set.
     #[error("scan {scan}: {source}")]

@@ -286,29 +286,31 @@ fn solve(
                 continue;
             }
         }
-        let unobservable = (0..n)
-            .map(|i| {
-                let t = &g.world_from_scan[i];
-                // The scan's information from its links, in its own frame
-                // (rotation about its scanner, as ICP's lever arm assumes).
-                let mut h = Matrix6::zeros();
-                for &k in &used {
-                    let l = &links[k];
-                    if l.target == i || l.source == i {
-                        let j = adjoint(&g.world_from_scan[l.target].inverse()) * adjoint(t);
-                        h += j.transpose() * links[k].result.as_ref().expect("accepted").information * j;
+        // Each scan's information from its links, in its own frame
+        // (rotation about its scanner, as ICP's lever arm assumes) —
+        // analysed only when blind directions are asked for.
+        let unobservable = match config.multiview.icp.degeneracy_ratio {
+            None => vec![Vec::new(); n],
+            Some(ratio) => (0..n)
+                .map(|i| {
+                    let t = &g.world_from_scan[i];
+                    let mut h = Matrix6::zeros();
+                    for &k in &used {
+                        let l = &links[k];
+                        if l.target == i || l.source == i {
+                            let j = adjoint(&g.world_from_scan[l.target].inverse()) * adjoint(t);
+                            h += j.transpose() * links[k].result.as_ref().expect("accepted").information * j;
+                        }
                     }
-                }
-                let to_world = adjoint(t);
-                config.multiview.icp.degeneracy_ratio.map_or_else(Vec::new, |ratio| {
+                    let to_world = adjoint(t);
                     Observability::new(&h, lever_arm[i], ratio)
                         .unobservable()
                         .into_iter()
                         .map(|d| (to_world * d).normalize())
                         .collect()
                 })
-            })
-            .collect();
+                .collect(),
+        };
         let scale = variance_factor.max(1.0);
         // Scan 0's prior leaves it within 1e-20 m of its pose: put it there.
         let shift = poses[0] * g.world_from_scan[0].inverse();

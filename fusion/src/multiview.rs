@@ -454,15 +454,15 @@ impl Matcher<'_> {
         Ok(before)
     }
 
-    fn no_overlap(&self, c: usize, best: usize, against: &str) -> FusionError {
-        FusionError::NoOverlap { scan: c, pairs: best, needed: self.config.min_pairs + 1, against: against.into() }
+    fn no_overlap(&self, c: usize, pairs: usize, against: &str, partner: Option<usize>) -> FusionError {
+        FusionError::NoOverlap { scan: c, pairs, needed: self.config.min_pairs + 1, against: against.into(), partner }
     }
 
     /// Registers scan `i` against the earlier scan with the most overlap.
     fn pairwise(&mut self, i: usize) -> Result<()> {
         let (best, pairs) = (0..i).map(|j| (j, self.overlap(i, j))).max_by_key(|&(j, p)| (p, j)).unwrap_or((0, 0));
         if pairs <= self.config.min_pairs {
-            return Err(self.no_overlap(i, pairs, &format!("the best earlier scan ({best})")));
+            return Err(self.no_overlap(i, pairs, &format!("the best earlier scan ({best})"), Some(best)));
         }
         let model = self.model(&[best])?;
         self.align(i, &model, vec![best])?;
@@ -475,7 +475,7 @@ impl Matcher<'_> {
         let model = self.model(&members)?;
         let pairs = model.correspondences(&self.prepared[i].source, &self.poses[i], self.overlap_distance());
         if pairs <= self.config.min_pairs {
-            return Err(self.no_overlap(i, pairs, "the metascan"));
+            return Err(self.no_overlap(i, pairs, "the metascan", None));
         }
         self.align(i, &model, members)?;
         Ok(())

@@ -94,10 +94,9 @@ impl Observability {
         for b in self.blind() {
             p -= b * b.transpose();
         }
-        let hu = p * self.hu * p;
-        let inv =
-            Matrix6::from_diagonal(&Vector6::new(self.lever_arm_m, self.lever_arm_m, self.lever_arm_m, 1.0, 1.0, 1.0));
-        let h = inv * hu * inv;
+        // H = S⁻¹·H_u·S⁻¹, S⁻¹ = scale(1/L).
+        let inv = scale(1.0 / self.lever_arm_m);
+        let h = inv * (p * self.hu * p) * inv;
         0.5 * (h + h.transpose())
     }
 

@@ -9,11 +9,12 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use fusion::icp::{Kernel, Method};
 use fusion::scanset::{Mode, SetConfig, SetResult};
-use nalgebra::{Isometry3, Matrix6, Vector3, Vector6};
+use nalgebra::{Isometry3, Matrix6, Vector3};
 use serde::Serialize;
 
 use super::Outcome;
 use super::register::MethodArg;
+use crate::run::report::directions;
 use crate::scans::inputs::InputScan;
 use crate::view::recording::{Recorder, Viewer};
 
@@ -236,11 +237,8 @@ fn progress_bar(hidden: bool) -> indicatif::ProgressBar {
 fn named(e: fusion::FusionError, scans: &[InputScan]) -> anyhow::Error {
     let file = |i: usize| scans.get(i).map_or_else(|| format!("scan {i}"), |s| s.file.clone());
     match e {
-        fusion::FusionError::NoOverlap { scan, pairs, needed, against } => {
-            let partner = against
-                .rsplit_once('(')
-                .and_then(|(_, n)| n.trim_end_matches(')').parse::<usize>().ok())
-                .map_or(against.clone(), file);
+        fusion::FusionError::NoOverlap { scan, pairs, needed, against, partner } => {
+            let partner = partner.map_or(against, file);
             anyhow::anyhow!(
                 "{} and {partner} do not overlap at their start poses: {pairs} correspondences, expected at least {needed} (are the start poses within the schedule's first distance, and do the scans overlap?)",
                 file(scan)
@@ -255,19 +253,11 @@ fn matrix<const R: usize, const C: usize>(f: impl Fn(usize, usize) -> f64) -> [[
     std::array::from_fn(|r| std::array::from_fn(|c| f(r, c)))
 }
 
-fn directions(d: &[Vector6<f64>]) -> Vec<[f64; 6]> {
-    d.iter().map(|v| std::array::from_fn(|i| v[i])).collect()
-}
-
 fn report(mode: ModeArg, scans: &[InputScan], r: &SetResult, seconds: f64) -> MatchReport {
-    let name = match mode {
-        ModeArg::Pairwise => "pairwise",
-        ModeArg::Incremental => "incremental",
-        ModeArg::Simultaneous => "simultaneous",
-        ModeArg::Graph => "graph",
-    };
+    use clap::ValueEnum;
     MatchReport {
-        mode: name.into(),
+        // The name the command line takes.
+        mode: mode.to_possible_value().map_or_else(String::new, |v| v.get_name().to_owned()),
         scans: scans
             .iter()
             .enumerate()
@@ -372,29 +362,38 @@ fn write_clouds(dir: &Path, formats: &[String], scans: &[InputScan], r: &SetResu
         source: true,
         timed: false,
     };
-    let mut files = Vec::new();
+    let mut writers = Vec::with_capacity(formats.len());
     for format in formats {
         let name = crate::run::outputs::cloud_file(format);
         let path = dir.join(&name);
-        let mut writer =
-            scanner::io::CloudWriter::create(&path, scanner::io::Format::from_path(&path)?, header.clone())?;
-        for (i, s) in scans.iter().enumerate() {
-            let pose = r.world_from_scan[i];
-            let relative = Isometry3::from_parts((pose.translation.vector - origin).into(), pose.rotation);
-            let n = s.points.len();
-            writer.push(&scanner::io::PointCloud {
-                points: fusion::direct::transform(&s.points, &relative),
-                source: Some(vec![u16::try_from(i).unwrap_or(u16::MAX); n]),
-                origin,
-                scans: vec![scanner::io::ScanInfo {
-                    name: s.name.clone(),
-                    points: 0..n,
-                    world_from_scan: pose,
-                    gps_time_s: None,
-                }],
-                ..scanner::io::PointCloud::default()
-            })?;
+        writers.push((
+            name,
+            scanner::io::CloudWriter::create(&path, scanner::io::Format::from_path(&path)?, header.clone())?,
+        ));
+    }
+    // Each scan moved into the world once, into every file.
+    for (i, s) in scans.iter().enumerate() {
+        let pose = r.world_from_scan[i];
+        let relative = Isometry3::from_parts((pose.translation.vector - origin).into(), pose.rotation);
+        let n = s.points.len();
+        let part = scanner::io::PointCloud {
+            points: fusion::direct::transform(&s.points, &relative),
+            source: Some(vec![u16::try_from(i).unwrap_or(u16::MAX); n]),
+            origin,
+            scans: vec![scanner::io::ScanInfo {
+                name: s.name.clone(),
+                points: 0..n,
+                world_from_scan: pose,
+                gps_time_s: None,
+            }],
+            ..scanner::io::PointCloud::default()
+        };
+        for (_, writer) in &mut writers {
+            writer.push(&part)?;
         }
+    }
+    let mut files = Vec::with_capacity(writers.len());
+    for (name, writer) in writers {
         writer.finish()?;
         files.push(name);
     }

@@ -262,7 +262,7 @@ impl FusionReport {
                     world_from_body: std::array::from_fn(|r| std::array::from_fn(|c| m[(r, c)])),
                     roll_pitch_yaw_rad: [roll, pitch, yaw],
                     covariance: f.covariance.map(|c| std::array::from_fn(|r| std::array::from_fn(|k| c[(r, k)]))),
-                    degenerate_directions: f.unobservable.iter().map(|d| std::array::from_fn(|i| d[i])).collect(),
+                    degenerate_directions: directions(&f.unobservable),
                     error_xy_m: None,
                     direct_error_xy_m: None,
                     error_heading_rad: None,
@@ -301,7 +301,7 @@ impl FusionReport {
                     converged: l.converged,
                     accepted: l.rejected.is_none(),
                     reason: l.rejected.clone(),
-                    degenerate_directions: l.unobservable.iter().map(|d| std::array::from_fn(|i| d[i])).collect(),
+                    degenerate_directions: directions(&l.unobservable),
                 })
                 .collect(),
         }
@@ -426,4 +426,9 @@ pub fn write_stations_csv(path: &Path, stations: &[StationRecord], adjusted: Opt
         );
     }
     std::fs::write(path, csv).with_context(|| format!("writing {}", path.display()))
+}
+
+/// Blind directions (unit ξ = (ω, v)) as JSON rows.
+pub(crate) fn directions(d: &[nalgebra::Vector6<f64>]) -> Vec<[f64; 6]> {
+    d.iter().map(|v| std::array::from_fn(|i| v[i])).collect()
 }

@@ -22,9 +22,6 @@ pub struct InputScan {
     pub points: Vec<Point3<f32>>,
     /// Its start `world_from_scan`.
     pub start: Isometry3<f64>,
-    /// Whether the start came from the input (a `.pose`, the E57, or
-    /// `--init-poses`) rather than identity.
-    pub posed: bool,
 }
 
 /// One entry of an `--init-poses` file.
@@ -57,7 +54,6 @@ pub fn read(
                 name: s.name,
                 points: s.points,
                 start: s.world_from_scan,
-                posed: true,
             }));
         } else {
             let cloud = scanner::io::read(input)?;
@@ -69,7 +65,6 @@ pub fn read(
                 name: stem(input),
                 points: cloud.points,
                 start: Isometry3::identity(),
-                posed: false,
             });
         }
     }
@@ -135,13 +130,7 @@ fn threedtk_directory(dir: &Path) -> Result<Vec<InputScan>> {
         .map(|(_, path)| {
             let start = scanner::io::read_3dtk_pose(&path.with_extension("pose"))?;
             let cloud = scanner::io::read(&path)?;
-            Ok(InputScan {
-                file: path.display().to_string(),
-                name: stem(&path),
-                points: cloud.points,
-                start,
-                posed: true,
-            })
+            Ok(InputScan { file: path.display().to_string(), name: stem(&path), points: cloud.points, start })
         })
         .collect()
 }
@@ -170,7 +159,6 @@ fn apply_init_poses(path: &Path, scans: &mut [InputScan]) -> Result<()> {
             );
         };
         scan.start = pose;
-        scan.posed = true;
     }
     Ok(())
 }
