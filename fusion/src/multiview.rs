@@ -24,9 +24,23 @@
 //! target with normals estimated in the scan's own frame and turned towards
 //! its scanner at [`IcpConfig::source_viewpoint`] (so that a match can
 //! leave out surfaces the other scanner saw from behind,
-//! [`IcpConfig::reject_back_faces`]); a model set
-//! M is the neighbours' targets moved into the world with their current
-//! poses (normals rotated along), so only its k-d tree is built per match.
+//! [`IcpConfig::reject_back_faces`]). A match against one scan runs in
+//! that scan's frame, against its prepared target (the link graph's way:
+//! no tree to build, the neighbourhoods already there), its result carried
+//! into the world by the frame's adjoint; a model set M of several scans is
+//! their targets moved into the world with their current poses (normals
+//! rotated along), so only its k-d tree is built per match.
+//!
+//! With [`IcpConfig::degeneracy_ratio`] every match runs in the world, as
+//! before: the eigen-analysis of blind directions is not invariant to the
+//! frame (rotations about a far origin weigh more against translations),
+//! and its threshold was chosen in the world frame — run in the scans' own
+//! frames, the sewer's matches kept their roll blind but saw the pipe's
+//! axis (ratio above 1e-3) and slid a metre along it. (Models built in the
+//! matched scan's frame gave the same matches to micrometres but stopped
+//! each a little earlier — the translation tolerance no longer carries the
+//! world's lever arm — and the millimetre-threshold queue of the hall test
+//! walked off; so the models stay in the world.)
 
 use std::collections::VecDeque;
 
@@ -36,6 +50,7 @@ use rayon::prelude::*;
 use crate::error::{FusionError, Result};
 use crate::graph::{Edge, JointPrior};
 use crate::icp::{IcpConfig, IcpResult, Kernel, Method, Target, align};
+use crate::se3::adjoint;
 
 /// How each new scan is registered.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -434,24 +449,45 @@ impl Matcher<'_> {
             let moved: Isometry3<f32> = pose.cast();
             let local = &self.prepared[j].local;
             points.extend(local.points().map(|p| moved * p));
-            normals.extend(local.normals().iter().map(|v| pose.rotation * v));
+            normals.extend(local.normals().into_iter().map(|v| pose.rotation * v));
         }
         Target::with_oriented_normals(&points, normals)
     }
 
-    /// Aligns scan `c` to `model` from its current pose and records the match.
-    fn align(&mut self, c: usize, model: &Target, partners: Vec<usize>) -> Result<Isometry3<f64>> {
-        let r = align(&self.prepared[c].source, model, &self.poses[c], &self.config.icp).map_err(|e| in_scan(c, e))?;
+    /// Aligns scan `c` from its current pose to `target`, whose frame is
+    /// `world_from_target`; the match is returned moved into the world.
+    fn match_to(&self, c: usize, target: &Target, world_from_target: &Isometry3<f64>) -> Result<IcpResult> {
+        let init = world_from_target.inverse() * self.poses[c];
+        let r = align(&self.prepared[c].source, target, &init, &self.config.icp).map_err(|e| in_scan(c, e))?;
+        Ok(in_world(r, world_from_target))
+    }
+
+    /// Aligns scan `c` to its `partners` and records the match; returns its
+    /// pose before. One partner is matched in its own frame, with its
+    /// prepared target (the tree and neighbourhoods built once per scan),
+    /// unless blind directions are analysed (see the module docs); several
+    /// through a model built in the world.
+    fn align(&mut self, c: usize, partners: Vec<usize>) -> Result<Isometry3<f64>> {
+        let r = if let ([j], None) = (&partners[..], self.config.icp.degeneracy_ratio) {
+            self.match_to(c, &self.prepared[*j].local, &self.poses[*j])?
+        } else {
+            self.match_to(c, &self.model(&partners)?, &Isometry3::identity())?
+        };
+        Ok(self.record(c, r, partners))
+    }
+
+    /// Records match `r` (in the world) of scan `c` against `partners`;
+    /// returns its pose before.
+    fn record(&mut self, c: usize, r: IcpResult, partners: Vec<usize>) -> Isometry3<f64> {
         let before = self.poses[c];
         if !r.trace.is_empty() {
-            // The model is in the world frame: the trace is the world pose.
             self.traces.push(IcpTrace { scan: c, partners: partners.clone(), world_from_scan: r.trace.clone() });
         }
         self.poses[c] = r.target_from_source;
         self.last_match[c] = Some(r);
         self.partners[c] = partners;
         self.matches += 1;
-        Ok(before)
+        before
     }
 
     fn no_overlap(&self, c: usize, pairs: usize, against: &str, partner: Option<usize>) -> FusionError {
@@ -464,8 +500,7 @@ impl Matcher<'_> {
         if pairs <= self.config.min_pairs {
             return Err(self.no_overlap(i, pairs, &format!("the best earlier scan ({best})"), Some(best)));
         }
-        let model = self.model(&[best])?;
-        self.align(i, &model, vec![best])?;
+        self.align(i, vec![best])?;
         Ok(())
     }
 
@@ -477,7 +512,8 @@ impl Matcher<'_> {
         if pairs <= self.config.min_pairs {
             return Err(self.no_overlap(i, pairs, "the metascan", None));
         }
-        self.align(i, &model, members)?;
+        let r = self.match_to(i, &model, &Isometry3::identity())?;
+        self.record(i, r, members);
         Ok(())
     }
 
@@ -498,8 +534,7 @@ impl Matcher<'_> {
             if neighbours.is_empty() {
                 continue;
             }
-            let model = self.model(&neighbours)?;
-            let before = self.align(c, &model, neighbours.clone())?;
+            let before = self.align(c, neighbours.clone())?;
             runs += 1;
             let step = self.poses[c] * before.inverse();
             let moved = step.translation.vector.norm() > self.config.moved_translation_m
@@ -514,6 +549,21 @@ impl Matcher<'_> {
         }
         Ok(())
     }
+}
+
+/// A match made in its target scan's frame (`target_from_source` =
+/// `j_from_c`), moved into the world by `world_from_j`: the pose and trace
+/// composed, the information and blind directions carried by the adjoint
+/// (ξ_world = Ad(world_from_j) ξ_j).
+fn in_world(mut r: IcpResult, world_from_j: &Isometry3<f64>) -> IcpResult {
+    let ad = adjoint(world_from_j);
+    let ad_inv = adjoint(&world_from_j.inverse());
+    r.target_from_source = world_from_j * r.target_from_source;
+    r.trace.iter_mut().for_each(|t| *t = world_from_j * *t);
+    r.information = ad_inv.transpose() * r.information * ad_inv;
+    r.information = 0.5 * (r.information + r.information.transpose());
+    r.unobservable.iter_mut().for_each(|d| *d = (ad * *d).normalize());
+    r
 }
 
 pub(crate) fn in_scan(scan: usize, e: FusionError) -> FusionError {
@@ -550,4 +600,112 @@ pub(crate) fn check<S>(scans: &[S], guesses: &[Isometry3<f64>], c: &MultiviewCon
         });
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::{Translation3, UnitQuaternion, Vector3, Vector6};
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    use super::*;
+
+    /// Random points on a plane patch (corner, two edges), with ±0.5 mm noise.
+    fn patch(rng: &mut ChaCha8Rng, c: [f32; 3], u: [f32; 3], v: [f32; 3], n: usize) -> Vec<Point3<f32>> {
+        let (c, u, v) = (Vector3::from(c), Vector3::from(u), Vector3::from(v));
+        let normal = u.cross(&v).normalize();
+        (0..n)
+            .map(|_| {
+                let (a, b): (f32, f32) = (rng.random_range(0.0..1.0), rng.random_range(0.0..1.0));
+                Point3::from(c + u * a + v * b + normal * rng.random_range(-0.0005..0.0005))
+            })
+            .collect()
+    }
+
+    /// A room (floor, four walls, a pillar) or, with `corridor`, only a
+    /// floor and two long walls — blind along x; x within ±`half_length`.
+    fn scene(rng: &mut ChaCha8Rng, corridor: bool, half_length: f32) -> Vec<Point3<f32>> {
+        let (x0, l) = (-half_length, 2.0 * half_length);
+        let dense = (1000.0 * half_length) as usize;
+        let mut p = patch(rng, [x0, -3.0, -1.0], [l, 0.0, 0.0], [0.0, 6.0, 0.0], 2 * dense);
+        p.extend(patch(rng, [x0, -3.0, -1.0], [l, 0.0, 0.0], [0.0, 0.0, 3.0], dense));
+        p.extend(patch(rng, [x0, 3.0, -1.0], [l, 0.0, 0.0], [0.0, 0.0, 3.0], dense));
+        if !corridor {
+            p.extend(patch(rng, [x0, -3.0, -1.0], [0.0, 6.0, 0.0], [0.0, 0.0, 3.0], 2000));
+            p.extend(patch(rng, [-x0, -3.0, -1.0], [0.0, 6.0, 0.0], [0.0, 0.0, 3.0], 2000));
+            p.extend(patch(rng, [1.0, 1.0, -1.0], [0.4, 0.0, 0.0], [0.0, 0.0, 3.0], 300));
+            p.extend(patch(rng, [1.0, 1.0, -1.0], [0.0, 0.4, 0.0], [0.0, 0.0, 3.0], 300));
+        }
+        p
+    }
+
+    /// A match made in the target scan's frame and carried into the world
+    /// ([`in_world`]) — the target's frame 14 m and 40° from the world's:
+    /// - in a room, it is the match against the target moved into the world
+    ///   (what a one-scan model was): the same pose and information;
+    /// - in a corridor (the source inside the target's length), the axis is
+    ///   its one blind direction, carried into the world by the adjoint, and
+    ///   the pose stays at the start along it while the rest is recovered
+    ///   (the link graph's matches, and `register`'s, run this way).
+    #[test]
+    fn a_match_in_its_target_frame_is_the_world_match() {
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let world_from_j = Isometry3::from_parts(
+            Translation3::new(12.0, -7.0, 1.5),
+            UnitQuaternion::from_euler_angles(0.05, -0.03, 40f64.to_radians()),
+        );
+        let j_from_c = Isometry3::from_parts(
+            Translation3::new(0.6, -0.2, 0.05),
+            UnitQuaternion::from_euler_angles(0.01, 0.02, 0.2),
+        );
+        let config = IcpConfig {
+            max_correspondence_m: 0.5,
+            max_iterations: 100,
+            translation_tolerance_m: 1e-9,
+            rotation_tolerance_rad: 1e-9,
+            reject_back_faces: true,
+            ..IcpConfig::default()
+        };
+        let start = Isometry3::translation(0.05, 0.03, -0.02) * j_from_c;
+        let c_from_j: Isometry3<f32> = j_from_c.inverse().cast();
+        let mut prepared = |corridor: bool, source_half_length: f32| {
+            let mut target = Target::new(&scene(&mut rng, corridor, 4.0), 10).expect("target");
+            target.orient_normals_towards(&Point3::origin());
+            let source: Vec<Point3<f32>> =
+                scene(&mut rng, corridor, source_half_length).iter().map(|p| c_from_j * p).collect();
+            (target, source)
+        };
+
+        let (local, source) = prepared(false, 4.0);
+        let moved: Isometry3<f32> = world_from_j.cast();
+        let world = Target::with_oriented_normals(
+            &local.points().map(|p| moved * p).collect::<Vec<_>>(),
+            local.normals().into_iter().map(|n| world_from_j.rotation * n).collect(),
+        )
+        .expect("world target");
+        let b = in_world(align(&source, &local, &start, &config).expect("in j's frame"), &world_from_j);
+        let a = align(&source, &world, &(world_from_j * start), &config).expect("in the world");
+        let d = a.target_from_source.inverse() * b.target_from_source;
+        assert!(d.translation.vector.norm() < 2e-5 && d.rotation.angle() < 2e-6, "{d}");
+        let truth = world_from_j * j_from_c;
+        let e = truth.inverse() * b.target_from_source;
+        assert!(e.translation.vector.norm() < 1e-3 && e.rotation.angle() < 2e-4, "{e}");
+        assert!((a.information - b.information).amax() < 1e-3 * a.information.amax(), "{}", b.information);
+
+        let (local, source) = prepared(true, 2.0);
+        // Random points' PCA normals tilt enough to leave the axis 1.7e-3
+        // of the largest eigenvalue here.
+        let blind = IcpConfig { degeneracy_ratio: Some(1e-2), ..config };
+        let in_j = align(&source, &local, &start, &blind).expect("in j's frame");
+        // The error in j's frame: the start's was (0.05, 0.03, −0.02) m.
+        let e = in_j.target_from_source * j_from_c.inverse();
+        assert!((e.translation.vector.x - 0.05).abs() < 1e-3, "held along the axis: {e}");
+        assert!(e.translation.vector.yz().norm() < 1e-3 && e.rotation.angle() < 2e-4, "{e}");
+        let b = in_world(in_j, &world_from_j);
+        let axis = adjoint(&world_from_j) * Vector6::new(0.0, 0.0, 0.0, 1.0, 0.0, 0.0);
+        assert_eq!(b.unobservable.len(), 1, "{:?}", b.unobservable);
+        assert!(b.unobservable[0].dot(&axis).abs() > 1.0 - 1e-4, "the corridor's axis: {}", b.unobservable[0]);
+        let along = b.information * b.unobservable[0];
+        assert!(along.norm() < 1e-9 * b.information.amax(), "information along the blind direction: {along}");
+    }
 }

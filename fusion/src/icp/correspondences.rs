@@ -117,14 +117,14 @@ pub(crate) fn accumulate(
                 }
                 let q = point(&target.points[i]);
                 if let Some(eye) = back_faces
-                    && target.normals[i].dot(&(eye - q)) < 0.0
+                    && target.normal(i).dot(&(eye - q)) < 0.0
                 {
                     continue;
                 }
                 s.n += 1;
                 match config.method {
                     Method::PointToPlane => {
-                        let n = target.normals[i];
+                        let n = target.normal(i);
                         let res = n.dot(&(pt - q));
                         let w = config.kernel.weight(res);
                         // r = nᵀ(T̂p + ω × T̂p + v − q): ∂r/∂ω = T̂p × n, ∂r/∂v = n.

@@ -126,7 +126,7 @@ fn align_impl(
                     .into(),
         });
     }
-    if config.method == Method::PointToPlane && target.normals.is_empty() {
+    if config.method == Method::PointToPlane && !target.has_normals() {
         return Err(FusionError::OutOfRange {
             what: "target normals".into(),
             value: 0.0,

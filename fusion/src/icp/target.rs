@@ -1,7 +1,8 @@
 //! A target cloud prepared for ICP: the k-d tree, PCA normals (optionally
 //! oriented towards the scanner) and each point's neighbourhood
 //! certificate, which answers most nearest-neighbour queries without the
-//! tree.
+//! tree. Normals and certificates are estimated point by point the first
+//! time ICP needs them, from one k-nearest query.
 
 use std::sync::OnceLock;
 
@@ -59,21 +60,41 @@ impl Neighbourhood {
     }
 }
 
-/// A target cloud prepared for ICP: its k-d tree, (for point-to-plane)
-/// unit normals, and each point's `Neighbourhood`, filled in as ICP
-/// first needs it (or with the normals, from the same query).
+/// A target point's surroundings, estimated the first time ICP needs
+/// them: its PCA normal (turned towards the viewpoint, when one is set) and
+/// its `Neighbourhood`, from one k-nearest query.
+#[derive(Debug, Clone, Copy)]
+struct Local {
+    /// Zero when the target's normals are given, not estimated.
+    normal: Vector3<f64>,
+    hood: Neighbourhood,
+}
+
+/// A target cloud prepared for ICP: its k-d tree and, for point-to-plane,
+/// unit normals — given with the points, or PCA normals estimated point by
+/// point as ICP first needs them (a point no source point comes near is
+/// never estimated: with partial overlap, and for the scans of a set that
+/// are only ever matched as sources, most of them) — and each point's
+/// `Neighbourhood`, from the same query.
 #[derive(Debug)]
 pub struct Target {
     pub(crate) points: Vec<[f32; 3]>,
-    pub(crate) normals: Vec<Vector3<f64>>,
+    /// Normals given with the points; empty when estimated or absent.
+    given: Vec<Vector3<f64>>,
+    /// Points of an estimated normal's neighbourhood; 0: none estimated.
+    normal_neighbours: usize,
+    /// Estimated normals are turned towards this point.
+    viewpoint: Option<Point3<f64>>,
     tree: KdTree,
-    neighbourhoods: Vec<OnceLock<Neighbourhood>>,
+    local: Vec<OnceLock<Local>>,
     /// The normals point to the side the target's scanner saw.
     pub(crate) oriented: bool,
 }
 
 impl Target {
-    /// Builds the tree and, when `normal_neighbours > 0`, PCA normals.
+    /// Builds the tree; when `normal_neighbours > 0`, the points get PCA
+    /// normals from that many nearest points (at least 3), estimated as
+    /// they are first needed.
     pub fn new(points: &[Point3<f32>], normal_neighbours: usize) -> Result<Self> {
         let points: Vec<[f32; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
         if points.len() < 6 {
@@ -85,13 +106,9 @@ impl Target {
         }
         let tree = KdTree::new_from_slice(&points)
             .map_err(|e| FusionError::Degenerate { what: format!("k-d tree: {e:?}") })?;
-        let mut t = Self { points, normals: Vec::new(), tree, neighbourhoods: Vec::new(), oriented: false };
-        if normal_neighbours > 0 {
-            (t.normals, t.neighbourhoods) = t.estimate_normals(normal_neighbours.max(3));
-        } else {
-            t.neighbourhoods = std::iter::repeat_with(OnceLock::new).take(t.points.len()).collect();
-        }
-        Ok(t)
+        let local = std::iter::repeat_with(OnceLock::new).take(points.len()).collect();
+        let normal_neighbours = if normal_neighbours > 0 { normal_neighbours.max(3) } else { 0 };
+        Ok(Self { points, given: Vec::new(), normal_neighbours, viewpoint: None, tree, local, oriented: false })
     }
 
     /// A target from points and their unit normals (estimated elsewhere, e.g.
@@ -106,7 +123,7 @@ impl Target {
             });
         }
         let mut t = Self::new(points, 0)?;
-        t.normals = normals;
+        t.given = normals;
         Ok(t)
     }
 
@@ -115,7 +132,7 @@ impl Target {
     /// normals moved into one frame with their scans).
     pub fn with_oriented_normals(points: &[Point3<f32>], normals: Vec<Vector3<f64>>) -> Result<Self> {
         let mut t = Self::with_normals(points, normals)?;
-        t.oriented = !t.normals.is_empty();
+        t.oriented = !t.given.is_empty();
         Ok(t)
     }
 
@@ -123,17 +140,28 @@ impl Target {
     /// points, in their frame): nᵀ(viewpoint − q) ≥ 0. Does nothing
     /// without normals.
     pub fn orient_normals_towards(&mut self, viewpoint: &Point3<f64>) {
-        for (n, q) in self.normals.iter_mut().zip(&self.points) {
-            if n.dot(&(viewpoint.coords - point(q))) < 0.0 {
-                *n = -*n;
+        for (n, q) in self.given.iter_mut().zip(&self.points) {
+            orient(n, q, viewpoint);
+        }
+        if self.normal_neighbours > 0 {
+            self.viewpoint = Some(*viewpoint);
+            for (l, q) in self.local.iter_mut().zip(&self.points) {
+                if let Some(l) = l.get_mut() {
+                    orient(&mut l.normal, q, viewpoint);
+                }
             }
         }
-        self.oriented = !self.normals.is_empty();
+        self.oriented = self.has_normals();
     }
 
     /// True when the normals are oriented towards the scanner.
     pub fn has_oriented_normals(&self) -> bool {
         self.oriented
+    }
+
+    /// True when the points have normals (given or estimated).
+    pub fn has_normals(&self) -> bool {
+        self.normal_neighbours > 0 || !self.given.is_empty()
     }
 
     /// The points, in the order of [`normals`](Self::normals).
@@ -171,40 +199,44 @@ impl Target {
         self.points.is_empty()
     }
 
-    /// Normals (empty when not estimated).
-    pub fn normals(&self) -> &[Vector3<f64>] {
-        &self.normals
+    /// Every point's normal (estimating those not yet estimated); empty
+    /// without normals.
+    pub fn normals(&self) -> Vec<Vector3<f64>> {
+        if !self.has_normals() {
+            return Vec::new();
+        }
+        (0..self.points.len()).into_par_iter().map(|i| self.normal(i)).collect()
     }
 
-    /// PCA normals from the `k` nearest points, and each point's
-    /// neighbourhood from the same query.
-    fn estimate_normals(&self, k: usize) -> (Vec<Vector3<f64>>, Vec<OnceLock<Neighbourhood>>) {
-        let n = self.points.len();
-        let k = std::num::NonZero::new(k.min(n)).unwrap_or(std::num::NonZero::<usize>::MIN);
-        self.points
-            .par_iter()
-            .enumerate()
-            .map(|(j, p)| {
-                let nn = self.tree.query(p).nearest_n::<SquaredEuclidean<f32>>(k).execute();
-                let mean =
-                    nn.iter().fold(Vector3::zeros(), |s, r| s + point(&self.points[r.item as usize])) / nn.len() as f64;
-                let cov = nn.iter().fold(Matrix3::zeros(), |s, r| {
-                    let d = point(&self.points[r.item as usize]) - mean;
-                    s + d * d.transpose()
-                });
-                let hood = Neighbourhood::new(j, nn.iter().map(|r| (r.item, r.distance)), nn.len() == n);
-                (smallest_eigenvector(&cov), OnceLock::from(hood))
-            })
-            .unzip()
+    /// Point `i`'s unit normal (the target has normals).
+    pub(crate) fn normal(&self, i: usize) -> Vector3<f64> {
+        if self.normal_neighbours > 0 { self.local(i).normal } else { self.given[i] }
     }
 
-    /// Point `j`'s neighbourhood, queried the first time it is needed.
-    fn neighbourhood(&self, j: usize) -> &Neighbourhood {
-        self.neighbourhoods[j].get_or_init(|| {
-            let k = (CERTIFICATE_NEIGHBOURS + 1).min(self.points.len());
+    /// Point `j`'s surroundings, queried the first time they are needed.
+    fn local(&self, j: usize) -> &Local {
+        self.local[j].get_or_init(|| {
+            let n = self.points.len();
+            let k = self.normal_neighbours.max(CERTIFICATE_NEIGHBOURS + 1).min(n);
             let k = std::num::NonZero::new(k).unwrap_or(std::num::NonZero::<usize>::MIN);
+            // Sorted by distance: the normal takes the nearest ones.
             let nn = self.tree.query(&self.points[j]).nearest_n::<SquaredEuclidean<f32>>(k).execute();
-            Neighbourhood::new(j, nn.iter().map(|r| (r.item, r.distance)), nn.len() == self.points.len())
+            let hood = Neighbourhood::new(j, nn.iter().map(|r| (r.item, r.distance)), nn.len() == n);
+            if self.normal_neighbours == 0 {
+                return Local { normal: Vector3::zeros(), hood };
+            }
+            let used = &nn[..self.normal_neighbours.min(nn.len())];
+            let mean =
+                used.iter().fold(Vector3::zeros(), |s, r| s + point(&self.points[r.item as usize])) / used.len() as f64;
+            let cov = used.iter().fold(Matrix3::zeros(), |s, r| {
+                let d = point(&self.points[r.item as usize]) - mean;
+                s + d * d.transpose()
+            });
+            let mut normal = smallest_eigenvector(&cov);
+            if let Some(v) = &self.viewpoint {
+                orient(&mut normal, &self.points[j], v);
+            }
+            Local { normal, hood }
         })
     }
 
@@ -224,7 +256,7 @@ impl Target {
     /// `Neighbourhood`, else `None`.
     fn certified_nearest(&self, q: &[f32; 3], hint: u32) -> Option<(usize, f32)> {
         let h = self.points.get(hint as usize)?;
-        let hood = self.neighbourhood(hint as usize);
+        let hood = &self.local(hint as usize).hood;
         let d2 = squared_distance(q, h);
         if d2 > hood.reach_sq {
             return None;
@@ -237,6 +269,13 @@ impl Target {
             }
         }
         Some(best)
+    }
+}
+
+/// Turns `n` (the normal at `q`) towards `viewpoint`.
+fn orient(n: &mut Vector3<f64>, q: &[f32; 3], viewpoint: &Point3<f64>) {
+    if n.dot(&(viewpoint.coords - point(q))) < 0.0 {
+        *n = -*n;
     }
 }
 
@@ -286,6 +325,7 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
 
     use super::*;
+    use crate::icp::IcpConfig;
 
     /// on random covariances, from isotropic to nearly planar and linear.
     #[test]
@@ -315,6 +355,49 @@ mod tests {
         // Repeated eigenvalues go through the fallback and still give a unit eigenvector.
         let v = smallest_eigenvector(&Matrix3::from_diagonal(&Vector3::new(2.0, 1.0, 1.0)));
         assert!((v.x.abs() < 1e-12) && (v.norm() - 1.0).abs() < 1e-12);
+    }
+
+    /// Normals estimated as they are needed are the PCA normals of each
+    /// point's 10 nearest points (found here by brute force), turned to the
+    /// viewpoint — also those estimated before the viewpoint was set — and
+    /// a match whose source covers a quarter of the target estimates few
+    /// of the target's normals.
+    #[test]
+    fn normals_estimated_as_needed_are_the_nearest_points_pca() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        // A wavy floor and a wall, 8 × 4 m.
+        let mut cloud = Vec::new();
+        for _ in 0..6000 {
+            let (a, b) = (rng.random_range(0.0f32..8.0), rng.random_range(0.0f32..4.0));
+            cloud.push(Point3::new(a, b, 0.05 * (a * 2.0).sin()));
+            cloud.push(Point3::new(a, 4.0, b));
+        }
+        let mut target = Target::new(&cloud, 10).expect("target");
+        assert!(target.local.iter().all(|l| l.get().is_none()), "nothing estimated at construction");
+        let early = target.normal(7);
+        let viewpoint = Point3::new(4.0, 2.0, 1.5);
+        target.orient_normals_towards(&viewpoint);
+        let source: Vec<Point3<f32>> = cloud.iter().filter(|p| p.x < 2.0).copied().collect();
+        let config = IcpConfig { max_correspondence_m: 0.2, reject_back_faces: true, ..IcpConfig::default() };
+        let r = crate::icp::align(&source, &target, &Isometry3::translation(0.03, 0.0, 0.01), &config).expect("icp");
+        assert!(r.target_from_source.translation.vector.norm() < 1e-3, "{}", r.target_from_source);
+        let estimated = target.local.iter().filter(|l| l.get().is_some()).count();
+        assert!(estimated < cloud.len() * 2 / 5, "{estimated} of {} normals estimated", cloud.len());
+        let normals = target.normals();
+        assert!((normals[7].dot(&early).abs() - 1.0).abs() < 1e-12);
+        assert!(normals[7].dot(&(viewpoint.coords - point(&target.points[7]))) >= 0.0, "turned when oriented");
+        for (i, n) in normals.iter().enumerate().step_by(37) {
+            let mut by_distance: Vec<(f32, usize)> =
+                (0..cloud.len()).map(|k| (squared_distance(&target.points[i], &target.points[k]), k)).collect();
+            by_distance.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let near: Vec<Vector3<f64>> = by_distance[..10].iter().map(|&(_, k)| point(&target.points[k])).collect();
+            let mean = near.iter().sum::<Vector3<f64>>() / 10.0;
+            let cov = near.iter().fold(Matrix3::zeros(), |s, q| s + (q - mean) * (q - mean).transpose());
+            let eig = SymmetricEigen::new(cov);
+            let pca = eig.eigenvectors.column(eig.eigenvalues.imin()).into_owned();
+            assert!(n.dot(&pca).abs() > 1.0 - 1e-9, "point {i}: {n} vs {pca}");
+            assert!(n.dot(&(viewpoint.coords - point(&target.points[i]))) >= 0.0, "point {i} faces the viewpoint");
+        }
     }
 
     /// The neighbourhood certificate gives exactly the k-d tree's nearest
