@@ -183,9 +183,14 @@ pub fn register_set<S: AsRef<[Point3<f32>]> + Sync>(
             Some(m) => {
                 let blind: Matrix6<f64> = m.unobservable.iter().map(|d| d * d.transpose()).sum();
                 let filled = m.information + blind.transpose() * step * blind;
-                filled
-                    .try_inverse()
-                    .map_or(Matrix6::from_diagonal_element(f64::INFINITY), |c| 0.5 * (c + c.transpose()))
+                // An information singular beyond its reported blind
+                // directions (point-to-point on collinear points; the
+                // analysis off) takes the start's step in every direction:
+                // positive definite, so the covariance is always finite.
+                let c = filled.try_inverse().or_else(|| (m.information + step).try_inverse()).unwrap_or_else(|| {
+                    step.try_inverse().unwrap_or_else(|| Matrix6::from_diagonal_element(f64::INFINITY))
+                });
+                0.5 * (c + c.transpose())
             }
         })
         .collect();

@@ -179,3 +179,33 @@ fn overlapping_wedges_of_a_real_room_scan_come_back_together() {
     let worst = (1..3).map(|k| error(&r.world_from_scan[k], &truth[k]).0).fold(0.0, f64::max);
     assert!(worst > 1.0, "a single plain scale lands {worst}° off (the contrast the defaults are for)");
 }
+
+/// Point-to-point on two scans of one straight line (no blind-direction
+/// analysis): the turn about the line is unseen, the match's information
+/// singular — the scan's covariance is still finite, the start's step σ
+/// about the line and the match's along it.
+#[test]
+fn a_match_that_cannot_see_a_turn_gets_the_start_step_there() {
+    use fusion::icp::{Method, Stage};
+    let line: Vec<Point3<f32>> = (0..1000).map(|k| Point3::new(k as f32 * 0.01, 0.0, 0.0)).collect();
+    let shifted: Vec<Point3<f32>> = line.iter().map(|p| p - Vector3::new(0.02, 0.0, 0.0)).collect();
+    let mut config = SetConfig {
+        mode: Mode::Pairwise,
+        stages: vec![Stage { voxel_m: 0.05, max_correspondence_m: 0.5 }],
+        ..SetConfig::default()
+    };
+    let icp = &mut config.link.multiview.icp;
+    icp.method = Method::PointToPoint;
+    icp.reject_back_faces = false;
+    icp.degeneracy_ratio = None;
+    config.link.multiview.min_pairs = 50;
+    let starts = [Isometry3::identity(); 2];
+    let r = register_set(&[line, shifted], &starts, &config, &mut |_, _, _, _| ()).expect("registers");
+    let m = r.links[0].result.as_ref().expect("the match");
+    assert!(m.information.try_inverse().is_none() || m.information[(0, 0)].abs() < 1e-9, "{}", m.information);
+    let c = r.covariance[1];
+    assert!(c.iter().all(|v| v.is_finite()), "{c}");
+    let step = config.link.step_sigma_rad.powi(2);
+    assert!((c[(0, 0)] - step).abs() < 1e-6 * step, "σ² about the line {} vs the step's {step}", c[(0, 0)]);
+    assert!(c[(3, 3)] > 0.0 && c[(3, 3)] < 1e-4, "along the line the match's: {}", c[(3, 3)]);
+}
