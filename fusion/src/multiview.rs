@@ -555,7 +555,7 @@ impl Matcher<'_> {
 /// `j_from_c`), moved into the world by `world_from_j`: the pose and trace
 /// composed, the information and blind directions carried by the adjoint
 /// (ξ_world = Ad(world_from_j) ξ_j).
-fn in_world(mut r: IcpResult, world_from_j: &Isometry3<f64>) -> IcpResult {
+pub(crate) fn in_world(mut r: IcpResult, world_from_j: &Isometry3<f64>) -> IcpResult {
     let ad = adjoint(world_from_j);
     let ad_inv = adjoint(&world_from_j.inverse());
     r.target_from_source = world_from_j * r.target_from_source;

@@ -9,13 +9,18 @@
 //! third of the time.
 //!
 //! The first scan stays where its start puts it and defines the frame.
+//! Everything runs in that frame — the starts moved into it, the results
+//! moved back by its adjoint — so georeferenced starts (an E57's project
+//! coordinates, UTM) cost neither the models' f32 coordinates their
+//! millimetres nor the blind-direction analysis its balance.
 
 use nalgebra::{Isometry3, Matrix6, Point3, Vector6};
 
 use crate::error::{FusionError, Result};
 use crate::icp::{IcpResult, Stage};
 use crate::links::{LinkConfig, LinkGraph};
-use crate::multiview::{MultiviewConfig, Strategy, register_views};
+use crate::multiview::{MultiviewConfig, Strategy, in_world, register_views};
+use crate::se3::adjoint;
 
 /// How the set is registered.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -115,6 +120,41 @@ pub struct SetLink {
 /// `world_from_scan`. `progress(stage, stages, done, total)` is called as
 /// scans (and, in graph mode, pairs: stage = stages) are matched.
 pub fn register_set<S: AsRef<[Point3<f32>]> + Sync>(
+    scans: &[S],
+    starts: &[Isometry3<f64>],
+    config: &SetConfig,
+    progress: &mut dyn FnMut(usize, usize, usize, usize),
+) -> Result<SetResult> {
+    let Some(world_from_first) = starts.first().copied() else {
+        return register_in_first_frame(scans, starts, config, progress);
+    };
+    // The first start exactly the identity, so the first scan comes back
+    // exactly where its start puts it.
+    let local: Vec<Isometry3<f64>> = std::iter::once(Isometry3::identity())
+        .chain(starts[1..].iter().map(|s| world_from_first.inverse() * s))
+        .collect();
+    let r = register_in_first_frame(scans, &local, config, progress)?;
+    Ok(into_world(r, &world_from_first, config.mode == Mode::Graph))
+}
+
+/// A set's result moved from the first scan's frame into the world by
+/// `world_from_first`: poses composed, covariances and blind directions
+/// carried by the adjoint, and — outside graph mode, whose links are
+/// relative — each last match's result too.
+fn into_world(mut r: SetResult, world_from_first: &Isometry3<f64>, graph: bool) -> SetResult {
+    let ad = adjoint(world_from_first);
+    r.world_from_scan.iter_mut().for_each(|p| *p = world_from_first * *p);
+    r.covariance.iter_mut().for_each(|c| *c = ad * *c * ad.transpose());
+    r.unobservable.iter_mut().flatten().for_each(|d| *d = (ad * *d).normalize());
+    if !graph {
+        for l in &mut r.links {
+            l.result = l.result.take().map(|m| in_world(m, world_from_first));
+        }
+    }
+    r
+}
+
+fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
     scans: &[S],
     starts: &[Isometry3<f64>],
     config: &SetConfig,

@@ -209,3 +209,36 @@ fn a_match_that_cannot_see_a_turn_gets_the_start_step_there() {
     assert!((c[(0, 0)] - step).abs() < 1e-6 * step, "σ² about the line {} vs the step's {step}", c[(0, 0)]);
     assert!(c[(3, 3)] > 0.0 && c[(3, 3)] < 1e-4, "along the line the match's: {}", c[(3, 3)]);
 }
+
+/// Georeferenced starts — the 3DTK set moved 5,400 km north and turned 30°
+/// (UTM-like coordinates, where f32 keeps half a metre) — register exactly
+/// as in the scans' own frame: every pose moved by the same transform to a
+/// micrometre, in graph and pairwise mode, with the covariances carried
+/// along.
+#[test]
+fn georeferenced_starts_register_as_local_ones() {
+    let scans: Vec<Vec<Point3<f32>>> = (0..3).map(threedtk).collect();
+    let starts: Vec<Isometry3<f64>> =
+        (0..3).map(|k| read_3dtk_pose(&data(&format!("3dtk_dat/scan{k:03}.pose"))).expect("pose")).collect();
+    let utm = Isometry3::from_parts(
+        Translation3::new(512_345.678, 5_400_123.456, 312.5),
+        UnitQuaternion::from_euler_angles(0.0, 0.0, 30f64.to_radians()),
+    );
+    let far: Vec<Isometry3<f64>> = starts.iter().map(|s| utm * s).collect();
+    for mode in [Mode::Graph, Mode::Pairwise] {
+        let config = SetConfig { mode, ..SetConfig::default() };
+        let near = register_set(&scans, &starts, &config, &mut |_, _, _, _| ()).expect("local");
+        let r = register_set(&scans, &far, &config, &mut |_, _, _, _| ()).expect("georeferenced");
+        assert_eq!(r.world_from_scan[0], far[0], "{mode:?}: the first scan holds the frame");
+        for (k, (a, b)) in near.world_from_scan.iter().zip(&r.world_from_scan).enumerate() {
+            let d = (utm * a).inverse() * b;
+            assert!(d.translation.vector.norm() < 1e-6 && d.rotation.angle() < 1e-8, "{mode:?} scan {k}: {d}");
+        }
+        let ad = fusion::se3::adjoint(&utm);
+        for (k, (a, b)) in near.covariance.iter().zip(&r.covariance).enumerate() {
+            let moved = ad * a * ad.transpose();
+            assert!((moved - b).amax() <= 1e-6 * moved.amax().max(1e-30), "{mode:?} scan {k}: {b} vs {moved}");
+        }
+        assert!(near.unobservable.iter().chain(&r.unobservable).all(Vec::is_empty));
+    }
+}
