@@ -38,8 +38,10 @@ use rayon::prelude::*;
 
 use crate::error::{FusionError, Result};
 use crate::graph::Edge;
+use crate::icp::correspondences::Partners;
 use crate::icp::degeneracy::{Observability, lever_arm};
-use crate::icp::{IcpConfig, IcpResult, align};
+use crate::icp::solve::align_from;
+use crate::icp::{IcpConfig, IcpResult};
 use crate::multiview::{GATE_CHI2, MultiviewConfig, check, in_scan, prepare};
 use crate::se3::{Prior, adjoint, left_difference};
 
@@ -124,7 +126,8 @@ pub struct LinkGraph {
 /// `world_from_scan`, e.g. a coarser stage's result) and adjusts the links
 /// in a pose graph, the increments of `starts` (the guesses the set came
 /// with, or the coarser stage's poses) holding what no link sees. `progress(done,
-/// total)` is called as pairs are matched.
+/// total)` is called as each scan's pairs (those whose boxes meet) are
+/// counted and matched.
 pub fn adjust<S: AsRef<[Point3<f32>]> + Sync>(
     scans: &[S],
     poses: &[Isometry3<f64>],
@@ -162,40 +165,33 @@ pub fn adjust<S: AsRef<[Point3<f32>]> + Sync>(
     let meet = |a: usize, b: usize| {
         (0..3).all(|k| boxes[a].0[k] - overlap_m <= boxes[b].1[k] && boxes[b].0[k] - overlap_m <= boxes[a].1[k])
     };
-    let pairs: Vec<(usize, usize)> =
-        (0..n).flat_map(|c| (0..c).map(move |j| (j, c))).filter(|&(j, c)| meet(j, c)).collect();
-    let overlaps: Vec<usize> = pairs
-        .par_iter()
-        .map(|&(j, c)| {
-            let j_from_c = poses[j].inverse() * poses[c];
-            prepared[j].local.correspondences(&prepared[c].source, &j_from_c, overlap_m)
-        })
-        .collect();
-    // Each scan's best-overlapping earlier scans.
-    let mut candidates: Vec<((usize, usize), usize)> = Vec::new();
-    let mut by_source: Vec<Vec<((usize, usize), usize)>> = vec![Vec::new(); n];
-    for (pair, overlap) in pairs.into_iter().zip(overlaps).filter(|&(_, overlap)| overlap > mv.min_pairs) {
-        by_source[pair.1].push((pair, overlap));
-    }
-    for mut found in by_source {
-        found.sort_by_key(|&((j, _), overlap)| std::cmp::Reverse((overlap, j)));
-        found.truncate(config.max_partners);
-        found.sort_by_key(|&((j, _), _)| j);
-        candidates.extend(found);
-    }
-    let total = candidates.len();
+    // Each scan's earlier scans whose boxes meet its own.
+    let earlier: Vec<Vec<usize>> = (0..n).map(|c| (0..c).filter(|&j| meet(j, c)).collect()).collect();
+    let total: usize = earlier.iter().map(Vec::len).sum();
     let mut done = 0;
     progress(0, total);
-    let mut links = Vec::with_capacity(total);
-    // Matched in chunks so that progress moves while every core works
-    // (several matches per core: they differ in length, and a chunk waits
-    // for its longest).
-    for chunk in candidates.chunks(4 * rayon::current_num_threads().max(1)) {
-        let found: Vec<Link> = chunk
+    let mut links = Vec::new();
+    // Scan by scan: the overlap with every earlier scan counted (each
+    // source point's nearest neighbour searched once and kept), then the
+    // best-overlapping ones matched from those same neighbours.
+    for (c, earlier) in earlier.iter().enumerate().filter(|(_, e)| !e.is_empty()) {
+        let source = &prepared[c].source;
+        let mut found: Vec<(usize, usize, Partners)> = earlier
             .par_iter()
-            .map(|&((j, c), overlap)| {
+            .map(|&j| {
+                let partners = Partners::at(source, &prepared[j].local, &(poses[j].inverse() * poses[c]));
+                (j, partners.within(overlap_m), partners)
+            })
+            .filter(|(_, overlap, _)| *overlap > mv.min_pairs)
+            .collect();
+        found.sort_by_key(|&(j, overlap, _)| std::cmp::Reverse((overlap, j)));
+        found.truncate(config.max_partners);
+        found.sort_by_key(|&(j, _, _)| j);
+        let matched: Vec<Link> = found
+            .into_par_iter()
+            .map(|(j, overlap, partners)| {
                 let init = poses[j].inverse() * poses[c];
-                let r = align(&prepared[c].source, &prepared[j].local, &init, &mv.icp).map_err(|e| in_scan(c, e));
+                let r = align_from(source, &prepared[j].local, &init, &mv.icp, partners).map_err(|e| in_scan(c, e));
                 let (result, rejected) = match r {
                     Ok(r) if r.inliers <= mv.min_pairs => {
                         let why = format!(
@@ -210,8 +206,8 @@ pub fn adjust<S: AsRef<[Point3<f32>]> + Sync>(
                 Link { target: j, source: c, overlap, result, rejected }
             })
             .collect();
-        done += found.len();
-        links.extend(found);
+        links.extend(matched);
+        done += earlier.len();
         progress(done, total);
     }
     let lever_arm: Vec<f64> = prepared.iter().map(|p| lever_arm(&p.source)).collect();

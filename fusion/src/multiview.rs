@@ -49,6 +49,8 @@ use rayon::prelude::*;
 
 use crate::error::{FusionError, Result};
 use crate::graph::{Edge, JointPrior};
+use crate::icp::correspondences::Partners;
+use crate::icp::solve::align_from;
 use crate::icp::{IcpConfig, IcpResult, Kernel, Method, Target, align};
 use crate::se3::adjoint;
 
@@ -454,24 +456,30 @@ impl Matcher<'_> {
         Target::with_oriented_normals(&points, normals)
     }
 
-    /// Aligns scan `c` from its current pose to `target`, whose frame is
-    /// `world_from_target`; the match is returned moved into the world.
-    fn match_to(&self, c: usize, target: &Target, world_from_target: &Isometry3<f64>) -> Result<IcpResult> {
-        let init = world_from_target.inverse() * self.poses[c];
-        let r = align(&self.prepared[c].source, target, &init, &self.config.icp).map_err(|e| in_scan(c, e))?;
-        Ok(in_world(r, world_from_target))
-    }
-
     /// Aligns scan `c` to its `partners` and records the match; returns its
     /// pose before. One partner is matched in its own frame, with its
     /// prepared target (the tree and neighbourhoods built once per scan),
     /// unless blind directions are analysed (see the module docs); several
     /// through a model built in the world.
     fn align(&mut self, c: usize, partners: Vec<usize>) -> Result<Isometry3<f64>> {
+        self.align_from(c, partners, None)
+    }
+
+    /// [`align`](Self::align), with the nearest neighbours of `c`'s points
+    /// in its one partner at the current poses already found (`first`).
+    fn align_from(&mut self, c: usize, partners: Vec<usize>, first: Option<Partners>) -> Result<Isometry3<f64>> {
         let r = if let ([j], None) = (&partners[..], self.config.icp.degeneracy_ratio) {
-            self.match_to(c, &self.prepared[*j].local, &self.poses[*j])?
+            let world_from_j = self.poses[*j];
+            let init = world_from_j.inverse() * self.poses[c];
+            let (source, target) = (&self.prepared[c].source, &self.prepared[*j].local);
+            let r = match first {
+                Some(first) => align_from(source, target, &init, &self.config.icp, first),
+                None => align(source, target, &init, &self.config.icp),
+            };
+            in_world(r.map_err(|e| in_scan(c, e))?, &world_from_j)
         } else {
-            self.match_to(c, &self.model(&partners)?, &Isometry3::identity())?
+            let model = self.model(&partners)?;
+            align(&self.prepared[c].source, &model, &self.poses[c], &self.config.icp).map_err(|e| in_scan(c, e))?
         };
         Ok(self.record(c, r, partners))
     }
@@ -496,11 +504,24 @@ impl Matcher<'_> {
 
     /// Registers scan `i` against the earlier scan with the most overlap.
     fn pairwise(&mut self, i: usize) -> Result<()> {
-        let (best, pairs) = (0..i).map(|j| (j, self.overlap(i, j))).max_by_key(|&(j, p)| (p, j)).unwrap_or((0, 0));
+        // Each earlier scan's nearest neighbours of scan i's points, counted
+        // within the overlap distance; the best one's start the match.
+        let source = &self.prepared[i].source;
+        let found: Vec<(usize, usize, Partners)> = (0..i)
+            .into_par_iter()
+            .map(|j| {
+                let partners =
+                    Partners::at(source, &self.prepared[j].local, &(self.poses[j].inverse() * self.poses[i]));
+                (j, partners.within(self.overlap_distance()), partners)
+            })
+            .collect();
+        let Some((best, pairs, first)) = found.into_iter().max_by_key(|&(j, p, _)| (p, j)) else {
+            return Err(self.no_overlap(i, 0, "the best earlier scan (0)", Some(0)));
+        };
         if pairs <= self.config.min_pairs {
             return Err(self.no_overlap(i, pairs, &format!("the best earlier scan ({best})"), Some(best)));
         }
-        self.align(i, vec![best])?;
+        self.align_from(i, vec![best], Some(first))?;
         Ok(())
     }
 
@@ -512,7 +533,7 @@ impl Matcher<'_> {
         if pairs <= self.config.min_pairs {
             return Err(self.no_overlap(i, pairs, "the metascan", None));
         }
-        let r = self.match_to(i, &model, &Isometry3::identity())?;
+        let r = align(&self.prepared[i].source, &model, &self.poses[i], &self.config.icp).map_err(|e| in_scan(i, e))?;
         self.record(i, r, members);
         Ok(())
     }

@@ -59,18 +59,56 @@ impl Sums {
 
 /// What one pass keeps of each source point for the next: its nearest
 /// target point (where the next search starts; `u32::MAX` before the
-/// first pass) and a lower bound on its distance to the target, metres.
+/// first pass) and a lower bound on its distance to the target, metres —
+/// or, from [`Partners::at`], the first pass's own answers.
 pub(crate) struct Partners {
     nearest: Vec<u32>,
     lower_m: Vec<f32>,
+    /// The squared distances to `nearest`, when those are exactly the
+    /// nearest points at the first pass's estimate.
+    known_sq: Option<Vec<f32>>,
 }
 
 impl Partners {
     /// Nothing known of `n` source points.
     pub(crate) fn new(n: usize) -> Self {
-        Self { nearest: vec![u32::MAX; n], lower_m: vec![0.0; n] }
+        Self { nearest: vec![u32::MAX; n], lower_m: vec![0.0; n], known_sq: None }
+    }
+
+    /// Every `source` point's nearest `target` point at `estimate`
+    /// (`target_from_source`), searched as ICP's first pass searches it:
+    /// counting an overlap with these and then matching from the same
+    /// estimate with [`crate::icp::solve::align_from`] searches each point once.
+    pub(crate) fn at(source: &[Point3<f32>], target: &Target, estimate: &Isometry3<f64>) -> Self {
+        let r: Matrix3<f64> = estimate.rotation.to_rotation_matrix().into_inner();
+        let t = estimate.translation.vector;
+        let (nearest, known): (Vec<u32>, Vec<f32>) = source
+            .par_iter()
+            .map(|p| {
+                let pt = r * p.coords.cast::<f64>() + t;
+                let (i, d2) = target.nearest_from(&[pt.x as f32, pt.y as f32, pt.z as f32], u32::MAX);
+                (i as u32, d2 as f32)
+            })
+            .unzip();
+        let lower_m = known.iter().map(|d2| d2.sqrt()).collect();
+        Self { nearest, lower_m, known_sq: Some(known) }
+    }
+
+    /// How many points have their nearest target point within
+    /// `max_distance_m` (the correspondences ICP would use).
+    pub(crate) fn within(&self, max_distance_m: f64) -> usize {
+        let max_sq = max_distance_m * max_distance_m;
+        self.known_sq.as_ref().map_or(0, |k| k.iter().filter(|&&d2| f64::from(d2) <= max_sq).count())
+    }
+
+    /// Number of source points.
+    pub(crate) fn len(&self) -> usize {
+        self.nearest.len()
     }
 }
+
+/// Source points per parallel chunk of a pass.
+const CHUNK: usize = 4096;
 
 /// One pass over the source: nearest neighbours within the distance and
 /// the sums both metrics need, updating `partners`. `moved` is how the
@@ -94,12 +132,15 @@ pub(crate) fn accumulate(
     // The source scanner in the target frame.
     let back_faces = config.reject_back_faces.then(|| r * config.source_viewpoint.coords + t);
     let max_m = max_sq.sqrt();
+    // The first pass's answers, when known (`Partners::at` at this estimate).
+    let known = partners.known_sq.take().filter(|_| moved.is_none());
     source
-        .par_chunks(4096)
-        .zip(partners.nearest.par_chunks_mut(4096).zip(partners.lower_m.par_chunks_mut(4096)))
-        .map(|(chunk, (partners, lower))| {
+        .par_chunks(CHUNK)
+        .enumerate()
+        .zip(partners.nearest.par_chunks_mut(CHUNK).zip(partners.lower_m.par_chunks_mut(CHUNK)))
+        .map(|((c, chunk), (partners, lower))| {
             let mut s = Sums::default();
-            for ((p, partner), lower) in chunk.iter().zip(partners).zip(lower) {
+            for (k, ((p, partner), lower)) in chunk.iter().zip(partners).zip(lower).enumerate() {
                 if let Some((angle, length)) = moved {
                     // The bound less the motion (and a margin for f32).
                     let bound = f64::from(*lower) - angle * f64::from(p.coords.norm()) - length - 1e-4;
@@ -109,7 +150,10 @@ pub(crate) fn accumulate(
                     }
                 }
                 let pt = r * p.coords.cast::<f64>() + t;
-                let (i, d2) = target.nearest_from(&[pt.x as f32, pt.y as f32, pt.z as f32], *partner);
+                let (i, d2) = match &known {
+                    Some(sq) => (*partner as usize, f64::from(sq[c * CHUNK + k])),
+                    None => target.nearest_from(&[pt.x as f32, pt.y as f32, pt.z as f32], *partner),
+                };
                 *partner = i as u32;
                 *lower = d2.sqrt() as f32;
                 if d2 > max_sq {
@@ -192,6 +236,36 @@ mod tests {
         assert!((bounded.h - full.h).amax() <= 1e-9 * full.h.amax());
         assert!((bounded.b - full.b).amax() <= 1e-9 * full.b.amax().max(1e-12));
         assert!((bounded.sq - full.sq).abs() <= 1e-9 * full.sq);
+    }
+
+    /// A match started from the neighbours an overlap count found
+    /// (`Partners::at`) is the match that searches them itself, to the last
+    /// bit, and the count is the target's own correspondence count.
+    #[test]
+    fn a_match_from_known_neighbours_is_the_same_match() {
+        let mut rng = ChaCha8Rng::seed_from_u64(9);
+        let mut cloud = Vec::new();
+        for _ in 0..6000 {
+            let (a, b) = (rng.random_range(0.0f32..6.0), rng.random_range(0.0f32..3.0));
+            cloud.push(Point3::new(a, b, 0.03 * (a * 1.7).sin()));
+            cloud.push(Point3::new(a, 3.0, b));
+            cloud.push(Point3::new(0.0, b, a * 0.5));
+        }
+        let mut target = Target::new(&cloud, 10).expect("target");
+        target.orient_normals_towards(&Point3::new(3.0, 1.5, 1.0));
+        // The source: the part with x < 4, seen from 10 cm and 1° away.
+        let source: Vec<Point3<f32>> = cloud.iter().filter(|p| p.x < 4.0).copied().collect();
+        let init = Isometry3::from_parts(
+            nalgebra::Translation3::new(0.06, -0.05, 0.03),
+            nalgebra::UnitQuaternion::from_euler_angles(0.01, -0.005, 0.015),
+        );
+        let config = IcpConfig { max_correspondence_m: 0.5, reject_back_faces: true, ..IcpConfig::default() };
+        let known = Partners::at(&source, &target, &init);
+        assert_eq!(known.within(0.3), target.correspondences(&source, &init, 0.3));
+        let searched = crate::icp::align(&source, &target, &init, &config).expect("icp");
+        let from_known = crate::icp::solve::align_from(&source, &target, &init, &config, known).expect("icp");
+        assert_eq!(searched, from_known);
+        assert!(searched.target_from_source.translation.vector.norm() < 1e-3, "{}", searched.target_from_source);
     }
 
     /// The point-to-point normal matrix derived from the sums equals Σ JᵀJ

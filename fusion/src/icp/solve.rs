@@ -6,7 +6,7 @@
 use nalgebra::{Isometry3, Matrix3, Matrix4, Matrix6, Point3, SymmetricEigen, Translation3, UnitQuaternion, Vector6};
 
 use super::config::{IcpConfig, Kernel, Method};
-use super::correspondences::{Sums, accumulate};
+use super::correspondences::{Partners, Sums, accumulate};
 use super::degeneracy::Observability;
 use super::target::Target;
 use crate::error::{FusionError, Result};
@@ -72,7 +72,20 @@ pub(crate) fn horn_rotation(s: &Matrix3<f64>) -> UnitQuaternion<f64> {
 
 /// Aligns `source` to `target` from `init` (`target_from_source`).
 pub fn align(source: &[Point3<f32>], target: &Target, init: &Isometry3<f64>, config: &IcpConfig) -> Result<IcpResult> {
-    align_impl(source, target, init, config, None)
+    align_impl(source, target, init, config, None, None)
+}
+
+/// [`align`] with the first pass's nearest neighbours already found
+/// (`partners` = `Partners::at(source, target, init)`, e.g. while counting
+/// the overlap): the same result without searching them again.
+pub(crate) fn align_from(
+    source: &[Point3<f32>],
+    target: &Target,
+    init: &Isometry3<f64>,
+    config: &IcpConfig,
+    partners: Partners,
+) -> Result<IcpResult> {
+    align_impl(source, target, init, config, None, Some(partners))
 }
 
 /// Point-to-plane ICP whose normal equations include a prior: each
@@ -106,7 +119,7 @@ pub fn align_with_prior(
             expected: "a finite, symmetric, positive semi-definite 6×6".into(),
         });
     }
-    align_impl(source, target, init, config, Some(prior))
+    align_impl(source, target, init, config, Some(prior), None)
 }
 
 fn align_impl(
@@ -115,6 +128,7 @@ fn align_impl(
     init: &Isometry3<f64>,
     config: &IcpConfig,
     prior: Option<&Prior>,
+    first: Option<Partners>,
 ) -> Result<IcpResult> {
     check(config)?;
     if config.reject_back_faces && !target.oriented {
@@ -143,7 +157,7 @@ fn align_impl(
     // a sixth of a typical run and change them by the last, sub-tolerance
     // update.
     let mut last = Sums::default();
-    let mut partners = super::correspondences::Partners::new(source.len());
+    let mut partners = first.filter(|p| p.len() == source.len()).unwrap_or_else(|| Partners::new(source.len()));
     // How the estimate moved since the last pass (none before the first).
     let mut moved = None;
     let mut unobservable = Vec::new();
