@@ -67,6 +67,15 @@ pub struct LinkConfig {
     pub max_partners: usize,
 }
 
+impl LinkConfig {
+    /// The information of one step of the start (σ `step_sigma_rad` about
+    /// each axis, `step_sigma_m` along it), order ξ = (ω, v).
+    pub fn step_information(&self) -> Matrix6<f64> {
+        let (r, t) = (self.step_sigma_rad.powi(-2), self.step_sigma_m.powi(-2));
+        Matrix6::from_diagonal(&Vector6::new(r, r, r, t, t, t))
+    }
+}
+
 impl Default for LinkConfig {
     fn default() -> Self {
         let multiview = MultiviewConfig::default();
@@ -223,7 +232,7 @@ fn solve(
     config: &LinkConfig,
 ) -> Result<LinkGraph> {
     let n = poses.len();
-    let step_information = step_information(config);
+    let step_information = config.step_information();
     let steps: Vec<Edge> = (1..n)
         .map(|i| Edge {
             target: i - 1,
@@ -325,10 +334,4 @@ fn solve(
             redundancy: g.redundancy,
         });
     }
-}
-
-/// The information of one step of the start (see [`LinkConfig`]).
-pub(crate) fn step_information(c: &LinkConfig) -> Matrix6<f64> {
-    let (r, t) = (c.step_sigma_rad.powi(-2), c.step_sigma_m.powi(-2));
-    Matrix6::from_diagonal(&Vector6::new(r, r, r, t, t, t))
 }

@@ -215,23 +215,12 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
         return Ok(from_graph(g, matches, settled));
     }
     let last = last.expect("at least one stage");
-    let step = crate::links::step_information(&config.link);
+    let step = config.link.step_information();
     let n = scans.len();
     let covariance = (0..n)
         .map(|i| match &last.last_match[i] {
             None => Matrix6::zeros(),
-            Some(m) => {
-                let blind: Matrix6<f64> = m.unobservable.iter().map(|d| d * d.transpose()).sum();
-                let filled = m.information + blind.transpose() * step * blind;
-                // An information singular beyond its reported blind
-                // directions (point-to-point on collinear points; the
-                // analysis off) takes the start's step in every direction:
-                // positive definite, so the covariance is always finite.
-                let c = filled.try_inverse().or_else(|| (m.information + step).try_inverse()).unwrap_or_else(|| {
-                    step.try_inverse().unwrap_or_else(|| Matrix6::from_diagonal_element(f64::INFINITY))
-                });
-                0.5 * (c + c.transpose())
-            }
+            Some(m) => m.covariance_held(&step),
         })
         .collect();
     let links = (0..n)

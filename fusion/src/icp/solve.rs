@@ -50,6 +50,22 @@ impl IcpResult {
     pub fn covariance(&self) -> Option<Matrix6<f64>> {
         self.information.cholesky().map(|c| c.inverse())
     }
+
+    /// The covariance with `held` (an information, e.g. a start's step σ)
+    /// along the directions the match cannot see — its
+    /// [`unobservable`](Self::unobservable) ones, or every direction when
+    /// the information is singular beyond them (point-to-point on
+    /// collinear points, the analysis off): always finite for a positive
+    /// definite `held`.
+    pub fn covariance_held(&self, held: &Matrix6<f64>) -> Matrix6<f64> {
+        let blind: Matrix6<f64> = self.unobservable.iter().map(|d| d * d.transpose()).sum();
+        let filled = self.information + blind.transpose() * held * blind;
+        let c = filled
+            .try_inverse()
+            .or_else(|| (self.information + held).try_inverse())
+            .unwrap_or_else(|| held.try_inverse().unwrap_or_else(|| Matrix6::from_diagonal_element(f64::INFINITY)));
+        0.5 * (c + c.transpose())
+    }
 }
 
 /// Horn's closed-form rotation: the unit quaternion is the eigenvector of

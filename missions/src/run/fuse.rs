@@ -78,7 +78,9 @@ pub struct FusedScan {
     pub rmse_m: Option<f64>,
     /// The fused pose's 6×6 covariance (ξ = (ω, v): rotation then
     /// translation, left perturbation, world frame), where the fusion
-    /// estimates one (`cps-icp`).
+    /// estimates one: `cps-icp`'s; `icp`'s last match, its partners held,
+    /// with odometry's step (0.1 m, 1°) along what it cannot see (zero for
+    /// the first scan, which holds the frame).
     pub covariance: Option<nalgebra::Matrix6<f64>>,
     /// `icp` with `[fusion] degeneracy_ratio`: the directions its last
     /// match could not see (unit ξ = (ω, v), world frame), left where
@@ -215,6 +217,15 @@ pub fn fuse(
             let rmse = r.last_match.iter().map(|m| m.as_ref().map(|m| m.rmse_m)).collect();
             unobservable =
                 r.last_match.iter().map(|m| m.as_ref().map_or_else(Vec::new, |m| m.unobservable.clone())).collect();
+            // Each scan's last match (its partners held), odometry's step —
+            // `match`'s 0.1 m and 1° — along what it cannot see; the first
+            // scan holds the frame.
+            let step = fusion::links::LinkConfig::default().step_information();
+            covariance = r
+                .last_match
+                .iter()
+                .map(|m| Some(m.as_ref().map_or_else(nalgebra::Matrix6::zeros, |m| m.covariance_held(&step))))
+                .collect();
             (r.world_from_scan, rmse, coarse.matches + r.matches)
         }
         FusionMode::CpsIcp => {

@@ -220,7 +220,9 @@ pub struct FusedScanReport {
     pub roll_pitch_yaw_rad: [f64; 3],
     /// The fused pose's 6×6 covariance, order (ω_x, ω_y, ω_z, x, y, z) —
     /// rotation (rad) then translation (m), left perturbation, world frame,
-    /// as `register`'s — where the fusion estimates one (`cps-icp`).
+    /// as `register`'s — where the fusion estimates one: `cps-icp`'s;
+    /// `icp`'s last match (its partners held) with odometry's step (0.1 m,
+    /// 1°) along what it cannot see, zero for the first scan.
     #[serde(default)]
     pub covariance: Option<[[f64; 6]; 6]>,
     /// `icp` with `[fusion] degeneracy_ratio`: the directions the scan's

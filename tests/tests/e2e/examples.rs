@@ -102,7 +102,8 @@ fn hall_fusion_modes_compare() {
         assert!(dir.path().join(format!("fusion/{mode}/frames/scan021.frames")).exists());
         let links = j["links"].as_array().expect("links");
         assert_eq!(links.is_empty(), mode == "direct", "{mode}: {links:?}");
-        assert_eq!(j["scans"][3]["covariance"].is_null(), mode != "cps-icp", "{mode}");
+        // A covariance wherever a match made the pose.
+        assert_eq!(j["scans"][3]["covariance"].is_null(), mode == "direct", "{mode}");
         rms.insert(mode, f(&j["rms_error_xy_m"]));
         worst.insert(
             mode,
@@ -444,9 +445,16 @@ fn sewer_example_fits_the_pipe_and_finds_the_brick() {
     }
     assert!(f(&j["rms_error_xy_m"]) < 0.01, "{j}");
     for s in j["scans"].as_array().expect("scans").iter().skip(1) {
-        let along_axis =
-            s["degenerate_directions"].as_array().expect("directions").iter().any(|d| f(&d[3]).abs() > 0.95);
-        assert!(along_axis, "scan {}: {}", s["station"], s["degenerate_directions"]);
+        let directions = s["degenerate_directions"].as_array().expect("directions");
+        let axis = directions.iter().find(|d| f(&d[3]).abs() > 0.95);
+        let axis = axis.unwrap_or_else(|| panic!("scan {}: {}", s["station"], s["degenerate_directions"]));
+        // Its σ along the axis is the start's step, 0.1 m.
+        let c = s["covariance"].as_array().expect("icp mode reports a covariance");
+        let along: f64 = (0..6)
+            .flat_map(|r| (0..6).map(move |k| (r, k)))
+            .map(|(r, k)| f(&axis[r]) * f(&c[r][k]) * f(&axis[k]))
+            .sum();
+        assert!((along.sqrt() - 0.1).abs() < 0.005, "scan {}: σ along the axis {} m", s["station"], along.sqrt());
     }
 }
 
