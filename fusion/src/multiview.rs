@@ -462,12 +462,13 @@ impl Matcher<'_> {
     /// unless blind directions are analysed (see the module docs); several
     /// through a model built in the world.
     fn align(&mut self, c: usize, partners: Vec<usize>) -> Result<Isometry3<f64>> {
-        self.align_from(c, partners, None)
+        self.align_starting(c, partners, None)
     }
 
     /// [`align`](Self::align), with the nearest neighbours of `c`'s points
-    /// in its one partner at the current poses already found (`first`).
-    fn align_from(&mut self, c: usize, partners: Vec<usize>, first: Option<Partners>) -> Result<Isometry3<f64>> {
+    /// in its one partner at the current poses already found (`first`,
+    /// used when the match runs in the partner's frame).
+    fn align_starting(&mut self, c: usize, partners: Vec<usize>, first: Option<Partners>) -> Result<Isometry3<f64>> {
         let r = if let ([j], None) = (&partners[..], self.config.icp.degeneracy_ratio) {
             let world_from_j = self.poses[*j];
             let init = world_from_j.inverse() * self.poses[c];
@@ -521,7 +522,7 @@ impl Matcher<'_> {
         if pairs <= self.config.min_pairs {
             return Err(self.no_overlap(i, pairs, &format!("the best earlier scan ({best})"), Some(best)));
         }
-        self.align_from(i, vec![best], Some(first))?;
+        self.align_starting(i, vec![best], Some(first))?;
         Ok(())
     }
 
