@@ -17,7 +17,7 @@ import jsonschema
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 SCHEMAS = ROOT / "docs" / "schemas"
-DATA = ROOT.parent / "shared" / "data"
+DATA = ROOT / "data"
 
 
 def strict(node):

@@ -8,7 +8,7 @@ Usage (from the workspace root):
     python3 fusion/benches/compare_icp.py [--reps 15] [--cps-survey target/release/cps-survey]
 
 All three tools get the same points (scan001 → scan000 of
-../shared/data/3dtk_dat, ranges 0.5–32.5 m, 3DTK axes, metres), the same
+data/3dtk_dat, ranges 0.5–32.5 m, 3DTK axes, metres), the same
 odometry guess, voxel 0.1 m, maximum correspondence distance 1 m, at most 50
 iterations, 10 neighbours for normals and small_gicp's convergence thresholds
 (0.1°, 1 mm; Open3D keeps its relative-fitness criteria). The time is the median wall time of
@@ -31,7 +31,7 @@ import time
 
 import numpy as np
 
-DATA = os.path.join(os.path.dirname(__file__), "../../../shared/data/3dtk_dat")
+DATA = os.path.join(os.path.dirname(__file__), "../../data/3dtk_dat")
 VOXEL, MAX_DIST, ITERATIONS, NEIGHBOURS = 0.1, 1.0, 50, 10
 # small_gicp's default convergence thresholds, given to cps-survey too
 # (Open3D converges on relative fitness/RMSE instead and keeps its defaults).

@@ -13,7 +13,7 @@ use scanner::io::{read, read_3dtk_pose};
 use scanner::reduced_points;
 
 fn data(rel: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/3dtk_dat").join(rel)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../data/3dtk_dat").join(rel)
 }
 
 fn scan(k: usize) -> Vec<Point3<f32>> {

@@ -1,4 +1,4 @@
-//! ICP on the real scans in `../shared/data` against their reference
+//! ICP on the real scans in `data/` (shipped with the repository) against their reference
 //! transforms.
 
 use std::path::PathBuf;
@@ -11,7 +11,7 @@ use rand_distr::StandardNormal;
 use scanner::io::{from_3dtk_axes, read, read_3dtk_pose, read_matrix4};
 
 fn data(rel: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data").join(rel)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../data").join(rel)
 }
 
 fn iso_from_file(rel: &str) -> Isometry3<f64> {

@@ -10,7 +10,7 @@ use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use scanner::io::{from_3dtk_axes, read, read_3dtk_pose, read_matrix4};
 
 fn data(rel: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data").join(rel)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../data").join(rel)
 }
 
 /// (rotation error in degrees, translation error in metres).

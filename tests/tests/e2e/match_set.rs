@@ -1,4 +1,4 @@
-//! `cps-survey match` end to end on the shared real scans: the 3DTK set
+//! `cps-survey match` end to end on the real scans in `data/`: the 3DTK set
 //! from its odometry against the reference transforms, the PCL room scans
 //! from their odometry guess, the outputs, and bad input.
 
@@ -10,7 +10,7 @@ use serde_json::Value;
 use tests::{cps_survey, workspace};
 
 fn data(rel: &str) -> OsString {
-    workspace().join("../shared/data").join(rel).into_os_string()
+    workspace().join("data").join(rel).into_os_string()
 }
 
 fn pose(v: &Value) -> Isometry3<f64> {

@@ -65,3 +65,58 @@ fn every_key_of_the_mission_reference_is_read() {
         );
     }
 }
+
+/// The README's `match` example runs as written from the workspace root:
+/// its input ships with the repository (`data/3dtk_dat`).
+#[test]
+fn the_match_example_runs_on_the_shipped_scans() {
+    let line = readme()
+        .lines()
+        .find(|l| l.starts_with("cps-survey match data/"))
+        .expect("README: a `cps-survey match data/…` example")
+        .to_string();
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = dir.path().join("matched");
+    let mut args: Vec<std::ffi::OsString> = Vec::new();
+    let mut words = line.split_whitespace().skip(1).peekable();
+    while let Some(word) = words.next() {
+        match word {
+            "--out" => {
+                words.next();
+                args.extend(["--out".into(), out.clone().into_os_string()]);
+            }
+            w if w.starts_with("data/") => args.push(tests::workspace().join(w).into_os_string()),
+            w => args.push(w.into()),
+        }
+    }
+    let run = tests::cps_survey(args);
+    assert_eq!(run.code, 0, "{line}: {}", run.stderr);
+    for file in ["poses.json", "links.csv", "cloud.ply", "cloud.las"] {
+        assert!(out.join(file).is_file(), "{line}: no {file}");
+    }
+}
+
+/// Nothing in the repository reads data from outside it: no source, script,
+/// document or CI step names the data folder beside the developers' clones.
+#[test]
+fn nothing_reads_data_from_beside_the_repository() {
+    let needle = ["shared", "data"].join("/");
+    let mut stack = vec![tests::workspace()];
+    let mut offenders = Vec::new();
+    while let Some(dir) = stack.pop() {
+        for entry in std::fs::read_dir(&dir).expect("read_dir") {
+            let path = entry.expect("entry").path();
+            let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+            if path.is_dir() {
+                if !matches!(name.as_str(), "target" | ".git" | "data" | "runs") {
+                    stack.push(path);
+                }
+            } else if let Ok(text) = std::fs::read_to_string(&path)
+                && text.contains(&needle)
+            {
+                offenders.push(path.display().to_string());
+            }
+        }
+    }
+    assert!(offenders.is_empty(), "read data from beside the repository: {offenders:?}");
+}

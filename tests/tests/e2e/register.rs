@@ -1,10 +1,10 @@
-//! `cps-survey register` end to end on the shared real scans.
+//! `cps-survey register` end to end on the real scans in `data/`.
 
 use serde_json::Value;
 use tests::{cps_survey, workspace};
 
 fn data(rel: &str) -> std::ffi::OsString {
-    workspace().join("../shared/data").join(rel).into_os_string()
+    workspace().join("data").join(rel).into_os_string()
 }
 
 #[test]
@@ -25,7 +25,7 @@ fn register_json_has_the_documented_fields_and_lands_on_the_reference() {
         assert!(v.get(key).is_some(), "{key} missing: {v}");
     }
     let m: Vec<Vec<f64>> = serde_json::from_value(v["target_from_source"].clone()).expect("4×4");
-    let text = std::fs::read_to_string(workspace().join("../shared/data/pcl_room_scans/reference_T_scan1_scan2.txt"))
+    let text = std::fs::read_to_string(workspace().join("data/pcl_room_scans/reference_T_scan1_scan2.txt"))
         .expect("reference");
     let reference: Vec<f64> = text.split_whitespace().filter_map(|t| t.parse().ok()).collect();
     assert_eq!(reference.len(), 16);

@@ -1,4 +1,4 @@
-//! The real scans in `../shared/data`: point counts as stated in their
+//! The real scans in `data/` (shipped with the repository): point counts as stated in their
 //! READMEs, and the 3DTK poses put consecutive scans on top of each other.
 
 use std::collections::HashMap;
@@ -8,7 +8,38 @@ use nalgebra::{Isometry3, Point3};
 use scanner::io::{from_3dtk_axes, read, read_3dtk_pose, read_matrix4};
 
 fn data(rel: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data").join(rel)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../data").join(rel)
+}
+
+/// Every file a data folder's README lists in its checksum table has that
+/// size and SHA-256, and every file in the folder is listed: the scans the
+/// tests read are the ones the READMEs describe, byte for byte.
+#[test]
+fn shipped_scans_match_their_readme_checksums() {
+    use sha2::{Digest, Sha256};
+    for folder in ["3dtk_dat", "pcl_room_scans", "small_gicp_pair"] {
+        let readme = std::fs::read_to_string(data(folder).join("README.md")).expect("README.md");
+        let table = &readme[readme.find("## Checksums").unwrap_or_else(|| panic!("{folder}: no checksum table"))..];
+        let mut listed = Vec::new();
+        for row in table.lines().filter(|l| l.starts_with("| `")) {
+            let cells: Vec<&str> = row.split('|').map(|c| c.trim().trim_matches('`')).collect();
+            let (name, bytes, sum) = (cells[1], cells[2], cells[3]);
+            let content = std::fs::read(data(folder).join(name)).unwrap_or_else(|e| panic!("{folder}/{name}: {e}"));
+            assert_eq!(content.len().to_string(), bytes, "{folder}/{name}: size");
+            let digest: String = Sha256::digest(&content).iter().map(|b| format!("{b:02x}")).collect();
+            assert_eq!(digest, sum, "{folder}/{name}: SHA-256");
+            listed.push(name.to_string());
+        }
+        let mut present: Vec<String> = std::fs::read_dir(data(folder))
+            .expect("folder")
+            .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+            .filter(|n| n != "README.md")
+            .collect();
+        present.sort();
+        listed.sort();
+        assert_eq!(present, listed, "{folder}: files on disk against the README's table");
+        assert!(listed.len() >= 3, "{folder}: {} files listed", listed.len());
+    }
 }
 
 #[test]
