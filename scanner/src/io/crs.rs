@@ -1,14 +1,20 @@
 //! The coordinate reference system a cloud's coordinates are in, as the
-//! files carry it: OGC WKT (version 1, as LAS 1.4 and most readers take
-//! it), with the EPSG code when there is one. An EPSG code is looked up in
-//! the EPSG definitions of the `crs-definitions` crate; a site without one
-//! is a named local engineering frame (`LOCAL_CS`), which says honestly that
-//! the coordinates are not georeferenced.
+//! files carry it: OGC WKT version 1 (as LAS 1.4 refers to it, and as GDAL
+//! and PROJ read it), with the EPSG code when there is one. An EPSG code is
+//! looked up in the EPSG definitions of the `crs-definitions` crate and
+//! written as GDAL ≥ 3 exports it (no `TOWGS84` clause, which would make
+//! PROJ read a bound CRS and find no code); `EPSG:H+V` joins a projected
+//! CRS and a vertical one into a compound CRS. A site without a CRS is a
+//! named local engineering frame (`LOCAL_CS` with two axes, the form GDAL
+//! and PROJ before 9.4 parse), which says honestly that the coordinates are
+//! not georeferenced. Coordinates are metres: a CRS in any other unit is
+//! refused, never written as metres that readers would take as feet.
 
 /// A coordinate reference system in metres.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Crs {
-    /// Its name: `EPSG:25832`, the WKT's own name, or the local frame's.
+    /// Its name: `EPSG:25832`, `EPSG:25832+7837`, the WKT's own name, or
+    /// the local frame's.
     pub name: String,
     /// The EPSG code, when it has one.
     pub epsg: Option<u16>,
@@ -17,27 +23,28 @@ pub struct Crs {
 }
 
 /// WKT keywords of the CRS kinds we accept (coordinates in metres).
-const METRIC_KINDS: [&str; 5] = ["PROJCS", "LOCAL_CS", "PROJCRS", "ENGCRS", "ENGINEERINGCRS"];
+const METRIC_KINDS: [&str; 6] = ["PROJCS", "LOCAL_CS", "COMPD_CS", "PROJCRS", "ENGCRS", "ENGINEERINGCRS"];
 
 impl Crs {
-    /// Reads `text`: `EPSG:NNNN` (any case) or a WKT definition of a
-    /// projected or local engineering CRS. The error says what was found
-    /// and what was expected.
+    /// Reads `text`: `EPSG:NNNN` (any case), `EPSG:H+V` (a projected and a
+    /// vertical CRS), or a WKT definition of a projected, compound or local
+    /// engineering CRS. The error says what was found and what was expected.
     pub fn parse(text: &str) -> Result<Self, String> {
         let text = text.trim();
-        if let Some(code) = text.strip_prefix("EPSG:").or_else(|| text.strip_prefix("epsg:")) {
-            let code: u16 = code.trim().parse().map_err(|_| {
-                format!("\"{text}\": expected EPSG:NNNN with a code from 1024 to 32767, or a WKT definition")
-            })?;
-            let def = crs_definitions::from_code(code)
-                .ok_or_else(|| format!("EPSG:{code} is not in the EPSG definitions this build carries"))?;
-            let crs = Self { name: format!("EPSG:{code}"), epsg: Some(code), wkt: def.wkt.to_string() };
+        if let Some(codes) = text.strip_prefix("EPSG:").or_else(|| text.strip_prefix("epsg:")) {
+            let crs = match codes.split_once('+') {
+                None => {
+                    let code = epsg_code(text, codes)?;
+                    Self { name: format!("EPSG:{code}"), epsg: Some(code), wkt: epsg_wkt(code)? }
+                }
+                Some((h, v)) => compound(text, epsg_code(text, h)?, epsg_code(text, v)?)?,
+            };
             return crs.metric().map(|()| crs);
         }
         let kind: String = text.chars().take_while(|c| c.is_ascii_alphanumeric() || *c == '_').collect();
         if kind.is_empty() || !text[kind.len()..].trim_start().starts_with('[') {
             return Err(format!(
-                "\"{}\": expected EPSG:NNNN or a WKT definition (PROJCS[…], LOCAL_CS[…], …)",
+                "\"{}\": expected EPSG:NNNN, EPSG:H+V or a WKT definition (PROJCS[…], COMPD_CS[…], LOCAL_CS[…], …)",
                 shorten(text)
             ));
         }
@@ -48,16 +55,16 @@ impl Crs {
         crs.metric().map(|()| crs)
     }
 
-    /// A local engineering frame named `name`: metres, x east, y north,
-    /// z up, tied to nothing.
+    /// A local engineering frame named `name`: metres, x east, y north
+    /// (z up), tied to nothing. WKT 1 `LOCAL_CS` with two axes: GDAL and
+    /// PROJ before 9.4 refuse three ("buildCS: unexpected AXIS count").
     pub fn local(name: &str) -> Self {
         let quoted = name.replace('"', "'");
         Self {
             name: name.to_string(),
             epsg: None,
             wkt: format!(
-                "LOCAL_CS[\"{quoted}\",LOCAL_DATUM[\"{quoted}\",0],UNIT[\"metre\",1],\
-                 AXIS[\"X\",EAST],AXIS[\"Y\",NORTH],AXIS[\"Z\",UP]]"
+                "LOCAL_CS[\"{quoted}\",LOCAL_DATUM[\"{quoted}\",0],UNIT[\"metre\",1],AXIS[\"X\",EAST],AXIS[\"Y\",NORTH]]"
             ),
         }
     }
@@ -67,20 +74,152 @@ impl Crs {
         self.wkt.starts_with("LOCAL_CS") || self.wkt.starts_with("ENGCRS") || self.wkt.starts_with("ENGINEERINGCRS")
     }
 
+    /// Whether it states the heights' datum (a compound CRS).
+    pub fn is_compound(&self) -> bool {
+        self.wkt.starts_with("COMPD_CS") || self.wkt.starts_with("COMPOUNDCRS")
+    }
+
     /// Only CRSs in metres: a geographic CRS (degrees) cannot hold a
-    /// survey's metric coordinates.
+    /// survey's metric coordinates, and one in feet would read our metres
+    /// as feet.
     fn metric(&self) -> Result<(), String> {
-        if METRIC_KINDS.iter().any(|k| self.wkt.starts_with(k)) {
-            Ok(())
-        } else {
+        if !METRIC_KINDS.iter().any(|k| self.wkt.starts_with(k)) {
             let kind: String = self.wkt.chars().take_while(|c| *c != '[').collect();
-            Err(format!(
-                "{} is a {kind} coordinate system: expected a projected (PROJCS) or local engineering (LOCAL_CS) one, \
-                 in metres",
+            return Err(format!(
+                "{} is a {kind} coordinate system: expected a projected (PROJCS), compound (COMPD_CS) or local \
+                 engineering (LOCAL_CS) one, in metres",
                 self.name
-            ))
+            ));
+        }
+        if self.wkt.starts_with("COMPD_CS") {
+            let kinds: Vec<String> = top_level(&self.wkt)
+                .into_iter()
+                .filter(|item| item.contains('['))
+                .map(keyword)
+                .filter(|k| k != "AUTHORITY")
+                .collect();
+            if kinds != ["PROJCS", "VERT_CS"] {
+                return Err(format!(
+                    "{} is a compound CRS of {}: expected a projected CRS (PROJCS) and a vertical one (VERT_CS)",
+                    self.name,
+                    kinds.join(" + ")
+                ));
+            }
+        }
+        match foreign_unit(&self.wkt) {
+            None => Ok(()),
+            Some((unit, factor)) => Err(format!(
+                "{} has its coordinates in {unit} ({factor} m): cps-survey computes and writes metres, which \
+                 readers would take as {unit}; choose the CRS's metric variant (or a local frame)",
+                self.name
+            )),
         }
     }
+}
+
+/// The code of `EPSG:code` (`text` for the error).
+fn epsg_code(text: &str, code: &str) -> Result<u16, String> {
+    code.trim().parse().map_err(|_| {
+        format!("\"{text}\": expected EPSG:NNNN (a code from 1024 to 32767), EPSG:H+V, or a WKT definition")
+    })
+}
+
+/// The WKT of EPSG `code` as GDAL ≥ 3 exports it: without `TOWGS84`.
+fn epsg_wkt(code: u16) -> Result<String, String> {
+    let def = crs_definitions::from_code(code)
+        .ok_or_else(|| format!("EPSG:{code} is not in the EPSG definitions this build carries"))?;
+    Ok(without_towgs84(def.wkt))
+}
+
+/// `EPSG:H+V`: the projected CRS `h` with the vertical CRS `v`, which is
+/// taken from a compound definition that carries it (the definitions hold
+/// no vertical CRS on its own).
+fn compound(text: &str, h: u16, v: u16) -> Result<Crs, String> {
+    let horizontal = epsg_wkt(h)?;
+    if !horizontal.starts_with("PROJCS") {
+        return Err(format!("\"{text}\": EPSG:{h} is not a projected CRS: expected EPSG:H+V with H projected"));
+    }
+    let tag = format!("AUTHORITY[\"EPSG\",\"{v}\"]]");
+    let vertical = (1024..=32767)
+        .filter_map(crs_definitions::from_code)
+        .filter(|d| d.wkt.starts_with("COMPD_CS"))
+        .find_map(|d| top_level(d.wkt).into_iter().find(|c| c.starts_with("VERT_CS[") && c.ends_with(&tag)))
+        .ok_or_else(|| {
+            format!("\"{text}\": EPSG:{v} is not a vertical CRS in the EPSG definitions this build carries")
+        })?;
+    let name = |wkt: &str| first_quoted(wkt).unwrap_or_default();
+    Ok(Crs {
+        name: format!("EPSG:{h}+{v}"),
+        epsg: None,
+        wkt: format!("COMPD_CS[\"{} + {}\",{horizontal},{vertical}]", name(&horizontal), name(vertical)),
+    })
+}
+
+/// `wkt` without its `TOWGS84[…]` clauses.
+fn without_towgs84(wkt: &str) -> String {
+    let mut out = String::with_capacity(wkt.len());
+    let mut rest = wkt;
+    while let Some(at) = rest.find(",TOWGS84[") {
+        out.push_str(&rest[..at]);
+        rest = &rest[at + 1..];
+        rest = rest.find(']').map_or("", |end| &rest[end + 1..]);
+    }
+    out.push_str(rest);
+    out
+}
+
+/// The comma-separated items directly inside a WKT node's brackets.
+fn top_level(wkt: &str) -> Vec<&str> {
+    let Some(open) = wkt.find('[') else { return Vec::new() };
+    let (mut depth, mut quoted, mut from, mut items) = (0usize, false, open + 1, Vec::new());
+    for (i, c) in wkt.char_indices().skip_while(|(i, _)| *i <= open) {
+        match c {
+            '"' => quoted = !quoted,
+            '[' | '(' if !quoted => depth += 1,
+            ']' | ')' if !quoted && depth == 0 => {
+                items.push(wkt[from..i].trim());
+                break;
+            }
+            ']' | ')' if !quoted => depth -= 1,
+            ',' if !quoted && depth == 0 => {
+                items.push(wkt[from..i].trim());
+                from = i + 1;
+            }
+            _ => {}
+        }
+    }
+    items
+}
+
+/// A WKT node's keyword.
+fn keyword(node: &str) -> String {
+    node.chars().take_while(|c| *c != '[').collect::<String>().trim().to_string()
+}
+
+/// The first linear unit of the coordinates that is not the metre: a
+/// projected CRS's own `UNIT` (not its geographic CRS's degrees), a
+/// vertical or local CRS's, or a WKT 2 `LENGTHUNIT`.
+fn foreign_unit(wkt: &str) -> Option<(String, f64)> {
+    let mut units = Vec::new();
+    let mut stack = vec![wkt];
+    while let Some(node) = stack.pop() {
+        let kind = keyword(node);
+        for child in top_level(node) {
+            match keyword(child).as_str() {
+                "UNIT" if matches!(kind.as_str(), "PROJCS" | "VERT_CS" | "LOCAL_CS") => units.push(child),
+                "LENGTHUNIT" => units.push(child),
+                "PROJCS" | "VERT_CS" | "LOCAL_CS" | "COMPD_CS" | "PROJCRS" | "ENGCRS" | "ENGINEERINGCRS"
+                | "VERTCRS" | "COMPOUNDCRS" | "AXIS" => stack.push(child),
+                _ => {}
+            }
+        }
+    }
+    units.into_iter().find_map(|unit| {
+        let items = top_level(unit);
+        let name = items.first()?.trim_matches('"').to_string();
+        let factor: f64 = items.get(1)?.parse().ok()?;
+        ((factor - 1.0).abs() > 1e-12).then_some((name, factor))
+    })
 }
 
 /// Brackets and quotes that close, or where they do not.
@@ -161,8 +300,57 @@ mod tests {
         assert!(degrees.contains("GEOGCS") && degrees.contains("metres"), "{degrees}");
         assert!(Crs::parse("EPSG:x").expect_err("code").contains("EPSG:NNNN"));
         assert!(Crs::parse("EPSG:1").expect_err("unknown").contains("EPSG:1 is not"));
-        assert!(Crs::parse("UTM 32").expect_err("prose").contains("expected EPSG:NNNN or a WKT"));
+        assert!(Crs::parse("UTM 32").expect_err("prose").contains("expected EPSG:NNNN, EPSG:H+V or a WKT"));
         assert!(Crs::parse("PROJCS[\"a\",UNIT[\"m\",1]").expect_err("open").contains("unclosed"));
+    }
+
+    /// GDAL ≥ 3 exports EPSG CRSs without TOWGS84 (PROJ then reads a
+    /// bound CRS and finds no code); neither a null nor a real one is kept.
+    #[test]
+    fn epsg_wkt_carries_no_towgs84() {
+        for code in ["EPSG:25832", "EPSG:7415", "EPSG:31467", "EPSG:5555"] {
+            let crs = Crs::parse(code).expect(code);
+            assert!(!crs.wkt.contains("TOWGS84"), "{code}: {}", crs.wkt);
+            balanced(&crs.wkt).expect("still balanced");
+            assert_eq!(authority_code(&crs.wkt), crs.epsg, "{code}");
+        }
+        assert_eq!(without_towgs84("A[B[1,TOWGS84[0,0,0]],C[2,TOWGS84[1,2,3,4,5,6,7]],D]"), "A[B[1],C[2],D]");
+    }
+
+    /// A CRS in feet would label our metres as feet: refused, naming the unit.
+    #[test]
+    fn a_crs_in_feet_is_refused_naming_its_unit() {
+        let feet = Crs::parse("EPSG:2263").expect_err("US survey feet");
+        assert!(feet.contains("US survey foot") && feet.contains("0.3048006096012192"), "{feet}");
+        let intl = Crs::parse("EPSG:2039").map(|c| c.wkt);
+        assert!(intl.is_ok(), "Israeli grid, metres: {intl:?}");
+        let wkt = crs_definitions::from_code(2263).expect("2263").wkt;
+        assert!(Crs::parse(wkt).expect_err("as WKT too").contains("US survey foot"));
+        let local_feet =
+            "LOCAL_CS[\"site\",LOCAL_DATUM[\"site\",0],UNIT[\"foot\",0.3048],AXIS[\"X\",EAST],AXIS[\"Y\",NORTH]]";
+        assert!(Crs::parse(local_feet).expect_err("local feet").contains("foot"));
+    }
+
+    /// Compound CRSs state the heights' datum: by code, as `EPSG:H+V`, or as
+    /// WKT; a compound of anything but a projected and a vertical CRS is refused.
+    #[test]
+    fn compound_crss_carry_their_vertical_datum() {
+        let nap = Crs::parse("EPSG:7415").expect("RD New + NAP");
+        assert!(nap.is_compound() && nap.epsg == Some(7415) && !nap.is_local());
+        assert!(nap.wkt.contains("VERT_CS[\"NAP height\""), "{}", nap.wkt);
+        let joined = Crs::parse("EPSG:25832+5783").expect("UTM 32N + DHHN92");
+        assert_eq!(joined.name, "EPSG:25832+5783");
+        assert_eq!(joined.epsg, None);
+        assert!(joined.wkt.starts_with("COMPD_CS[\"ETRS89 / UTM zone 32N + DHHN92 height\",PROJCS["), "{}", joined.wkt);
+        assert_eq!(keyword(top_level(&joined.wkt)[2]), "VERT_CS");
+        assert!(joined.wkt.ends_with("AUTHORITY[\"EPSG\",\"5783\"]]]"), "{}", joined.wkt);
+        assert_eq!(Crs::parse(&joined.wkt).expect("reads back").wkt, joined.wkt);
+        assert!(Crs::parse("EPSG:4326+5783").expect_err("geographic").contains("not a projected CRS"));
+        assert!(Crs::parse("EPSG:25832+25833").expect_err("not vertical").contains("not a vertical CRS"));
+        assert!(Crs::parse("EPSG:25832+x").expect_err("code").contains("EPSG:H+V"));
+        let geographic = crs_definitions::from_code(4326).expect("4326").wkt;
+        let wrong = format!("COMPD_CS[\"x\",{geographic},{}]", top_level(&joined.wkt)[2]);
+        assert!(Crs::parse(&wrong).expect_err("GEOGCS + VERT_CS").contains("GEOGCS + VERT_CS"));
     }
 
     #[test]
@@ -171,6 +359,8 @@ mod tests {
         assert!(crs.is_local());
         assert_eq!(crs.name, "Hall \"B\" grid");
         assert!(crs.wkt.starts_with("LOCAL_CS[\"Hall 'B' grid\""));
+        // Two axes: GDAL and PROJ before 9.4 refuse a LOCAL_CS with three.
+        assert_eq!(crs.wkt.matches("AXIS[").count(), 2, "{}", crs.wkt);
         assert_eq!(Crs::parse(&crs.wkt).expect("own WKT reads back").wkt, crs.wkt);
     }
 }

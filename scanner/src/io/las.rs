@@ -182,6 +182,9 @@ pub(super) struct LasStream {
     cloud: CloudHeader,
     compressed: bool,
     path: PathBuf,
+    /// The records' raw (scaled integer) extremes so far, per axis: the
+    /// header's bounds are written from them exactly.
+    raw_bounds: Option<([i32; 3], [i32; 3])>,
 }
 
 impl std::fmt::Debug for LasStream {
@@ -194,7 +197,14 @@ impl LasStream {
     /// Creates `path` for a cloud of `cloud`'s kind.
     pub(super) fn create(path: &Path, cloud: &CloudHeader, compressed: bool) -> Result<Self> {
         File::create(path).map_err(|e| ScannerError::io(path, e))?;
-        Ok(Self { writer: None, pending: Vec::new(), cloud: cloud.clone(), compressed, path: path.to_path_buf() })
+        Ok(Self {
+            writer: None,
+            pending: Vec::new(),
+            cloud: cloud.clone(),
+            compressed,
+            path: path.to_path_buf(),
+            raw_bounds: None,
+        })
     }
 
     /// The writer, opened with the offset at the first part's lower
@@ -276,6 +286,7 @@ impl LasStream {
                         ),
                     )
                 })?;
+            self.raw_bounds = raw_extremes(&self.pending[start..], self.raw_bounds);
             if self.pending.len() >= BATCH_POINTS * FORMAT_6_LEN {
                 self.flush()?;
             }
@@ -310,10 +321,67 @@ impl LasStream {
         let Some(mut writer) = self.writer.take() else {
             return Err(ScannerError::whole_file(path, "the LAS writer is not open"));
         };
+        let transforms = *writer.header().transforms();
         writer.close().map_err(|e| ScannerError::whole_file(path, e))?;
-        let file = writer.into_inner().map_err(|e| ScannerError::whole_file(path, e))?;
-        file.get_ref().sync_all().map_err(|e| ScannerError::io(path, e))
+        let buffered = writer.into_inner().map_err(|e| ScannerError::whole_file(path, e))?;
+        let mut file = buffered.into_inner().map_err(|e| ScannerError::io(path, e.into_error()))?;
+        patch_header(&mut file, self.raw_bounds, &transforms).map_err(|e| ScannerError::io(path, e))?;
+        file.sync_all().map_err(|e| ScannerError::io(path, e))
     }
+}
+
+/// Header offsets (LAS 1.4 R15, table 3): the legacy point count and
+/// legacy points by return (6 × u32), and max X, min X, … min Z (6 × f64).
+const LEGACY_COUNTS_AT: u64 = 107;
+const BOUNDS_AT: u64 = 179;
+
+/// What the `las` crate's header gets wrong for LAS 1.4 R15: for point
+/// formats 6–10 the legacy counts must be 0 (it fills them when they fit),
+/// and the bounds must be the records' own extremes, raw · scale + offset
+/// (it rounds them outwards from float noise, up to a quantum outside).
+fn patch_header(file: &mut File, raw: Option<([i32; 3], [i32; 3])>, t: &Vector<Transform>) -> std::io::Result<()> {
+    use std::io::{Seek as _, SeekFrom, Write as _};
+    file.seek(SeekFrom::Start(LEGACY_COUNTS_AT))?;
+    file.write_all(&[0u8; 24])?;
+    if let Some((lo, hi)) = raw {
+        let mut bytes = Vec::with_capacity(48);
+        for (k, axis) in [t.x, t.y, t.z].iter().enumerate() {
+            for v in [hi[k], lo[k]] {
+                bytes.extend_from_slice(&axis.direct(v).to_le_bytes());
+            }
+        }
+        file.seek(SeekFrom::Start(BOUNDS_AT))?;
+        file.write_all(&bytes)?;
+    }
+    Ok(())
+}
+
+/// Folds the raw X, Y, Z of format 6 `records` into `bounds`.
+fn raw_extremes(records: &[u8], bounds: Option<([i32; 3], [i32; 3])>) -> Option<([i32; 3], [i32; 3])> {
+    records
+        .par_chunks(FORMAT_6_LEN)
+        .fold(
+            || bounds,
+            |b, r| {
+                let v = [0, 4, 8].map(|at| i32::from_le_bytes(r[at..at + 4].try_into().expect("4 bytes")));
+                Some(match b {
+                    None => (v, v),
+                    Some((lo, hi)) => {
+                        (std::array::from_fn(|k| lo[k].min(v[k])), std::array::from_fn(|k| hi[k].max(v[k])))
+                    }
+                })
+            },
+        )
+        .reduce(
+            || bounds,
+            |a, b| match (a, b) {
+                (Some((la, ha)), Some((lb, hb))) => {
+                    Some((std::array::from_fn(|k| la[k].min(lb[k])), std::array::from_fn(|k| ha[k].max(hb[k]))))
+                }
+                (a, None) => a,
+                (None, b) => b,
+            },
+        )
 }
 
 /// The LAS 1.4 header of a cloud: point format 6, compressed or not; the
@@ -352,9 +420,12 @@ fn header(path: &Path, cloud: &CloudHeader, corner: [f64; 3], compressed: bool) 
 
 /// Re-orders the LAZ file `laz` into the COPC file `path` (an octree of
 /// LAZ chunks) with `copc-writer`, which spills to a temporary file in the
-/// same directory rather than holding the points.
+/// same directory rather than holding the points. The COPC file gets the
+/// LAZ file's permissions (a new file's, as the umask makes them): the
+/// crate renames a private temporary file (0600) into place.
 pub(super) fn convert_to_copc(laz: &Path, path: &Path) -> Result<()> {
     let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let permissions = std::fs::metadata(laz).map_err(|e| ScannerError::io(laz, e))?.permissions();
     copc_writer::convert_las_to_copc_streaming(
         laz,
         path,
@@ -362,7 +433,8 @@ pub(super) fn convert_to_copc(laz: &Path, path: &Path) -> Result<()> {
         dir,
         &copc_core::NeverCancel,
     )
-    .map_err(|e| ScannerError::whole_file(path, format!("COPC: {e}")))
+    .map_err(|e| ScannerError::whole_file(path, format!("COPC: {e}")))?;
+    std::fs::set_permissions(path, permissions).map_err(|e| ScannerError::io(path, e))
 }
 
 /// Today's date (UTC), the file's creation date.

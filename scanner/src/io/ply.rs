@@ -241,7 +241,10 @@ pub(super) fn cloud_header(cloud: &super::CloudHeader, encoding: PlyEncoding) ->
         ScalarType::Float
     };
     let names: &[&str] = if cloud.intensity { &["intensity"] } else { &[] };
-    header(xyz, comments, names, encoding, cloud.points.unwrap_or(COUNT_PLACEHOLDER))
+    // A cloud with a CRS is in the world (its axes east, north, up); one
+    // without is in a body's frame (a scan in its scanner's).
+    let axes = if cloud.crs.is_some() { WORLD_AXES } else { BODY_AXES };
+    header(xyz, axes, comments, names, encoding, cloud.points.unwrap_or(COUNT_PLACEHOLDER))
 }
 
 /// The vertex count of a header written before it was known (20 digits).
@@ -285,22 +288,33 @@ pub(super) fn write_scalar(
     encoding: PlyEncoding,
 ) -> std::io::Result<()> {
     let names = scalar.map_or(&[][..], |(names, _)| names);
-    let header = header(ScalarType::Float, Vec::new(), names, encoding, points.len());
+    let header = header(ScalarType::Float, WORLD_AXES, Vec::new(), names, encoding, points.len());
     write_header(w, &header)?;
     let scalar_at = |i: usize| scalar.map_or(0.0, |(_, v)| v[i]);
     let items = points.iter().enumerate().map(|(i, p)| Vertex { p: [p.x, p.y, p.z], intensity: scalar_at(i) });
     write_vertices(w, &header, &items.collect())
 }
 
-/// A header of `count` vertices: x, y, z of type `xyz`, one float under
-/// each of `names`, `comments` after ours.
-fn header(xyz: ScalarType, comments: Vec<String>, names: &[&str], encoding: PlyEncoding, count: usize) -> Header {
+/// The axes a header comment names: a world cloud's, a body's.
+const WORLD_AXES: &str = "x east, y north, z up";
+const BODY_AXES: &str = "x forward, y left, z up";
+
+/// A header of `count` vertices: x, y, z of type `xyz` along `axes`, one
+/// float under each of `names`, `comments` after ours.
+fn header(
+    xyz: ScalarType,
+    axes: &str,
+    comments: Vec<String>,
+    names: &[&str],
+    encoding: PlyEncoding,
+    count: usize,
+) -> Header {
     let mut header = Header::new();
     header.encoding = match encoding {
         PlyEncoding::Ascii => Encoding::Ascii,
         PlyEncoding::BinaryLittleEndian => Encoding::BinaryLittleEndian,
     };
-    header.comments.push("written by cps-survey; metres, x forward, y left, z up".into());
+    header.comments.push(format!("written by cps-survey; metres, {axes}"));
     header.comments.extend(comments);
     let mut vertex = ElementDef::new("vertex".into());
     vertex.count = count;

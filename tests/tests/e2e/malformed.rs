@@ -54,7 +54,27 @@ const CASES: &[Case] = &[
         ),
         "19:7",
         "site.crs",
-        "expected EPSG:NNNN or a WKT",
+        "expected EPSG:NNNN, EPSG:H+V or a WKT",
+    ),
+    (
+        "site: a CRS in feet (metres would be read as feet)",
+        (
+            "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]",
+            "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]\n[site]\ncrs = \"EPSG:2263\"",
+        ),
+        "19:7",
+        "site.crs",
+        "EPSG:2263 has its coordinates in US survey foot (0.3048006096012192 m)",
+    ),
+    (
+        "site: a compound CRS whose vertical part is not vertical",
+        (
+            "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]",
+            "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]\n[site]\ncrs = \"EPSG:25832+25833\"",
+        ),
+        "19:7",
+        "site.crs",
+        "EPSG:25833 is not a vertical CRS",
     ),
     (
         "site: both a CRS and a local frame",
