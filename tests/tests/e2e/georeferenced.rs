@@ -275,3 +275,39 @@ fn deliverables(run: &Path, report: &Value) {
     }
     assert_eq!(at, las_points.len());
 }
+
+/// A compound CRS (ETRS89 / UTM 32N + DHHN92 height, `EPSG:25832+5783`)
+/// says which heights the deliverables carry: the same `COMPD_CS` in the
+/// report, the LAS and COPC WKT VLR, E57's `coordinateMetadata` and the PLY
+/// comments.
+#[test]
+fn a_compound_crs_states_the_heights_datum_in_every_deliverable() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let site = "[site]\ncrs = \"EPSG:25832+5783\"\n";
+    let path = mission(dir.path(), OFFSET, r#"["ply", "las", "copc", "e57"]"#, site);
+    let run = run_mission(&path, &dir.path().join("run"));
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    let out = dir.path().join("run");
+    let crs = &report(&out)["crs"];
+    assert_eq!(
+        (crs["name"].as_str(), crs["epsg"].is_null(), crs["local"].as_bool()),
+        (Some("EPSG:25832+5783"), true, Some(false)),
+        "{crs}"
+    );
+    let wkt = crs["wkt"].as_str().expect("wkt");
+    assert!(wkt.starts_with("COMPD_CS[\"ETRS89 / UTM zone 32N + DHHN92 height\",PROJCS["), "{wkt}");
+    assert!(wkt.contains(",VERT_CS[\"DHHN92 height\"") && !wkt.contains("TOWGS84"), "{wkt}");
+    for name in ["cloud.las", "cloud.copc.laz"] {
+        let header = las::Reader::from_path(out.join(name)).expect("las").header().clone();
+        let vlr = header.all_vlrs().find(|v| v.user_id == "LASF_Projection" && v.record_id == 2112).expect("WKT VLR");
+        assert_eq!(String::from_utf8_lossy(&vlr.data).trim_end_matches('\0'), wkt, "{name}");
+    }
+    let e57 = e57::E57Reader::from_file(out.join("cloud.e57")).expect("e57");
+    assert_eq!(e57.coordinate_metadata(), Some(wkt));
+    let ply = std::fs::read(out.join("cloud.ply")).expect("ply");
+    let end = ply.windows(10).position(|w| w == b"end_header").expect("header");
+    let header = String::from_utf8_lossy(&ply[..end]);
+    assert!(header.contains("comment crs EPSG:25832+5783\n"), "{header}");
+    assert!(header.contains(&format!("comment crs_wkt {wkt}\n")), "{header}");
+    assert!(header.contains("x east, y north, z up"), "{header}");
+}
