@@ -79,6 +79,41 @@ pub struct MatchArgs {
     /// Print one JSON object instead of the tables.
     #[arg(long)]
     pub json: bool,
+    /// The coordinate reference system of the start poses and so of every
+    /// output: EPSG:NNNN, EPSG:H+V or WKT (in metres). Default: the one
+    /// the E57 inputs name in their coordinateMetadata, else a local frame.
+    #[arg(long, value_name = "CRS")]
+    pub crs: Option<String>,
+}
+
+/// The CRS of `match`'s outputs: `--crs`, else the one E57 inputs name,
+/// else a local engineering frame. The error names the option or file.
+fn output_crs(args: &MatchArgs) -> Result<scanner::io::Crs> {
+    if let Some(text) = &args.crs {
+        return scanner::io::Crs::parse(text).map_err(|e| anyhow::anyhow!("--crs: {e}"));
+    }
+    let mut named: Option<(PathBuf, String)> = None;
+    for input in &args.inputs {
+        if input.is_dir() || scanner::io::Format::from_path(input).ok() != Some(scanner::io::Format::E57) {
+            continue;
+        }
+        let Some(text) = scanner::io::read_e57_crs(input)? else { continue };
+        match &named {
+            Some((first, known)) if *known != text => bail!(
+                "{} and {} name different coordinate reference systems: give the outputs' with --crs",
+                first.display(),
+                input.display()
+            ),
+            Some(_) => {}
+            None => named = Some((input.clone(), text)),
+        }
+    }
+    match named {
+        Some((file, text)) => scanner::io::Crs::parse(&text).map_err(|e| {
+            anyhow::anyhow!("{}: coordinateMetadata: {e} (give the outputs' CRS with --crs)", file.display())
+        }),
+        None => Ok(scanner::io::Crs::local("cps-survey match local frame")),
+    }
 }
 
 /// `match --json` and `poses.json`.
@@ -86,6 +121,8 @@ pub struct MatchArgs {
 pub(crate) struct MatchReport {
     /// The mode.
     mode: String,
+    /// The coordinate reference system of the poses and clouds.
+    crs: crate::run::report::CrsReport,
     /// Every scan in input order.
     scans: Vec<ScanReport>,
     /// The final stage's matches, used or not.
@@ -180,6 +217,7 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
         icp.reject_back_faces = false;
     }
     let min_points = config.link.multiview.min_pairs;
+    let crs = output_crs(args)?;
     let scans = crate::scans::inputs::read(
         &args.inputs,
         args.init_poses.as_deref(),
@@ -202,8 +240,8 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
     bar.finish_and_clear();
     let result = result.map_err(|e| named(e, &scans))?;
     let seconds = started.elapsed().as_secs_f64();
-    let report = report(args.mode, &scans, &result, seconds);
-    let written = write_outputs(args, &scans, &result, &report)?;
+    let report = report(args.mode, &crs, &scans, &result, seconds);
+    let written = write_outputs(args, &crs, &scans, &result, &report)?;
     if args.json {
         crate::view::document::write_line(out, &report)?;
     } else {
@@ -253,11 +291,12 @@ fn matrix<const R: usize, const C: usize>(f: impl Fn(usize, usize) -> f64) -> [[
     std::array::from_fn(|r| std::array::from_fn(|c| f(r, c)))
 }
 
-fn report(mode: ModeArg, scans: &[InputScan], r: &SetResult, seconds: f64) -> MatchReport {
+fn report(mode: ModeArg, crs: &scanner::io::Crs, scans: &[InputScan], r: &SetResult, seconds: f64) -> MatchReport {
     use clap::ValueEnum;
     MatchReport {
         // The name the command line takes.
         mode: mode.to_possible_value().map_or_else(String::new, |v| v.get_name().to_owned()),
+        crs: crate::run::report::CrsReport::new(crs),
         scans: scans
             .iter()
             .enumerate()
@@ -295,7 +334,13 @@ fn report(mode: ModeArg, scans: &[InputScan], r: &SetResult, seconds: f64) -> Ma
 }
 
 /// poses.json, frames/NAME.frames, links.csv, the clouds and match.rrd.
-fn write_outputs(args: &MatchArgs, scans: &[InputScan], r: &SetResult, report: &MatchReport) -> Result<Vec<String>> {
+fn write_outputs(
+    args: &MatchArgs,
+    crs: &scanner::io::Crs,
+    scans: &[InputScan],
+    r: &SetResult,
+    report: &MatchReport,
+) -> Result<Vec<String>> {
     let dir = &args.out;
     let frames = dir.join("frames");
     std::fs::create_dir_all(&frames).with_context(|| format!("creating {}", frames.display()))?;
@@ -313,7 +358,7 @@ fn write_outputs(args: &MatchArgs, scans: &[InputScan], r: &SetResult, report: &
     }
     write_links(&dir.join("links.csv"), scans, report)?;
     let mut written = vec!["poses.json".to_string(), "frames/".into(), "links.csv".into()];
-    written.extend(write_clouds(dir, &args.formats, scans, r)?);
+    written.extend(write_clouds(dir, &args.formats, crs, scans, r)?);
     let rrd = dir.join("match.rrd");
     let mut rec = Recorder::new("match", Some(&rrd), &Viewer::None, Vec::new())?;
     if rec.enabled() {
@@ -351,12 +396,18 @@ fn write_links(path: &Path, scans: &[InputScan], report: &MatchReport) -> Result
 /// The merged cloud in every format, a scan at a time, relative to the
 /// first pose's position rounded to the kilometre (64-bit coordinates when
 /// that is not zero).
-fn write_clouds(dir: &Path, formats: &[String], scans: &[InputScan], r: &SetResult) -> Result<Vec<String>> {
+fn write_clouds(
+    dir: &Path,
+    formats: &[String],
+    crs: &scanner::io::Crs,
+    scans: &[InputScan],
+    r: &SetResult,
+) -> Result<Vec<String>> {
     let first = r.world_from_scan[0].translation.vector;
     let origin: Vector3<f64> = first.map(|v| (v / 1000.0).round() * 1000.0);
     let header = scanner::io::CloudHeader {
         origin,
-        crs: None,
+        crs: Some(crs.clone()),
         points: Some(scans.iter().map(|s| s.points.len()).sum()),
         intensity: false,
         source: true,

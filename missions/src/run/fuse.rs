@@ -189,14 +189,24 @@ pub fn fuse(
         c.icp.trace = trace;
         c
     };
+    // The matching runs in a frame at the first scan's station, its axes
+    // the world's: at national-grid coordinates (E 500 000, N 5 500 000)
+    // points moved into the world in single precision lose their
+    // millimetres (0.5 m steps), and a prior about the far world origin
+    // makes the normal equations singular. Poses come back by the shift;
+    // covariances stay about the first scan's station (the same wherever
+    // the world's origin lies).
+    let base = views.first().map_or_else(Vector3::zeros, |v| v.pose.position.coords);
+    let to_local = Translation3::from(-base);
+    let to_world = Translation3::from(base);
     let (poses, rmse, matches): (Vec<Isometry3<f64>>, Vec<Option<f64>>, usize) = match mode {
         FusionMode::Direct => (views.iter().map(ScanView::direct).collect(), vec![None; views.len()], 0),
         _ if views.is_empty() => (Vec::new(), Vec::new(), 0),
         FusionMode::Icp => {
             // The first scan holds the frame at its CPS pose; the rest start
             // from odometry. A coarse pass, then a fine one from its result.
-            let mut guesses: Vec<Isometry3<f64>> = views.iter().map(ScanView::odometry_guess).collect();
-            let shift = views[0].direct() * guesses[0].inverse();
+            let mut guesses: Vec<Isometry3<f64>> = views.iter().map(|v| to_local * v.odometry_guess()).collect();
+            let shift = to_local * views[0].direct() * guesses[0].inverse();
             guesses.iter_mut().for_each(|g| *g = shift * *g);
             let mut config = traced(multiview_config(plan, Strategy::Simultaneous, scanner_in_body));
             // Nothing but the start holds a scan here: what the matches
@@ -226,10 +236,10 @@ pub fn fuse(
                 .iter()
                 .map(|m| Some(m.as_ref().map_or_else(nalgebra::Matrix6::zeros, |m| m.covariance_held(&step))))
                 .collect();
-            (r.world_from_scan, rmse, coarse.matches + r.matches)
+            (r.world_from_scan.iter().map(|t| to_world * t).collect(), rmse, coarse.matches + r.matches)
         }
         FusionMode::CpsIcp => {
-            let prior = joint_prior(views)?;
+            let prior = joint_prior(views, &base)?;
             let r = fusion::multiview::register_with_priors(
                 &scans,
                 &prior,
@@ -258,9 +268,12 @@ pub fn fuse(
             }
             covariance = r.covariance.iter().copied().map(Some).collect();
             traces = r.traces;
-            (r.world_from_scan, rmse, r.matches.len())
+            (r.world_from_scan.iter().map(|t| to_world * t).collect(), rmse, r.matches.len())
         }
     };
+    for t in &mut traces {
+        t.world_from_scan.iter_mut().for_each(|p| *p = to_world * *p);
+    }
     let scans = views
         .iter()
         .zip(poses)
@@ -280,8 +293,9 @@ pub fn fuse(
 
 /// The scans' joint CPS prior: the 4N×4N covariance of their stations
 /// from each view's covariance and cross-covariances, mapped to the
-/// scanners' poses with the tilt ([`fusion::graph::JointPrior::cps`]).
-pub fn joint_prior(views: &[ScanView]) -> Result<fusion::graph::JointPrior> {
+/// scanners' poses with the tilt ([`fusion::graph::JointPrior::cps`]), in
+/// a frame whose origin is the world's `base` (the world's axes).
+pub fn joint_prior(views: &[ScanView], base: &Vector3<f64>) -> Result<fusion::graph::JointPrior> {
     let n = views.len();
     let mut joint = faer::Mat::<f64>::zeros(4 * n, 4 * n);
     for (i, v) in views.iter().enumerate() {
@@ -295,8 +309,10 @@ pub fn joint_prior(views: &[ScanView]) -> Result<fusion::graph::JointPrior> {
             }
         }
     }
-    let scanners: Vec<Isometry3<f64>> = views.iter().map(ScanView::direct).collect();
-    let poses: Vec<ParentPose> = views.iter().map(|v| v.pose).collect();
+    let to_local = Translation3::from(-base);
+    let scanners: Vec<Isometry3<f64>> = views.iter().map(|v| to_local * v.direct()).collect();
+    let poses: Vec<ParentPose> =
+        views.iter().map(|v| ParentPose { position: v.pose.position - base, ..v.pose }).collect();
     let tilts: Vec<Tilt> = views.iter().map(|v| v.tilt).collect();
     Ok(fusion::graph::JointPrior::cps(&scanners, &poses, &tilts, &joint, TILT_SIGMA_RAD)?)
 }

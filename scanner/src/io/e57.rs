@@ -67,6 +67,13 @@ pub struct E57Scan {
     pub points: Vec<Point3<f32>>,
 }
 
+/// The coordinate reference system an E57 file names
+/// (`coordinateMetadata`: usually WKT), if it names one.
+pub fn read_e57_crs(path: &Path) -> Result<Option<String>> {
+    let reader = E57Reader::from_file(path).map_err(|e| ScannerError::whole_file(path, e))?;
+    Ok(reader.coordinate_metadata().map(str::trim).filter(|c| !c.is_empty()).map(String::from))
+}
+
 /// Reads every `data3D` of an E57 file in its own frame with its pose —
 /// a terrestrial scanner's scans with their registration.
 pub fn read_e57_scans(path: &Path) -> Result<Vec<E57Scan>> {

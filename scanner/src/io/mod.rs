@@ -38,7 +38,7 @@ use std::ops::Range;
 use nalgebra::{Isometry3, Point3, Vector3};
 
 pub use crs::Crs;
-pub use e57::{E57Scan, read_e57_scans};
+pub use e57::{E57Scan, read_e57_crs, read_e57_scans};
 pub use pcd::PcdData;
 pub use ply::PlyEncoding;
 pub use stream::CloudWriter;

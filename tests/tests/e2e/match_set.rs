@@ -242,3 +242,48 @@ fn a_multi_scan_e57_starts_from_its_poses() {
         assert!(deg < 0.01 && m < 0.001, "scan {k}: moved {deg}° {m} m from where the E57 put it");
     }
 }
+
+/// The WKT in a LAS file's CRS record.
+fn las_wkt(path: &Path) -> String {
+    let header = las::Reader::from_path(path).expect("LAS").header().clone();
+    let vlr = header.all_vlrs().find(|v| v.user_id == "LASF_Projection" && v.record_id == 2112).expect("WKT VLR");
+    assert!(header.has_wkt_crs(), "{}: global encoding's WKT bit", path.display());
+    String::from_utf8_lossy(&vlr.data).trim_end_matches('\0').to_string()
+}
+
+/// `match` writes a CRS in every output (LAS 1.4 requires one): `--crs`,
+/// else the one a georeferenced E57 names in its coordinateMetadata, else
+/// a local frame; a CRS the tool cannot honour is refused naming its source.
+#[test]
+fn match_writes_the_crs_it_was_given_or_the_e57s() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let local = dir.path().join("local");
+    let (r, v) = run(&[data("3dtk_dat"), "--formats".into(), "las".into()], &local);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let crs = &v.expect("JSON")["crs"];
+    assert_eq!((crs["local"].as_bool(), crs["epsg"].is_null()), (Some(true), true), "{crs}");
+    assert!(las_wkt(&local.join("cloud.las")).starts_with("LOCAL_CS[\"cps-survey match local frame\""));
+
+    let given = dir.path().join("given");
+    let args = [data("3dtk_dat"), "--formats".into(), "las,e57".into(), "--crs".into(), "EPSG:25832".into()];
+    let (r, v) = run(&args, &given);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let v = v.expect("JSON");
+    assert_eq!((v["crs"]["name"].as_str(), v["crs"]["epsg"].as_u64()), (Some("EPSG:25832"), Some(25832)));
+    let wkt = v["crs"]["wkt"].as_str().expect("wkt").to_string();
+    assert_eq!(las_wkt(&given.join("cloud.las")), wkt);
+    let e57 = given.join("cloud.e57");
+    assert_eq!(scanner::io::read_e57_crs(&e57).expect("E57").as_deref(), Some(wkt.as_str()));
+
+    // The E57 names its CRS: matched again without --crs, the outputs keep it.
+    let again = dir.path().join("again");
+    let (r, v) = run(&[e57.clone().into_os_string(), "--formats".into(), "las".into()], &again);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert_eq!(v.expect("JSON")["crs"]["epsg"].as_u64(), Some(25832));
+    assert_eq!(las_wkt(&again.join("cloud.las")), wkt);
+
+    // Refused: a CRS in feet, naming the option.
+    let (r, _) = run(&[data("3dtk_dat"), "--crs".into(), "EPSG:2263".into()], &dir.path().join("feet"));
+    assert_eq!(r.code, 2);
+    assert!(r.stderr.contains("--crs: EPSG:2263 has its coordinates in US survey foot"), "{}", r.stderr);
+}
