@@ -238,8 +238,8 @@ fn copc_cube_is_anchored_at_the_header_minimum() {
     let min = [h.bounds[1], h.bounds[3], h.bounds[5]];
     let extent = (0..3).map(|k| h.bounds[2 * k] - h.bounds[2 * k + 1]).fold(0.0, f64::max);
     assert!((2.0 * info.halfsize - extent).abs() < 1e-9, "side {} against extent {extent}", 2.0 * info.halfsize);
-    for k in 0..3 {
-        assert!((info.center[k] - info.halfsize - min[k]).abs() < 1e-9, "axis {k}: cube min against header min");
+    for (k, (centre, min)) in info.center.iter().zip(min).enumerate() {
+        assert!((centre - info.halfsize - min).abs() < 1e-9, "axis {k}: cube min against header min");
     }
     // Every node's points lie in the node's cube (so that a box query that
     // skips a node skips none of its points).
