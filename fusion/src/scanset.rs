@@ -9,10 +9,12 @@
 //! third of the time.
 //!
 //! The first scan stays where its start puts it and defines the frame.
-//! Everything runs in that frame — the starts moved into it, the results
-//! moved back by its adjoint — so georeferenced starts (an E57's project
-//! coordinates, UTM) cost neither the models' f32 coordinates their
-//! millimetres nor the blind-direction analysis its balance.
+//! Everything runs in that frame — the starts moved into it, the poses
+//! moved back, covariances and blind directions turned into the world's
+//! axes about the first scan's origin — so georeferenced starts (an E57's
+//! project coordinates, UTM) cost neither the models' f32 coordinates their
+//! millimetres, nor the blind-direction analysis its balance, nor the
+//! covariances their meaning.
 
 use nalgebra::{Isometry3, Matrix6, Point3, Vector6};
 
@@ -138,11 +140,14 @@ pub fn register_set<S: AsRef<[Point3<f32>]> + Sync>(
 }
 
 /// A set's result moved from the first scan's frame into the world by
-/// `world_from_first`: poses composed, covariances and blind directions
-/// carried by the adjoint, and — outside graph mode, whose links are
-/// relative — each last match's result too.
+/// `world_from_first`: poses composed; covariances and blind directions
+/// turned into the world's axes but left about the first scan's origin
+/// (the adjoint of the rotation alone: carried to the world's origin, a
+/// set at national-grid coordinates would report the rotations' lever arm
+/// over 5,500 km as metres of position σ); and — outside graph mode, whose
+/// links are relative — each last match's result in the world.
 fn into_world(mut r: SetResult, world_from_first: &Isometry3<f64>, graph: bool) -> SetResult {
-    let ad = adjoint(world_from_first);
+    let ad = adjoint(&Isometry3::from_parts(nalgebra::Translation3::identity(), world_from_first.rotation));
     r.world_from_scan.iter_mut().for_each(|p| *p = world_from_first * *p);
     r.covariance.iter_mut().for_each(|c| *c = ad * *c * ad.transpose());
     r.unobservable.iter_mut().flatten().for_each(|d| *d = (ad * *d).normalize());

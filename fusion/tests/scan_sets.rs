@@ -213,8 +213,8 @@ fn a_match_that_cannot_see_a_turn_gets_the_start_step_there() {
 /// Georeferenced starts — the 3DTK set moved 5,400 km north and turned 30°
 /// (UTM-like coordinates, where f32 keeps half a metre) — register exactly
 /// as in the scans' own frame: every pose moved by the same transform to a
-/// micrometre, in graph and pairwise mode, with the covariances carried
-/// along.
+/// micrometre, in graph and pairwise mode, with the covariances turned
+/// into the world's axes (the same σ as at the origin).
 #[test]
 fn georeferenced_starts_register_as_local_ones() {
     let scans: Vec<Vec<Point3<f32>>> = (0..3).map(threedtk).collect();
@@ -234,10 +234,17 @@ fn georeferenced_starts_register_as_local_ones() {
             let d = (utm * a).inverse() * b;
             assert!(d.translation.vector.norm() < 1e-6 && d.rotation.angle() < 1e-8, "{mode:?} scan {k}: {d}");
         }
-        let ad = fusion::se3::adjoint(&utm);
+        // Covariances in the world's axes about the first scan's origin:
+        // the local ones turned by the rotation alone, so the position σ is
+        // the same at UTM (carried to the world's origin, the rotations'
+        // lever arm over 5,400 km made it hundreds of metres).
+        let ad = fusion::se3::adjoint(&Isometry3::from_parts(Translation3::identity(), utm.rotation));
         for (k, (a, b)) in near.covariance.iter().zip(&r.covariance).enumerate() {
             let moved = ad * a * ad.transpose();
             assert!((moved - b).amax() <= 1e-6 * moved.amax().max(1e-30), "{mode:?} scan {k}: {b} vs {moved}");
+            let sigma = |c: &nalgebra::Matrix6<f64>| c.fixed_view::<3, 3>(3, 3).trace().sqrt();
+            assert!((sigma(a) - sigma(b)).abs() <= 1e-6 * sigma(a).max(1e-12), "{mode:?} scan {k}: σxyz");
+            assert!(sigma(b) < 0.1, "{mode:?} scan {k}: σxyz {} m at UTM", sigma(b));
         }
         assert!(near.unobservable.iter().chain(&r.unobservable).all(Vec::is_empty));
     }

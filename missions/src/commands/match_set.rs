@@ -140,15 +140,22 @@ pub(crate) struct MatchReport {
 struct ScanReport {
     /// The scan as given (`FILE.e57#NAME` for an E57's scans).
     file: String,
+    /// Its name (the file's stem, or the E57 `data3D`'s name): its frames
+    /// file, E57 `data3D` and recording entity.
+    name: String,
+    /// Its number: the input's own (3DTK `scanNNN`, the trailing digits of
+    /// the name) when they tell the scans apart, else its input order; each
+    /// of its points carries it (LAS `point_source_id`).
+    number: u16,
     /// Its registered pose, 4×4 row-major, metres.
     world_from_scan: [[f64; 4]; 4],
     /// 6×6, order (ωx, ωy, ωz, x, y, z), radians and metres, left
-    /// perturbation in the world frame (as `register`'s); zero for the
-    /// first scan, which holds the frame.
+    /// perturbation (as `register`'s) in the world's axes about the first
+    /// scan's origin; zero for the first scan, which holds the frame.
     covariance: [[f64; 6]; 6],
-    /// Directions the matches cannot see (unit vectors in the order of
-    /// the covariance, world frame): held where the start put them, their
-    /// σ the start's.
+    /// Directions the matches cannot see (unit vectors in the order and
+    /// frame of the covariance): held where the start put them, their σ
+    /// the start's.
     degenerate_directions: Vec<[f64; 6]>,
 }
 
@@ -293,6 +300,7 @@ fn matrix<const R: usize, const C: usize>(f: impl Fn(usize, usize) -> f64) -> [[
 
 fn report(mode: ModeArg, crs: &scanner::io::Crs, scans: &[InputScan], r: &SetResult, seconds: f64) -> MatchReport {
     use clap::ValueEnum;
+    let numbers = crate::scans::inputs::scan_numbers(scans);
     MatchReport {
         // The name the command line takes.
         mode: mode.to_possible_value().map_or_else(String::new, |v| v.get_name().to_owned()),
@@ -305,6 +313,8 @@ fn report(mode: ModeArg, crs: &scanner::io::Crs, scans: &[InputScan], r: &SetRes
                 let c: Matrix6<f64> = r.covariance[i];
                 ScanReport {
                     file: s.file.clone(),
+                    name: s.name.clone(),
+                    number: numbers[i],
                     world_from_scan: matrix(|a, b| m[(a, b)]),
                     covariance: matrix(|a, b| c[(a, b)]),
                     degenerate_directions: directions(&r.unobservable[i]),
@@ -409,9 +419,10 @@ fn write_clouds(
         origin,
         crs: Some(crs.clone()),
         points: Some(scans.iter().map(|s| s.points.len()).sum()),
-        intensity: false,
+        // What every input scan carries (intensity) or any (its time).
+        intensity: scans.iter().all(|s| s.intensity.is_some()),
         source: true,
-        timed: false,
+        timed: scans.iter().any(|s| s.gps_time_s.is_some()),
     };
     let mut writers = Vec::with_capacity(formats.len());
     for format in formats {
@@ -423,19 +434,21 @@ fn write_clouds(
         ));
     }
     // Each scan moved into the world once, into every file.
+    let numbers = crate::scans::inputs::scan_numbers(scans);
     for (i, s) in scans.iter().enumerate() {
         let pose = r.world_from_scan[i];
         let relative = Isometry3::from_parts((pose.translation.vector - origin).into(), pose.rotation);
         let n = s.points.len();
         let part = scanner::io::PointCloud {
             points: fusion::direct::transform(&s.points, &relative),
-            source: Some(vec![u16::try_from(i).unwrap_or(u16::MAX); n]),
+            source: Some(vec![numbers[i]; n]),
+            intensity: s.intensity.clone().filter(|_| header.intensity),
             origin,
             scans: vec![scanner::io::ScanInfo {
                 name: s.name.clone(),
                 points: 0..n,
                 world_from_scan: pose,
-                gps_time_s: None,
+                gps_time_s: s.gps_time_s,
             }],
             ..scanner::io::PointCloud::default()
         };

@@ -22,6 +22,10 @@ pub struct InputScan {
     pub points: Vec<Point3<f32>>,
     /// Its start `world_from_scan`.
     pub start: Isometry3<f64>,
+    /// Its points' intensities, when the input has them (as recorded).
+    pub intensity: Option<Vec<f32>>,
+    /// When it was taken, GPS seconds, when the input says.
+    pub gps_time_s: Option<f64>,
 }
 
 /// One entry of an `--init-poses` file.
@@ -54,17 +58,25 @@ pub fn read(
                 name: s.name,
                 points: s.points,
                 start: s.world_from_scan,
+                intensity: s.intensity,
+                gps_time_s: s.gps_time_s,
             }));
         } else {
             let cloud = scanner::io::read(input)?;
             if cloud.origin != nalgebra::Vector3::zeros() {
                 bail!("{}: a georeferenced cloud: expected a scan in its own frame", input.display());
             }
+            let gps_time_s = match cloud.scans.as_slice() {
+                [one] => one.gps_time_s,
+                _ => None,
+            };
             scans.push(InputScan {
                 file: input.display().to_string(),
                 name: stem(input),
                 points: cloud.points,
                 start: Isometry3::identity(),
+                intensity: cloud.intensity,
+                gps_time_s,
             });
         }
     }
@@ -76,6 +88,9 @@ pub fn read(
     }
     for s in &mut scans {
         let all = s.points.len();
+        let keep = super::settings::in_range(&s.points, min_m, max_m);
+        let kept = |values: Vec<f32>| values.into_iter().zip(&keep).filter_map(|(v, &k)| k.then_some(v)).collect();
+        s.intensity = s.intensity.take().filter(|v| v.len() == keep.len()).map(kept);
         s.points = super::settings::within_range(std::mem::take(&mut s.points), min_m, max_m);
         if s.points.len() <= min_points {
             bail!(
@@ -130,7 +145,14 @@ fn threedtk_directory(dir: &Path) -> Result<Vec<InputScan>> {
         .map(|(_, path)| {
             let start = scanner::io::read_3dtk_pose(&path.with_extension("pose"))?;
             let cloud = scanner::io::read(&path)?;
-            Ok(InputScan { file: path.display().to_string(), name: stem(&path), points: cloud.points, start })
+            Ok(InputScan {
+                file: path.display().to_string(),
+                name: stem(&path),
+                points: cloud.points,
+                start,
+                intensity: cloud.intensity,
+                gps_time_s: None,
+            })
         })
         .collect()
 }
@@ -163,6 +185,54 @@ fn apply_init_poses(path: &Path, scans: &mut [InputScan]) -> Result<()> {
     Ok(())
 }
 
+/// Each scan's number in the outputs (LAS `point_source_id`,
+/// `poses.json`): the input's own — the trailing digits of its name (a
+/// 3DTK `scanNNN`, an E57 `data3D` named `scan002`, a file `room_scan2`) —
+/// when every scan has one and no two share it; else its place in the
+/// input order (then, as the numbers cannot tell them apart, all of them).
+pub fn scan_numbers(scans: &[InputScan]) -> Vec<u16> {
+    let own: Option<Vec<u16>> = scans
+        .iter()
+        .map(|s| {
+            let digits = s.name.len() - s.name.trim_end_matches(|c: char| c.is_ascii_digit()).len();
+            s.name[s.name.len() - digits..].parse().ok()
+        })
+        .collect();
+    match own {
+        Some(numbers) if numbers.iter().collect::<std::collections::HashSet<_>>().len() == numbers.len() => numbers,
+        _ => (0..scans.len()).map(|i| u16::try_from(i).unwrap_or(u16::MAX)).collect(),
+    }
+}
+
 fn stem(path: &Path) -> String {
     path.file_stem().map_or_else(|| path.display().to_string(), |s| s.to_string_lossy().into_owned())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn named(names: &[&str]) -> Vec<InputScan> {
+        names
+            .iter()
+            .map(|n| InputScan {
+                file: format!("{n}.3d"),
+                name: (*n).to_string(),
+                points: Vec::new(),
+                start: Isometry3::identity(),
+                intensity: None,
+                gps_time_s: None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn scans_keep_their_own_numbers_when_these_tell_them_apart() {
+        assert_eq!(scan_numbers(&named(&["scan000", "scan002", "scan004"])), [0, 2, 4]);
+        assert_eq!(scan_numbers(&named(&["room_scan1", "room_scan2"])), [1, 2]);
+        // Shared, missing or too large: the input order for all.
+        assert_eq!(scan_numbers(&named(&["a/scan000", "b/scan000"])), [0, 1]);
+        assert_eq!(scan_numbers(&named(&["scan7", "north"])), [0, 1]);
+        assert_eq!(scan_numbers(&named(&["scan70000", "scan1"])), [0, 1]);
+    }
 }

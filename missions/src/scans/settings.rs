@@ -43,8 +43,14 @@ pub fn rigid(m: &Matrix4<f64>) -> Result<Isometry3<f64>> {
 
 /// Keeps the points between `min_m` and `max_m` from their scan's origin.
 pub fn within_range(points: Vec<nalgebra::Point3<f32>>, min_m: f64, max_m: f64) -> Vec<nalgebra::Point3<f32>> {
+    let keep = in_range(&points, min_m, max_m);
+    points.into_iter().zip(keep).filter_map(|(p, k)| k.then_some(p)).collect()
+}
+
+/// Whether each point lies between `min_m` and `max_m` from its scan's origin.
+pub fn in_range(points: &[nalgebra::Point3<f32>], min_m: f64, max_m: f64) -> Vec<bool> {
     let (min2, max2) = ((min_m * min_m) as f32, (max_m * max_m) as f32);
-    points.into_iter().filter(|p| (min2..=max2).contains(&p.coords.norm_squared())).collect()
+    points.iter().map(|p| (min2..=max2).contains(&p.coords.norm_squared())).collect()
 }
 
 /// Checks `--min-range` / `--max-range`.

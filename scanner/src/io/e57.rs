@@ -65,6 +65,11 @@ pub struct E57Scan {
     pub world_from_scan: Isometry3<f64>,
     /// Its valid Cartesian points in its own frame.
     pub points: Vec<Point3<f32>>,
+    /// Their intensities as recorded (not normalised), when every point
+    /// has one.
+    pub intensity: Option<Vec<f32>>,
+    /// When it was taken (its `acquisitionStart`), GPS seconds.
+    pub gps_time_s: Option<f64>,
 }
 
 /// The coordinate reference system an E57 file names
@@ -97,14 +102,22 @@ pub fn read_e57_scans(path: &Path) -> Result<Vec<E57Scan>> {
         let name = pc.name.clone().unwrap_or_else(|| format!("data3D[{k}]"));
         let mut iter = reader.pointcloud_simple(&pc).map_err(|e| ScannerError::whole_file(path, e))?;
         iter.apply_pose(false);
+        iter.normalize_intensity(false);
         let mut points = Vec::new();
+        let mut intensity = Some(Vec::new());
         for (i, p) in iter.enumerate() {
             let p = p.map_err(|e| ScannerError::whole_file(path, format!("data3D[{k}] point {i}: {e}")))?;
             if let Some(point) = cartesian(path, &format!("data3D[{k}] point {i}"), &p.cartesian)? {
                 points.push(point);
+                intensity = intensity.zip(p.intensity).map(|(mut all, v)| {
+                    all.push(v);
+                    all
+                });
             }
         }
-        scans.push(E57Scan { name, world_from_scan, points });
+        let intensity = intensity.filter(|v| !v.is_empty());
+        let gps_time_s = pc.acquisition_start.as_ref().map(|t| t.gps_time);
+        scans.push(E57Scan { name, world_from_scan, points, intensity, gps_time_s });
     }
     Ok(scans)
 }

@@ -287,3 +287,108 @@ fn match_writes_the_crs_it_was_given_or_the_e57s() {
     assert_eq!(r.code, 2);
     assert!(r.stderr.contains("--crs: EPSG:2263 has its coordinates in US survey foot"), "{}", r.stderr);
 }
+
+/// `match` keeps what came in: each scan's own number (3DTK `scanNNN`) in
+/// LAS `point_source_id` and `poses.json`, its name in E57 and the frames
+/// files — also when its E57 is matched again — and the inputs'
+/// intensities (the small_gicp frames' 0–215; they came out 0).
+#[test]
+fn match_keeps_the_inputs_scan_numbers_names_and_intensities() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = dir.path().join("set");
+    std::fs::create_dir_all(&set).expect("set");
+    for k in ["000", "002"] {
+        for ext in ["3d", "pose"] {
+            let name = format!("scan{k}.{ext}");
+            std::fs::copy(workspace().join("data/3dtk_dat").join(&name), set.join(&name)).expect("copy");
+        }
+    }
+    let first = dir.path().join("first");
+    let (r, v) = run(&[set.into_os_string(), "--formats".into(), "las,e57".into()], &first);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let numbers = |v: &Value, key: &str| -> Vec<Value> {
+        v["scans"].as_array().expect("scans").iter().map(|s| s[key].clone()).collect()
+    };
+    let v = v.expect("JSON");
+    assert_eq!(numbers(&v, "number"), [serde_json::json!(0), serde_json::json!(2)]);
+    assert_eq!(numbers(&v, "name"), [serde_json::json!("scan000"), serde_json::json!("scan002")]);
+    let ids: std::collections::BTreeSet<u16> =
+        las_points(&first.join("cloud.las")).iter().map(|p| p.point_source_id).collect();
+    assert_eq!(ids.into_iter().collect::<Vec<_>>(), [0, 2]);
+    let e57 = first.join("cloud.e57");
+    let names: Vec<String> = scanner::io::read_e57_scans(&e57).expect("E57").into_iter().map(|s| s.name).collect();
+    assert_eq!(names, ["scan000", "scan002"]);
+    assert!(first.join("frames/scan002.frames").is_file());
+    let (r, v) = run(&[e57.into_os_string()], &dir.path().join("again"));
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert_eq!(numbers(&v.expect("JSON"), "number"), [serde_json::json!(0), serde_json::json!(2)]);
+
+    // Intensities through LAS and E57, and E57 matched again.
+    let pair = dir.path().join("pair");
+    let inputs = [data("small_gicp_pair/target.ply"), data("small_gicp_pair/source.ply")];
+    let mut args = inputs.to_vec();
+    args.extend(["--formats".into(), "las,e57".into()]);
+    let (r, _) = run(&args, &pair);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let mut want: Vec<u16> = inputs
+        .iter()
+        .flat_map(|f| scanner::io::read(Path::new(f)).expect("PLY").intensity.expect("intensity"))
+        .map(|v| v as u16)
+        .collect();
+    want.sort_unstable();
+    assert_eq!(want.last(), Some(&215));
+    let las_intensities = |path: &Path| {
+        let mut got: Vec<u16> = las_points(path).iter().map(|p| p.intensity).collect();
+        got.sort_unstable();
+        got
+    };
+    assert_eq!(las_intensities(&pair.join("cloud.las")), want, "LAS intensities against the inputs'");
+    let again = dir.path().join("pair-again");
+    let (r, _) = run(&[pair.join("cloud.e57").into_os_string(), "--formats".into(), "las".into()], &again);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert_eq!(las_intensities(&again.join("cloud.las")), want, "through E57 and back");
+}
+
+fn las_points(path: &Path) -> Vec<las::Point> {
+    let mut reader = las::Reader::from_path(path).expect("LAS");
+    reader.read_all().expect("points").points().map(|p| p.expect("a point")).collect()
+}
+
+/// The same scans at national-grid coordinates report the σ they have at
+/// the origin (covariances in the world's axes about the first scan's
+/// origin): carried to the world's origin, 0.76 mm became 415,802 mm.
+#[test]
+fn a_set_at_national_grid_coordinates_reports_the_sigma_it_has_at_the_origin() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let offset = nalgebra::Translation3::new(500_000.0, 5_500_000.0, 300.0);
+    let init = dir.path().join("utm.json");
+    let entries: Vec<Value> = (0..3)
+        .map(|k| {
+            let pose =
+                scanner::io::read_3dtk_pose(Path::new(&data(&format!("3dtk_dat/scan{k:03}.pose")))).expect("pose");
+            let m = (offset * pose).to_homogeneous();
+            let rows: Vec<Vec<f64>> = (0..4).map(|r| (0..4).map(|c| m[(r, c)]).collect()).collect();
+            serde_json::json!({ "file": format!("scan{k:03}.3d"), "world_from_scan": rows })
+        })
+        .collect();
+    std::fs::write(&init, serde_json::to_string(&entries).expect("JSON")).expect("init poses");
+    let (r, near) = run(&[data("3dtk_dat")], &dir.path().join("near"));
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let far_args =
+        [data("3dtk_dat"), "--init-poses".into(), init.into_os_string(), "--crs".into(), "EPSG:25832".into()];
+    let (r, far) = run(&far_args, &dir.path().join("far"));
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let sigma_mm = |v: &Value, k: usize| {
+        let c = &v["scans"][k]["covariance"];
+        (3..6).map(|i| c[i][i].as_f64().expect("variance")).sum::<f64>().sqrt() * 1e3
+    };
+    let (near, far) = (near.expect("JSON"), far.expect("JSON"));
+    for k in 1..3 {
+        let (a, b) = (sigma_mm(&near, k), sigma_mm(&far, k));
+        assert!(a > 0.0 && a < 50.0, "scan {k}: σxyz {a} mm at the origin");
+        assert!((a - b).abs() <= 1e-3 * a, "scan {k}: σxyz {b} mm at UTM against {a} mm at the origin");
+        let (p, q) = (pose(&near["scans"][k]["world_from_scan"]), pose(&far["scans"][k]["world_from_scan"]));
+        let (deg, m) = error(&q, &(offset * p));
+        assert!(deg < 1e-6 && m < 1e-4, "scan {k}: {deg}° {m} m from the origin's result shifted");
+    }
+}
