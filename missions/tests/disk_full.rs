@@ -68,3 +68,27 @@ fn a_recording_that_cannot_be_written_is_named_and_the_reports_are_kept() {
     assert!(journal.lines().last().is_some_and(|l| l.starts_with("{\"event\":\"end\"")), "the journal ends");
     assert!(std::fs::metadata(out.join("mission.rrd")).expect("rrd").len() > 200 * 1024, "the recording rewritten");
 }
+
+/// A LAS cloud that cannot be written (the disk fills while it grows) is a
+/// named error, exit 2 — not a panic in the `las` crate's writer as it is
+/// dropped (exit 101, or 134 on a full tmpfs) — and no half-written cloud
+/// is left under its name. (LAZ and COPC: `scanner/tests/disk_full.rs`.)
+#[test]
+fn a_las_cloud_that_cannot_be_written_is_named_not_a_panic() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mission = common::short_hall(dir.path(), false);
+    // Five scans: each scan file (~86 KB) fits in 170 blocks (85 or 170
+    // KB), the LAS cloud (~220 KB) does not; no recording.
+    let text = std::fs::read_to_string(&mission)
+        .expect("mission")
+        .replace("[[1.5, 4.2, 1.5], [8.7, 4.2, 1.5]]", "[[1.5, 4.2, 1.5], [15.9, 4.2, 1.5]]")
+        .replace("formats = [\"ply\"]", "formats = [\"las\"]\nrerun = false");
+    assert!(text.contains("formats = [\"las\"]") && text.contains("[15.9, 4.2"), "the helper's mission changed");
+    std::fs::write(&mission, text).expect("mission");
+    let out = dir.path().join("run");
+    let (code, stderr) = run_limited(170, &mission, &out);
+    assert_eq!(code, Some(2), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(stderr.contains("cloud.las"), "the cloud file named: {stderr}");
+    assert!(!out.join("cloud.las").exists(), "no half-written cloud.las");
+}

@@ -9,6 +9,8 @@
 use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use las::{Builder, GpsTimeType, PointDataBuilder, Reader, Transform, Vector, Vlr, Writer};
 use nalgebra::Point3;
@@ -173,7 +175,10 @@ const FORMAT_6_LEN: usize = 30;
 /// finished. It is opened at the first part, whose lower corner (rounded
 /// to metres) plus the origin becomes the offset.
 pub(super) struct LasStream {
-    writer: Option<Writer<BufWriter<File>>>,
+    writer: Option<Writer<Disarmable>>,
+    /// Set when the file is given up: the writer's remaining writes (its
+    /// `Drop` closes it) go nowhere.
+    disarmed: Arc<AtomicBool>,
     /// Encoded records not yet written: LAZ writes them [`BATCH_POINTS`]
     /// at a time, so that it compresses many chunks at once in parallel
     /// however small the parts (about 30 MB more than part by part; LAS
@@ -204,12 +209,13 @@ impl LasStream {
             compressed,
             path: path.to_path_buf(),
             raw_bounds: None,
+            disarmed: Arc::new(AtomicBool::new(false)),
         })
     }
 
     /// The writer, opened with the offset at the first part's lower
     /// corner (its times, if any, are adjusted standard GPS time).
-    fn writer(&mut self, first: &PointCloud) -> Result<&mut Writer<BufWriter<File>>> {
+    fn writer(&mut self, first: &PointCloud) -> Result<&mut Writer<Disarmable>> {
         if self.writer.is_none() {
             let path = &self.path;
             self.cloud.timed |= first.scans.iter().any(|s| s.gps_time_s.is_some());
@@ -222,8 +228,8 @@ impl LasStream {
                 return Err(ScannerError::whole_file(path, "the header's point format is not format 6"));
             }
             let file = File::create(path).map_err(|e| ScannerError::io(path, e))?;
-            let writer = Writer::new(BufWriter::with_capacity(1 << 20, file), header)
-                .map_err(|e| ScannerError::whole_file(path, e))?;
+            let stream = Disarmable { inner: BufWriter::with_capacity(1 << 20, file), disarmed: self.disarmed.clone() };
+            let writer = Writer::new(stream, header).map_err(|e| ScannerError::whole_file(path, e))?;
             self.writer = Some(writer);
         }
         self.writer.as_mut().ok_or_else(|| ScannerError::whole_file(&self.path, "the LAS writer is not open"))
@@ -322,11 +328,54 @@ impl LasStream {
             return Err(ScannerError::whole_file(path, "the LAS writer is not open"));
         };
         let transforms = *writer.header().transforms();
-        writer.close().map_err(|e| ScannerError::whole_file(path, e))?;
-        let buffered = writer.into_inner().map_err(|e| ScannerError::whole_file(path, e))?;
-        let mut file = buffered.into_inner().map_err(|e| ScannerError::io(path, e.into_error()))?;
+        if let Err(e) = writer.close() {
+            // Dropped before this stream: disarmed here.
+            self.disarmed.store(true, Ordering::Relaxed);
+            return Err(ScannerError::whole_file(path, e));
+        }
+        let stream = writer.into_inner().map_err(|e| ScannerError::whole_file(path, e))?;
+        let mut file = stream.inner.into_inner().map_err(|e| ScannerError::io(path, e.into_error()))?;
         patch_header(&mut file, self.raw_bounds, &transforms).map_err(|e| ScannerError::io(path, e))?;
         file.sync_all().map_err(|e| ScannerError::io(path, e))
+    }
+}
+
+impl Drop for LasStream {
+    /// A file given up (an error, a full disk): the `las` crate's writer
+    /// closes itself when dropped and panics if that fails, so its writes
+    /// are disarmed first. (The unfinished file is removed by its owner.)
+    fn drop(&mut self) {
+        self.disarmed.store(true, Ordering::Relaxed);
+    }
+}
+
+/// The file under the `las` crate's writer: once `disarmed`, every write,
+/// flush and seek succeeds without touching it.
+#[derive(Debug)]
+struct Disarmable {
+    inner: BufWriter<File>,
+    disarmed: Arc<AtomicBool>,
+}
+
+impl Disarmable {
+    fn live(&self) -> bool {
+        !self.disarmed.load(Ordering::Relaxed)
+    }
+}
+
+impl std::io::Write for Disarmable {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        if self.live() { self.inner.write(buf) } else { Ok(buf.len()) }
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        if self.live() { self.inner.flush() } else { Ok(()) }
+    }
+}
+
+impl std::io::Seek for Disarmable {
+    fn seek(&mut self, to: std::io::SeekFrom) -> std::io::Result<u64> {
+        if self.live() { self.inner.seek(to) } else { Ok(0) }
     }
 }
 
