@@ -198,9 +198,12 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
     if !(args.huber.is_finite() && args.huber >= 0.0) {
         bail!("--huber {}: expected a width ≥ 0 in metres (0: least squares)", args.huber);
     }
-    for f in &args.formats {
+    for (k, f) in args.formats.iter().enumerate() {
         if !crate::mission::OUTPUT_FORMATS.contains(&f.as_str()) {
             bail!("--formats {f}: expected some of {}", crate::mission::OUTPUT_FORMATS.join(", "));
+        }
+        if args.formats[..k].contains(f) {
+            bail!("--formats {}: {f} is listed twice: expected each format once", args.formats.join(","));
         }
     }
     if args.out.exists() && !args.out.is_dir() {

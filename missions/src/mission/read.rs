@@ -455,8 +455,19 @@ fn read_fusion(r: &mut Reader<'_>, root: &mut Table<'_, '_>, solo: bool) -> Opti
 /// `[output]`.
 fn read_output(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Output> {
     let mut o = root.table(r, "output");
-    let formats = o
-        .optional(r, "formats", |r, v, f| r.array(v, f, |r, e, f| r.choice(e, f, &OUTPUT_FORMATS).map(At::into_inner)));
+    let formats = o.optional(r, "formats", |r, v, f| {
+        let mut seen = Vec::new();
+        r.array(v, f, |r, e, f| {
+            let format = r.choice(e, f, &OUTPUT_FORMATS)?.into_inner();
+            // Two writers of one file: the survey ran, then no report.
+            if seen.contains(&format) {
+                r.problem(&e.span(), f, format!("\"{format}\" is listed twice: expected each format once"));
+                return None;
+            }
+            seen.push(format.clone());
+            Some(format)
+        })
+    });
     let rerun = o.optional(r, "rerun", |r, v, f| r.boolean(v, f));
     o.finish(r);
     Some(Output { formats: formats?.unwrap_or_else(|| vec!["ply".into()]), rerun: rerun?.unwrap_or(true) })
@@ -482,6 +493,8 @@ fn read_site(r: &mut Reader<'_>, root: &mut Table<'_, '_>, mission: Option<&str>
             r.problem(&s.span(), f, "expected the local frame's name, found an empty string");
             return None;
         }
+        // It goes into file headers (a newline ended a PLY header early).
+        Crs::check_local_name(s.get_ref().trim()).map_err(|message| r.problem(&s.span(), f, message)).ok()?;
         Some(Crs::local(s.get_ref().trim()))
     });
     t.finish(r);

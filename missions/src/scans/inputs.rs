@@ -165,6 +165,7 @@ fn apply_init_poses(path: &Path, scans: &mut [InputScan]) -> Result<()> {
     let entries: Vec<InitPose> = serde_json::from_str(&text).with_context(|| {
         format!("{}: expected JSON [{{\"file\": \"…\", \"world_from_scan\": [[4×4 row-major]]}}, …]", path.display())
     })?;
+    let mut given: Vec<(usize, usize)> = Vec::new(); // (scan, entry)
     for (k, e) in entries.iter().enumerate() {
         let m = nalgebra::Matrix4::from_fn(|r, c| e.world_from_scan[r][c]);
         let pose = super::settings::rigid(&m)
@@ -172,7 +173,16 @@ fn apply_init_poses(path: &Path, scans: &mut [InputScan]) -> Result<()> {
         let matches = |s: &InputScan| {
             s.file == e.file || Path::new(&s.file).file_name().is_some_and(|n| n.to_string_lossy() == e.file)
         };
-        let Some(scan) = scans.iter_mut().find(|s| matches(s)) else {
+        if let Some(i) = scans.iter().position(|s| matches(s))
+            && let Some((_, first)) = given.iter().find(|(scan, _)| *scan == i)
+        {
+            bail!(
+                "{}: entries {first} and {k} both give the pose of \"{}\": expected one entry per scan",
+                path.display(),
+                scans[i].file
+            );
+        }
+        let Some(i) = scans.iter().position(|s| matches(s)) else {
             bail!(
                 "{}: entry {k} names \"{}\", which is not among the scans: expected one of {}",
                 path.display(),
@@ -180,7 +190,8 @@ fn apply_init_poses(path: &Path, scans: &mut [InputScan]) -> Result<()> {
                 scans.iter().map(|s| format!("\"{}\"", s.file)).collect::<Vec<_>>().join(", ")
             );
         };
-        scan.start = pose;
+        scans[i].start = pose;
+        given.push((i, k));
     }
     Ok(())
 }

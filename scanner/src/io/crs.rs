@@ -22,6 +22,15 @@ pub struct Crs {
     pub wkt: String,
 }
 
+/// The longest WKT definition taken.
+const MAX_WKT_BYTES: usize = 64 * 1024;
+
+/// Unicode's bidirectional controls: they make a name read differently
+/// from what it holds.
+fn is_bidi_control(c: char) -> bool {
+    matches!(c, '\u{202a}'..='\u{202e}' | '\u{2066}'..='\u{2069}' | '\u{200e}' | '\u{200f}' | '\u{061c}')
+}
+
 /// WKT keywords of the CRS kinds we accept (coordinates in metres).
 const METRIC_KINDS: [&str; 6] = ["PROJCS", "LOCAL_CS", "COMPD_CS", "PROJCRS", "ENGCRS", "ENGINEERINGCRS"];
 
@@ -48,11 +57,72 @@ impl Crs {
                 shorten(text)
             ));
         }
+        if text.len() > MAX_WKT_BYTES {
+            return Err(format!(
+                "a WKT definition of {} bytes: expected at most {MAX_WKT_BYTES} (an EPSG definition has a few thousand)",
+                text.len()
+            ));
+        }
         balanced(text)?;
+        // Line breaks and tabs are layout (folded below); any other control
+        // character would end up in file headers (a PLY header ended early).
+        if let Some(c) = text.chars().find(|c| c.is_control() && !c.is_whitespace() || is_bidi_control(*c)) {
+            return Err(format!("a WKT definition holding {c:?}: expected printable text"));
+        }
         let name = first_quoted(text).unwrap_or_else(|| kind.clone());
         let epsg = authority_code(text);
         let crs = Self { name, epsg, wkt: text.split_whitespace().collect::<Vec<_>>().join(" ") };
-        crs.metric().map(|()| crs)
+        crs.metric()?;
+        crs.structure()?;
+        Ok(crs)
+    }
+
+    /// Checks a local frame's name: printable text on one line (it goes
+    /// into file headers and comments), at most 200 bytes.
+    pub fn check_local_name(name: &str) -> Result<(), String> {
+        if let Some(c) = name.chars().find(|c| c.is_control() || is_bidi_control(*c)) {
+            return Err(format!(
+                "\"{}\" holds {c:?}: expected a name on one line without control characters",
+                name.escape_debug()
+            ));
+        }
+        if name.len() > 200 {
+            return Err(format!("a name of {} bytes: expected at most 200", name.len()));
+        }
+        Ok(())
+    }
+
+    /// The nodes each kind of CRS must hold (OGC 01-009): a WKT that only
+    /// looks like one (`PROJCS["x",AAAA…]`) would be written into every
+    /// deliverable and refused by every reader.
+    fn structure(&self) -> Result<(), String> {
+        let required: &[(&str, &[&str])] = &[
+            ("PROJCS", &["GEOGCS", "PROJECTION", "UNIT"]),
+            ("LOCAL_CS", &["LOCAL_DATUM", "UNIT"]),
+            ("VERT_CS", &["VERT_DATUM", "UNIT"]),
+            ("GEOGCS", &["DATUM", "PRIMEM", "UNIT"]),
+        ];
+        let mut stack = vec![self.wkt.as_str()];
+        while let Some(node) = stack.pop() {
+            let kind = keyword(node);
+            let children: Vec<&str> = top_level(node).into_iter().filter(|c| c.contains('[')).collect();
+            let kinds: Vec<String> = children.iter().map(|c| keyword(c)).collect();
+            if let Some((_, needs)) = required.iter().find(|(k, _)| *k == kind) {
+                if let Some(missing) = needs.iter().find(|n| !kinds.iter().any(|k| k == *n)) {
+                    return Err(format!(
+                        "{}: its {kind}[…] has no {missing}[…]: expected {} (OGC WKT 1)",
+                        self.name,
+                        needs.iter().map(|n| format!("{n}[…]")).collect::<Vec<_>>().join(", ")
+                    ));
+                }
+            }
+            if matches!(kind.as_str(), "PROJCS" | "COMPD_CS") {
+                stack.extend(
+                    children.into_iter().filter(|c| matches!(keyword(c).as_str(), "GEOGCS" | "PROJCS" | "VERT_CS")),
+                );
+            }
+        }
+        Ok(())
     }
 
     /// A local engineering frame named `name`: metres, x east, y north
@@ -351,6 +421,48 @@ mod tests {
         let geographic = crs_definitions::from_code(4326).expect("4326").wkt;
         let wrong = format!("COMPD_CS[\"x\",{geographic},{}]", top_level(&joined.wkt)[2]);
         assert!(Crs::parse(&wrong).expect_err("GEOGCS + VERT_CS").contains("GEOGCS + VERT_CS"));
+    }
+
+    /// Only a WKT with the nodes its kind needs, printable and of a
+    /// sensible size, reaches the deliverables.
+    #[test]
+    fn a_wkt_that_only_looks_like_one_is_refused() {
+        let fake = format!("PROJCS[\"x\",{}]", "A".repeat(1000));
+        assert!(Crs::parse(&fake).expect_err("no GEOGCS").contains("has no GEOGCS[…]"));
+        let huge = format!("PROJCS[\"x\",{}]", "A".repeat(1 << 20));
+        assert!(Crs::parse(&huge).expect_err("1 MB").contains("expected at most 65536"));
+        let local = "LOCAL_CS[\"a\",UNIT[\"metre\",1]]";
+        assert!(Crs::parse(local).expect_err("no datum").contains("has no LOCAL_DATUM[…]"));
+        let escape = Crs::local("a").wkt.replace("\"a\"", "\"a\u{1b}[2J\"");
+        assert!(Crs::parse(&escape).expect_err("ESC").contains("expected printable text"));
+        // Layout is fine: an EPSG WKT spread over lines reads as on one.
+        let wkt = Crs::parse("EPSG:25832").expect("UTM").wkt;
+        assert_eq!(Crs::parse(&wkt.replace(",", ",\n\t")).expect("multi-line").wkt, wkt.replace(",", ", "));
+        assert!(Crs::check_local_name("grid\nend_header").expect_err("newline").contains("on one line"));
+        assert!(Crs::check_local_name("grid\u{202e}").is_err());
+        assert!(Crs::check_local_name("Hall B grid").is_ok());
+    }
+
+    /// Every projected and compound EPSG definition this build carries is
+    /// either taken or refused for its unit — none for its structure.
+    #[test]
+    fn every_epsg_definition_passes_the_structure_check() {
+        let (mut taken, mut feet) = (0, 0);
+        for code in 1024..=32767u16 {
+            let Some(def) = crs_definitions::from_code(code) else { continue };
+            if !(def.wkt.starts_with("PROJCS") || def.wkt.starts_with("COMPD_CS")) {
+                continue;
+            }
+            match Crs::parse(&format!("EPSG:{code}")) {
+                Ok(crs) => {
+                    assert!(crs.structure().is_ok());
+                    taken += 1;
+                }
+                Err(e) if e.contains("has its coordinates in") || e.contains("a compound CRS of") => feet += 1,
+                Err(e) => panic!("EPSG:{code}: {e}"),
+            }
+        }
+        assert!(taken > 4000 && feet > 100, "{taken} taken, {feet} refused for their unit or parts");
     }
 
     #[test]

@@ -67,6 +67,36 @@ const CASES: &[Case] = &[
         "EPSG:2263 has its coordinates in US survey foot (0.3048006096012192 m)",
     ),
     (
+        "site: a newline in the local frame's name (it ended a PLY header early)",
+        (
+            "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]",
+            "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]\n[site]\nlocal_frame = \"grid\\nend_header\\n\"",
+        ),
+        "19:15",
+        "site.local_frame",
+        "expected a name on one line without control characters",
+    ),
+    (
+        "output: a format listed twice (the survey ran, then failed with no report)",
+        (
+            "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]",
+            "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]\n[output]\nformats = [\"ply\", \"las\", \"ply\"]",
+        ),
+        "19:26",
+        "output.formats[2]",
+        "\"ply\" is listed twice: expected each format once",
+    ),
+    (
+        "site: a WKT that only looks like one",
+        (
+            "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]",
+            "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]\n[site]\ncrs = \"PROJCS[\\\"x\\\",AAAA]\"",
+        ),
+        "19:7",
+        "site.crs",
+        "has no GEOGCS[…]",
+    ),
+    (
         "site: a compound CRS whose vertical part is not vertical",
         (
             "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]",

@@ -164,6 +164,16 @@ fn bad_input_is_named_and_exits_2() {
         expect([&rooms[..], &["--init-poses".into(), file.into_os_string()]].concat(), wanted);
     };
     init_case(
+        "twice.json",
+        r#"[{"file": "room_scan2.pcd", "world_from_scan": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]},
+            {"file": "room_scan2.pcd", "world_from_scan": [[1,0,0,9],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}]"#,
+        &["twice.json", "entries 0 and 1 both give the pose of", "room_scan2.pcd", "one entry per scan"],
+    );
+    expect(
+        vec![data("3dtk_dat"), "--formats".into(), "ply,las,ply".into()],
+        &["--formats ply,las,ply", "ply is listed twice"],
+    );
+    init_case(
         "far.json",
         r#"[{"file": "room_scan2.pcd", "world_from_scan": [[1,0,0,500],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}]"#,
         &["room_scan2.pcd and", "room_scan1.pcd do not overlap"],
