@@ -190,12 +190,14 @@ pub fn fuse(
         c
     };
     // The matching runs in a frame at the first scan's station, its axes
-    // the world's: at national-grid coordinates (E 500 000, N 5 500 000)
-    // points moved into the world in single precision lose their
-    // millimetres (0.5 m steps), and a prior about the far world origin
-    // makes the normal equations singular. Poses come back by the shift;
-    // covariances stay about the first scan's station (the same wherever
-    // the world's origin lies).
+    // the world's, wherever the world's origin lies: at national-grid
+    // coordinates (E 500 000, N 5 500 000, H 300) points moved into the
+    // world in single precision lost their millimetres (0.5 m steps) and a
+    // prior about the far origin made the normal equations singular; and
+    // ICP's linearisation and the blind-direction analysis depend on the
+    // frame, so only a frame that moves with the survey gives at UTM what
+    // it gives at the origin. Poses come back by the shift; covariances
+    // stay about the first scan's station.
     let base = views.first().map_or_else(Vector3::zeros, |v| v.pose.position.coords);
     let to_local = Translation3::from(-base);
     let to_world = Translation3::from(base);
