@@ -436,10 +436,8 @@ pub fn run_dance(
 ) -> Result<(), PlanError> {
     let start = |source| PlanError::Model { cycle: 0, source };
     let sighting = sighting_instrument(instrument);
-    let mut control = Vec::with_capacity(dance.control.len());
-    for c in &dance.control {
-        control.push(team.add_fixed_point(c.position, c.prism_covariance(instrument)).map_err(start)?);
-    }
+    let points: Vec<_> = dance.control.iter().map(|c| (c.position, c.prism_covariance(instrument))).collect();
+    let control = team.add_fixed_points(&points).map_err(start)?;
     let mut readings: Vec<(usize, Reading, &Instrument)> = Vec::with_capacity(dance.n_children() + control.len());
     // The control points sighted at station `at`, joined to `readings`.
     fn sight<'i>(

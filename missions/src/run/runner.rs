@@ -200,9 +200,9 @@ pub fn run(mission: &Mission, planned: &Planned, dir: &Path, options: &RunOption
         TeamState::new(planned.dance.station_pose(0), mission.plan.start_covariance, planned.dance.n_children())?;
     let control_index = state.n_children();
     if let Some(instrument) = &mission.total_station {
-        for c in &planned.dance.control {
-            state.add_fixed_point(c.position, c.prism_covariance(instrument))?;
-        }
+        let points: Vec<_> =
+            planned.dance.control.iter().map(|c| (c.position, c.prism_covariance(instrument))).collect();
+        state.add_fixed_points(&points)?;
     }
     let steps = Steps {
         journal,

@@ -651,3 +651,22 @@ fn several_problems_are_reported_at_once() {
     assert_eq!(run.code, 2);
     assert!(run.stderr.contains("2 problems found"), "{}", run.stderr);
 }
+
+/// `[[control]]` is bounded as the children are: 1,001 control points are
+/// refused at once (each adds three unknowns to every fix's dense state;
+/// before the bound, and before the state grew once for all of them,
+/// 1,000 took minutes to validate).
+#[test]
+fn more_control_points_than_the_limit_are_refused() {
+    let mut text = GOOD.to_string();
+    for i in 0..1001 {
+        text.push_str(&format!(
+            "\n[[control]]\nname = \"C{i}\"\nposition_m = [{}, 5.0, 0.0]\n",
+            10.0 + 0.01 * f64::from(i)
+        ));
+    }
+    let mission = temp_mission(&text);
+    let run = cps_survey(["validate".into(), mission.path.clone().into_os_string()]);
+    assert_eq!(run.code, 2, "{}", run.stderr);
+    assert!(run.stderr.contains("control: 1001 control points; expected at most 1000"), "{}", run.stderr);
+}
