@@ -44,3 +44,27 @@ fn usage_errors_are_2() {
     assert_eq!(cps_survey(&["predict"]).status.code(), Some(2));
     assert_eq!(cps_survey(&["no-such-command"]).status.code(), Some(2));
 }
+
+/// Statistics' levels and iteration caps outside what gives an answer are
+/// refused before anything runs (S3, S4: at α = 1e-16 the global test's
+/// bound was null, the exit code wrong and every MDB NaN; H2: register's
+/// cap of 2^64 − 1 with zero tolerances never ended).
+#[test]
+fn levels_and_caps_that_give_no_answer_are_refused() {
+    for (args, wanted) in [
+        (vec!["adjust", "nowhere", "--alpha", "1e-16"], "expected a significance level from 0.000001 to 0.5"),
+        (vec!["adjust", "nowhere", "--alpha0", "1e-16"], "expected a significance level from 0.000001 to 0.5"),
+        (vec!["adjust", "nowhere", "--alpha", "0.9"], "expected a significance level"),
+        (vec!["adjust", "nowhere", "--power", "0.9999999"], "expected a power from 0.5 to 0.999999"),
+        (
+            vec!["register", "a.ply", "b.ply", "--iterations", "18446744073709551615"],
+            "expected a whole number of iterations from 1 to 10000",
+        ),
+        (vec!["register", "a.ply", "b.ply", "--iterations", "0"], "from 1 to 10000"),
+    ] {
+        let out = cps_survey(&args);
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(stderr.contains(wanted), "{args:?}: {stderr}");
+    }
+}

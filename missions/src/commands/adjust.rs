@@ -20,26 +20,36 @@ pub struct AdjustArgs {
     /// Print one JSON object instead of the summary.
     #[arg(long)]
     pub json: bool,
-    /// Significance level of the global test, two-sided.
-    #[arg(long, value_name = "A", default_value_t = 0.05, value_parser = probability)]
+    /// Significance level of the global test, two-sided (1e-6 to 0.5).
+    #[arg(long, value_name = "A", default_value_t = 0.05, value_parser = significance)]
     pub alpha: f64,
-    /// Significance level of one w-test (data snooping).
-    #[arg(long, value_name = "A0", default_value_t = cps::stats::ALPHA0, value_parser = probability)]
+    /// Significance level of one w-test, data snooping (1e-6 to 0.5).
+    #[arg(long, value_name = "A0", default_value_t = cps::stats::ALPHA0, value_parser = significance)]
     pub alpha0: f64,
-    /// Power of one w-test against a bias of the MDB.
-    #[arg(long, value_name = "B", default_value_t = cps::stats::BETA0, value_parser = probability)]
+    /// Power of one w-test against a bias of the MDB (0.5 to 0.999999).
+    #[arg(long, value_name = "B", default_value_t = cps::stats::BETA0, value_parser = power)]
     pub power: f64,
     /// Test every observation but remove none.
     #[arg(long)]
     pub no_snooping: bool,
 }
 
-fn probability(s: &str) -> Result<f64, String> {
+/// A probability in `[lo, hi]`: the statistics' quantiles are finite there
+/// (at 1e-16 the global test's bound was null and every MDB NaN).
+fn probability_in(s: &str, lo: f64, hi: f64, what: &str) -> Result<f64, String> {
     let p: f64 = s.trim().parse().map_err(|_| format!("\"{s}\" is not a number"))?;
-    if !(p > 0.0 && p < 1.0) {
-        return Err(format!("{s} is out of range; expected strictly between 0 and 1"));
+    if !(lo..=hi).contains(&p) {
+        return Err(format!("{s} is out of range; expected {what} from {lo} to {hi}"));
     }
     Ok(p)
+}
+
+fn significance(s: &str) -> Result<f64, String> {
+    probability_in(s, 1e-6, 0.5, "a significance level")
+}
+
+fn power(s: &str) -> Result<f64, String> {
+    probability_in(s, 0.5, 0.999_999, "a power")
 }
 
 impl AdjustArgs {

@@ -45,8 +45,8 @@ pub struct RegisterArgs {
     /// --voxel and --max-dist), e.g. "0.5/2,0.25/1,0.1/0.5,0.05/0.2".
     #[arg(long, conflicts_with_all = ["voxel", "max_dist"])]
     pub schedule: Option<String>,
-    /// Iteration cap (per stage).
-    #[arg(long, default_value_t = 50)]
+    /// Iteration cap (per stage), 1 to 10,000.
+    #[arg(long, default_value_t = 50, value_parser = iterations)]
     pub iterations: usize,
     /// Converged when an update moves less than this, metres.
     #[arg(long, default_value_t = 1e-5)]
@@ -85,6 +85,15 @@ pub(crate) struct Report {
 impl crate::view::document::Document for Report {
     const NAME: &'static str = "register";
     const VERSION: u32 = 1;
+}
+
+/// `--iterations`: a cap that ends (18446744073709551615 with zero
+/// tolerances never did).
+fn iterations(s: &str) -> Result<usize, String> {
+    match s.trim().parse::<usize>() {
+        Ok(n) if (1..=10_000).contains(&n) => Ok(n),
+        _ => Err(format!("{s} is out of range; expected a whole number of iterations from 1 to 10000")),
+    }
 }
 
 /// Runs `register`: reads both scans, aligns and writes the report.

@@ -195,7 +195,11 @@ pub fn run(mission: &Mission, planned: &Planned, dir: &Path, options: &RunOption
     rec.scene(team.scene())?;
     rec.plan(mission, planned, "plan", &[])?;
     let progress = Progress::new(options.quiet, planned, mission)?;
-    let resume_hint = format!("cps-survey run {} --out {} --resume", mission.source.file.display(), dir.display());
+    let resume_hint = format!(
+        "cps-survey run {} --out {} --resume",
+        shell_word(&mission.source.file.display().to_string()),
+        shell_word(&dir.display().to_string())
+    );
     let mut state =
         TeamState::new(planned.dance.station_pose(0), mission.plan.start_covariance, planned.dance.n_children())?;
     let control_index = state.n_children();
@@ -750,4 +754,29 @@ fn mission_accepted(
 pub fn on_surface_fraction(scene: &cps::geom::Scene, cloud: &[Point3<f32>], tolerance_m: f64) -> f64 {
     let near = cloud.iter().filter(|p| scene.bvh().distance(&p.cast()).0 <= tolerance_m).count();
     near as f64 / cloud.len().max(1) as f64
+}
+
+/// `word` as one word of a POSIX shell command, to paste as it is printed:
+/// unchanged when it holds only characters no shell treats specially, else
+/// in single quotes ("--out out dir" split the directory in two).
+pub fn shell_word(word: &str) -> String {
+    if !word.is_empty() && word.chars().all(|c| c.is_ascii_alphanumeric() || "_./:@%+=,-".contains(c)) {
+        word.to_string()
+    } else {
+        format!("'{}'", word.replace('\'', "'\\''"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::shell_word;
+
+    #[test]
+    fn a_path_with_spaces_or_quotes_is_one_shell_word() {
+        assert_eq!(shell_word("runs/hall"), "runs/hall");
+        assert_eq!(shell_word("out dir"), "'out dir'");
+        assert_eq!(shell_word("it's"), "'it'\\''s'");
+        assert_eq!(shell_word("$HOME"), "'$HOME'");
+        assert_eq!(shell_word(""), "''");
+    }
 }
