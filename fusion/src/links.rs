@@ -209,6 +209,16 @@ pub fn adjust<S: AsRef<[Point3<f32>]> + Sync>(
                         );
                         (Some(r), Some(why))
                     }
+                    // A match stopped by the iteration cap is still moving:
+                    // its pose is not one the data agree on (a 1e-4 m Huber
+                    // width left a scan 1.1 m off, its link "accepted").
+                    Ok(r) if !r.converged => {
+                        let why = format!(
+                            "did not converge in {} iterations: its updates still moved more than the tolerance",
+                            r.iterations
+                        );
+                        (Some(r), Some(why))
+                    }
                     Ok(r) => (Some(r), None),
                     Err(e) => (None, Some(format!("the match failed: {e}"))),
                 };

@@ -92,3 +92,33 @@ fn a_las_cloud_that_cannot_be_written_is_named_not_a_panic() {
     assert!(stderr.contains("cloud.las"), "the cloud file named: {stderr}");
     assert!(!out.join("cloud.las").exists(), "no half-written cloud.las");
 }
+
+/// `adjust` on a full disk keeps the complete `adjustment.txt` it had
+/// (issue 34, F1: it was replaced by a truncated one).
+#[test]
+fn adjust_on_a_full_disk_keeps_the_last_listing_whole() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mission = common::short_hall(dir.path(), false);
+    let out = dir.path().join("run");
+    let run = Command::new(env!("CARGO_BIN_EXE_cps-survey"))
+        .args([mission.as_os_str(), out.as_os_str()].iter().enumerate().flat_map(|(k, a)| {
+            let flag: &std::ffi::OsStr = if k == 0 { "run".as_ref() } else { "--out".as_ref() };
+            [flag.to_os_string(), a.to_os_string()]
+        }))
+        .arg("--quiet")
+        .output()
+        .expect("runs");
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let listing = out.join("adjustment.txt");
+    let before = std::fs::read(&listing).expect("listing");
+    assert!(before.len() > 2048, "a listing of {} bytes", before.len());
+    // 2 blocks (1 or 2 KB): less than the listing.
+    let script = "ulimit -f 2; trap '' XFSZ; exec \"$0\" adjust \"$1\" --alpha 0.2";
+    let output =
+        Command::new("sh").args(["-c", script, env!("CARGO_BIN_EXE_cps-survey")]).arg(&out).output().expect("sh runs");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("adjustment.txt"), "{stderr}");
+    assert_eq!(std::fs::read(&listing).expect("listing"), before, "the last listing, whole");
+    assert!(!out.join("adjustment.txt.partial").exists(), "no partial file left");
+}

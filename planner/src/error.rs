@@ -48,7 +48,8 @@ pub enum PlanError {
     },
     /// More stations than a plan may have.
     #[error(
-        "the route and stride give {count} stations; expected at most {limit} (a longer stride, or a shorter route)"
+        "the route and stride give {} stations; expected at most {limit} (a longer stride, or a shorter route)",
+        station_count(*count)
     )]
     TooManyStations {
         /// Stations the route and stride would give.
@@ -119,4 +120,10 @@ pub enum PlanError {
         #[source]
         source: cps::CpsError,
     },
+}
+
+/// A station count as a person reads it: whole up to a trillion, then in
+/// scientific notation (a stride of 1e-300 m gave 230 digits).
+fn station_count(count: f64) -> String {
+    if count.is_finite() && count < 1e12 { format!("{count:.0}") } else { format!("{count:.3e}") }
 }

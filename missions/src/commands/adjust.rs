@@ -75,7 +75,9 @@ pub fn run(args: &AdjustArgs, out: &mut dyn Write) -> Result<Outcome> {
     let net = crate::run::adjust::network(&run.mission, &run.planned, &run.journal, &path)?;
     let report = crate::run::adjust::adjust(&run.mission, &run.planned, &net, &args.options())?;
     let listing = dir.join("adjustment.txt");
-    std::fs::write(&listing, crate::view::listing::listing(&run.mission, &report))
+    // Renamed into place: a full disk leaves the last listing whole, and a
+    // hard-link snapshot of the run keeps its own.
+    scanner::io::replace_file(&listing, crate::view::listing::listing(&run.mission, &report).as_bytes())
         .with_context(|| format!("writing {}", listing.display()))?;
     if args.json {
         crate::view::document::write_line(out, &report)?;

@@ -258,7 +258,9 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
         write_text(out, &scans, &report)?;
         writeln!(out, "outputs in {}: {}", args.out.display(), written.join(", "))?;
     }
-    Ok(Outcome::Success)
+    // A scan the final matches do not hold has a pose no data confirm:
+    // the outputs are written, and the exit says it (1).
+    Ok(Outcome::passed(unlinked(&report).is_empty()))
 }
 
 fn mode(m: ModeArg) -> Mode {
@@ -403,7 +405,7 @@ fn write_links(path: &Path, scans: &[InputScan], report: &MatchReport) -> Result
             quote(l.reason.as_deref().unwrap_or("")),
         ));
     }
-    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+    scanner::io::replace_file(path, text.as_bytes()).with_context(|| format!("writing {}", path.display()))
 }
 
 /// The merged cloud in every format, a scan at a time, relative to the
@@ -497,17 +499,12 @@ fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &MatchReport) ->
         report.matches,
         report.seconds
     )?;
-    if report.mode == "graph" {
-        for (i, s) in scans.iter().enumerate().skip(1) {
-            let linked = report.links.iter().any(|l| l.accepted && (l.source == i || l.targets.contains(&i)));
-            if !linked {
-                writeln!(
-                    out,
-                    "  warning: {} has no accepted link at the last stage: it keeps the coarser stages' pose, blind in every direction",
-                    s.name
-                )?;
-            }
-        }
+    for i in unlinked(report) {
+        writeln!(
+            out,
+            "  not trusted: {} has no accepted link at the last stage: it keeps the coarser stages' pose, blind in every direction",
+            scans[i].name
+        )?;
     }
     for l in report.links.iter().filter(|l| !l.accepted) {
         let targets: Vec<&str> = l.targets.iter().map(|&t| scans[t].name.as_str()).collect();
@@ -520,4 +517,15 @@ fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &MatchReport) ->
         )?;
     }
     Ok(())
+}
+
+/// In graph mode, the scans (after the first, which holds the frame) that
+/// no accepted link of the last stage reaches.
+fn unlinked(report: &MatchReport) -> Vec<usize> {
+    if report.mode != "graph" {
+        return Vec::new();
+    }
+    (1..report.scans.len())
+        .filter(|&i| !report.links.iter().any(|l| l.accepted && (l.source == i || l.targets.contains(&i))))
+        .collect()
 }

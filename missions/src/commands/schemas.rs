@@ -50,7 +50,8 @@ pub fn run(args: &SchemasArgs, out: &mut dyn Write) -> Result<Outcome> {
         for (name, _, _, schema) in &documents {
             let path = dir.join(format!("{name}.schema.json"));
             let text = serde_json::to_string_pretty(schema)? + "\n";
-            std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
+            // Renamed into place: a link there is replaced, not written through.
+            scanner::io::replace_file(&path, text.as_bytes()).with_context(|| format!("writing {}", path.display()))?;
         }
         writeln!(out, "wrote {} schemas into {}", documents.len(), dir.display())?;
     } else if let Some(name) = &args.name {

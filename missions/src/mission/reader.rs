@@ -59,7 +59,15 @@ impl<'s> Reader<'s> {
     pub fn number(&mut self, v: &Spanned<DeValue<'_>>, field: &str) -> Option<At<f64>> {
         let parsed = match v.get_ref() {
             DeValue::Float(f) => f.as_str().parse::<f64>().ok(),
-            DeValue::Integer(i) => i64::from_str_radix(i.as_str(), i.radix()).ok().map(|i| i as f64),
+            DeValue::Integer(i) => match i64::from_str_radix(i.as_str(), i.radix()) {
+                Ok(i) => Some(i as f64),
+                Err(_) => {
+                    // A number, but beyond any range a key has (not "not finite").
+                    let message = format!("value {} is out of range: beyond a 64-bit integer", i.as_str());
+                    self.problem(&v.span(), field, message);
+                    return None;
+                }
+            },
             other => {
                 self.problem(&v.span(), field, format!("expected a number, found {}", kind(other)));
                 return None;

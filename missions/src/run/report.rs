@@ -427,7 +427,7 @@ pub fn write_stations_csv(path: &Path, stations: &[StationRecord], adjusted: Opt
             truth
         );
     }
-    std::fs::write(path, csv).with_context(|| format!("writing {}", path.display()))
+    scanner::io::replace_file(path, csv.as_bytes()).with_context(|| format!("writing {}", path.display()))
 }
 
 /// Blind directions (unit ξ = (ω, v)) as JSON rows.

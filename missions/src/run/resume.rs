@@ -86,10 +86,10 @@ pub fn open(
     let mut journal = Journal::create(&journal_path)?;
     journal.hold(lock);
     journal.abort_after(abort_after);
-    std::fs::write(&mission_copy, &mission.source.text)
+    scanner::io::replace_file(&mission_copy, mission.source.text.as_bytes())
         .with_context(|| format!("writing {}", mission_copy.display()))?;
     if let Some((_, text)) = &mission.backend.scene_file {
-        std::fs::write(dir.join("scene.toml"), text)
+        scanner::io::replace_file(&dir.join("scene.toml"), text.as_bytes())
             .with_context(|| format!("writing {}/scene.toml", dir.display()))?;
     }
     journal.append(Event::Start(Start {

@@ -650,7 +650,7 @@ impl Run<'_> {
         Ok(Some(match report {
             Ok(report) => {
                 let listing = self.dir.join("adjustment.txt");
-                std::fs::write(&listing, crate::view::listing::listing(self.mission, &report))
+                scanner::io::replace_file(&listing, crate::view::listing::listing(self.mission, &report).as_bytes())
                     .with_context(|| format!("writing {}", listing.display()))?;
                 self.steps.rec.adjustment(self.mission, &report)?;
                 AdjustmentOutcome::Adjusted(Box::new(report))

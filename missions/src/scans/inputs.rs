@@ -173,7 +173,8 @@ fn apply_init_poses(path: &Path, scans: &mut [InputScan]) -> Result<()> {
         let matches = |s: &InputScan| {
             s.file == e.file || Path::new(&s.file).file_name().is_some_and(|n| n.to_string_lossy() == e.file)
         };
-        if let Some(i) = scans.iter().position(|s| matches(s))
+        let found = scans.iter().position(matches);
+        if let Some(i) = found
             && let Some((_, first)) = given.iter().find(|(scan, _)| *scan == i)
         {
             bail!(
@@ -182,7 +183,7 @@ fn apply_init_poses(path: &Path, scans: &mut [InputScan]) -> Result<()> {
                 scans[i].file
             );
         }
-        let Some(i) = scans.iter().position(|s| matches(s)) else {
+        let Some(i) = found else {
             bail!(
                 "{}: entry {k} names \"{}\", which is not among the scans: expected one of {}",
                 path.display(),

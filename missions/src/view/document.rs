@@ -60,7 +60,8 @@ pub fn write_file<T: Document>(path: &std::path::Path, document: &T) -> anyhow::
     } else {
         serde_json::to_string_pretty(&versioned(document))?
     } + "\n";
-    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+    // A new file renamed into place: never half-written, never through a link.
+    scanner::io::replace_file(path, text.as_bytes()).with_context(|| format!("writing {}", path.display()))
 }
 
 /// The JSON Schema (draft 2020-12) of `T`'s documents, header included.

@@ -107,14 +107,14 @@ impl Crs {
             let kind = keyword(node);
             let children: Vec<&str> = top_level(node).into_iter().filter(|c| c.contains('[')).collect();
             let kinds: Vec<String> = children.iter().map(|c| keyword(c)).collect();
-            if let Some((_, needs)) = required.iter().find(|(k, _)| *k == kind) {
-                if let Some(missing) = needs.iter().find(|n| !kinds.iter().any(|k| k == *n)) {
-                    return Err(format!(
-                        "{}: its {kind}[…] has no {missing}[…]: expected {} (OGC WKT 1)",
-                        self.name,
-                        needs.iter().map(|n| format!("{n}[…]")).collect::<Vec<_>>().join(", ")
-                    ));
-                }
+            if let Some((_, needs)) = required.iter().find(|(k, _)| *k == kind)
+                && let Some(missing) = needs.iter().find(|n| !kinds.iter().any(|k| k == *n))
+            {
+                return Err(format!(
+                    "{}: its {kind}[…] has no {missing}[…]: expected {} (OGC WKT 1)",
+                    self.name,
+                    needs.iter().map(|n| format!("{n}[…]")).collect::<Vec<_>>().join(", ")
+                ));
             }
             if matches!(kind.as_str(), "PROJCS" | "COMPD_CS") {
                 stack.extend(

@@ -339,6 +339,35 @@ pub(crate) fn against(path: &Path, e: ScannerError) -> ScannerError {
     }
 }
 
+/// Writes `bytes` as a new file and renames it over `path`: a reader never
+/// sees it half-written, a full disk leaves the old file whole, a hard
+/// link to the old file (a `cp -al` snapshot) keeps the old bytes, and a
+/// symbolic link at `path` is replaced, never written through. The new
+/// file is made beside it (`NAME.partial`, created exclusively: a link
+/// there is removed first, not followed) and synced before the rename.
+pub fn replace_file(path: &Path, bytes: &[u8]) -> Result<()> {
+    use std::io::Write as _;
+    let tmp = temporary(path);
+    match std::fs::symlink_metadata(&tmp) {
+        Ok(_) => std::fs::remove_file(&tmp).map_err(|e| ScannerError::io(&tmp, e))?,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+        Err(e) => return Err(ScannerError::io(&tmp, e)),
+    }
+    let written = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&tmp)
+        .and_then(|mut f| f.write_all(bytes).and_then(|()| f.sync_all()));
+    if let Err(e) = written {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(ScannerError::io(path, e));
+    }
+    std::fs::rename(&tmp, path).map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        ScannerError::io(path, e)
+    })
+}
+
 pub(crate) fn temporary(path: &Path) -> PathBuf {
     let mut name = path.file_name().map(|n| n.to_os_string()).unwrap_or_default();
     name.push(".partial");

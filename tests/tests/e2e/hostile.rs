@@ -253,3 +253,53 @@ fn outputs_that_cannot_be_written_are_refused_before_anything_is_measured() {
     assert!(refused.stderr.contains("fusion.json: exists and is not a file"), "{}", refused.stderr);
     assert!(!fusion.join("direct").join("cloud.ply").exists(), "nothing fused");
 }
+
+/// Outputs are new files renamed over their names (issue 34, W1, W6, W7):
+/// a hard-link snapshot of a run (`cp -al`) keeps its `adjustment.txt`
+/// when `adjust` writes a new one, and a symbolic link where `match` or
+/// `schemas --out` writes a document is replaced, its target untouched.
+#[cfg(unix)]
+#[test]
+fn outputs_replace_their_files_never_write_through_links() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let hall = std::fs::read_to_string(tests::example("hall.toml")).expect("hall");
+    let mission = dir.path().join("m.toml");
+    std::fs::write(&mission, tests::hall_first_leg(&hall)).expect("mission");
+    let out = dir.path().join("run");
+    assert_eq!(tests::run_mission(&mission, &out).code, 0);
+    let snapshot = dir.path().join("snapshot.txt");
+    std::fs::hard_link(out.join("adjustment.txt"), &snapshot).expect("hard link");
+    let before = std::fs::read_to_string(&snapshot).expect("snapshot");
+    let run = tests::cps_survey(["adjust".into(), out.clone().into_os_string(), "--alpha".into(), "0.2".into()]);
+    assert!(run.code <= 1, "{}", run.stderr);
+    let after = std::fs::read_to_string(out.join("adjustment.txt")).expect("listing");
+    assert_ne!(after, before, "adjust wrote a new listing (α = 0.2)");
+    assert_eq!(std::fs::read_to_string(&snapshot).expect("snapshot"), before, "the snapshot kept its bytes");
+
+    // schemas --out: a link where a schema goes.
+    let victim = dir.path().join("victim.json");
+    std::fs::write(&victim, "precious").expect("victim");
+    let schemas = dir.path().join("schemas");
+    std::fs::create_dir(&schemas).expect("dir");
+    std::os::unix::fs::symlink(&victim, schemas.join("report.schema.json")).expect("link");
+    let run = tests::cps_survey(["schemas".into(), "--out".into(), schemas.clone().into_os_string()]);
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    assert_eq!(std::fs::read_to_string(&victim).expect("victim"), "precious");
+    let written = schemas.join("report.schema.json");
+    assert!(!std::fs::symlink_metadata(&written).expect("meta").file_type().is_symlink());
+
+    // match --out: links where poses.json and links.csv go.
+    let matched = dir.path().join("matched");
+    std::fs::create_dir(&matched).expect("dir");
+    for name in ["poses.json", "links.csv"] {
+        std::os::unix::fs::symlink(&victim, matched.join(name)).expect("link");
+    }
+    let data = tests::workspace().join("data/3dtk_dat");
+    let run =
+        tests::cps_survey(["match".into(), data.into_os_string(), "--out".into(), matched.clone().into_os_string()]);
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    assert_eq!(std::fs::read_to_string(&victim).expect("victim"), "precious");
+    for name in ["poses.json", "links.csv"] {
+        assert!(!std::fs::symlink_metadata(matched.join(name)).expect("meta").file_type().is_symlink(), "{name}");
+    }
+}

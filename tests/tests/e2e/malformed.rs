@@ -587,7 +587,24 @@ const CASES: &[Case] = &[
     ("mission name too long", ("name = \"ok\"", LONG_NAME), "2:8", "mission.name", "at most 100"),
     ("vertical route segment", ("[100.0, 0.0, 0.0]]", "[0.0, 0.0, 50.0]]"), "15:29", "plan.route_m[1]", "is vertical"),
     ("too many stations", ("stride_m = 10.0", "stride_m = 0.000001"), "16:12", "plan.stride_m", "at most 100001"),
+    (
+        "a stride of 1e-300 (the count was printed in 230 digits)",
+        ("stride_m = 10.0", "stride_m = 1e-300"),
+        "16:12",
+        "plan.stride_m",
+        "give 1.000e302 stations; expected at most 100001",
+    ),
+    (
+        "an integer beyond 64 bits (it was \"not a finite number\")",
+        ("formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]", PIPE_HUGE_MIN_POINTS),
+        "22:14",
+        "pipe.min_points",
+        "value 18446744073709551615 is out of range: beyond a 64-bit integer",
+    ),
 ];
+
+const PIPE_HUGE_MIN_POINTS: &str = "formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]\n[pipe]\n\
+    axis_from_m = [0.0, 0.0, 0.5]\naxis_to_m = [20.0, 0.0, 0.5]\nradius_m = 0.5\nmin_points = 18446744073709551615";
 
 const LONG_NAME: &str =
     "name = \"xxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx\"";

@@ -196,7 +196,8 @@ fn bad_input_is_named_and_exits_2() {
 
 /// A scan that no link reaches at the last stage (here: a last stage of
 /// 1 mm, which no pair of real scans meets) keeps the coarser stages'
-/// registration, is blind in every direction, and the text says so.
+/// registration, is blind in every direction, the text names it, and the
+/// exit is 1.
 #[test]
 fn a_scan_without_links_is_reported() {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -212,12 +213,15 @@ fn a_scan_without_links_is_reported() {
         "--out".into(),
         dir.path().join("text").into_os_string(),
     ];
+    // Its outputs are written, and the exit says the result is not trusted.
     let text = cps_survey(args.clone());
-    assert_eq!(text.code, 0, "{}", text.stderr);
-    assert!(text.stdout.contains("room_scan2 has no accepted link at the last stage"), "{}", text.stdout);
+    assert_eq!(text.code, 1, "{}", text.stderr);
+    assert!(text.stdout.contains("not trusted: room_scan2 has no accepted link at the last stage"), "{}", text.stdout);
+    assert!(dir.path().join("text/poses.json").is_file());
     args.truncate(args.len() - 1);
     args.extend([dir.path().join("json").into_os_string(), "--json".into()]);
     let run = cps_survey(args);
+    assert_eq!(run.code, 1);
     let v: Value = serde_json::from_str(&run.stdout).expect("JSON");
     assert_eq!(v["links"].as_array().map(Vec::len), Some(0));
     assert_eq!(v["scans"][1]["degenerate_directions"].as_array().map(Vec::len), Some(6));
@@ -401,4 +405,19 @@ fn a_set_at_national_grid_coordinates_reports_the_sigma_it_has_at_the_origin() {
         let (deg, m) = error(&q, &(offset * p));
         assert!(deg < 1e-6 && m < 1e-4, "scan {k}: {deg}° {m} m from the origin's result shifted");
     }
+}
+
+/// A link whose match hit the iteration cap is not used (issue 34, S6: a
+/// 1e-4 m Huber width left the room scan 1.1 m off, its link "accepted",
+/// exit 0): rejected with the reason, the scan not trusted, exit 1.
+#[test]
+fn a_link_that_did_not_converge_is_rejected_and_the_exit_says_so() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let rooms = [data("pcl_room_scans/room_scan1.pcd"), data("pcl_room_scans/room_scan2.pcd")];
+    let (r, v) = run(&[&rooms[..], &["--huber".into(), "1e-4".into()]].concat(), &dir.path().join("o"));
+    assert_eq!(r.code, 1, "{}", r.stderr);
+    let v = v.expect("JSON");
+    let link = &v["links"][0];
+    assert_eq!((link["converged"].as_bool(), link["accepted"].as_bool()), (Some(false), Some(false)), "{link}");
+    assert!(link["reason"].as_str().expect("reason").starts_with("did not converge in 50 iterations"), "{link}");
 }
