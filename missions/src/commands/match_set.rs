@@ -209,6 +209,7 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
     if args.out.exists() && !args.out.is_dir() {
         bail!("--out {}: exists and is not a directory", args.out.display());
     }
+    check_out(args)?;
     crate::view::recording::available()?;
     if !(args.degeneracy_ratio.is_finite() && (0.0..0.1).contains(&args.degeneracy_ratio)) {
         bail!("--degeneracy-ratio {}: expected a ratio in [0, 0.1) (0: off)", args.degeneracy_ratio);
@@ -358,6 +359,7 @@ fn write_outputs(
 ) -> Result<Vec<String>> {
     let dir = &args.out;
     let frames = dir.join("frames");
+    remove_stale_outputs(dir, &args.formats)?;
     std::fs::create_dir_all(&frames).with_context(|| format!("creating {}", frames.display()))?;
     crate::view::document::write_file(&dir.join("poses.json"), report)?;
     let mut names = std::collections::HashSet::new();
@@ -528,4 +530,54 @@ fn unlinked(report: &MatchReport) -> Vec<usize> {
     (1..report.scans.len())
         .filter(|&i| !report.links.iter().any(|l| l.accepted && (l.source == i || l.targets.contains(&i))))
         .collect()
+}
+
+/// Refuses, before any work, an `--out` that is not `match`'s to write
+/// into: a run directory (its cloud is the run's, under the run's lock),
+/// or a directory that holds one of the inputs (an input named like an
+/// output would be overwritten).
+fn check_out(args: &MatchArgs) -> Result<()> {
+    let out = &args.out;
+    if out.join("journal.jsonl").exists() {
+        bail!(
+            "--out {}: a run directory (it holds journal.jsonl): match writes its outputs into a directory of its own",
+            out.display()
+        );
+    }
+    let Ok(out_real) = out.canonicalize() else { return Ok(()) }; // not there yet: nothing in it
+    for input in &args.inputs {
+        let Ok(real) = input.canonicalize() else { continue }; // reading names it
+        let holds = if real.is_dir() { real == out_real } else { real.parent() == Some(out_real.as_path()) };
+        if holds {
+            bail!(
+                "--out {}: holds the input {}: expected a directory apart from the scans (its outputs would \
+                 overwrite what they were made from)",
+                out.display(),
+                input.display()
+            );
+        }
+    }
+    Ok(())
+}
+
+/// A previous `match`'s outputs in `dir` that this one will not rewrite
+/// — clouds of other formats, frames of other scans — are removed, so no
+/// stale result stands beside the new ones. Only `match`'s own names.
+fn remove_stale_outputs(dir: &Path, formats: &[String]) -> Result<()> {
+    for format in crate::mission::OUTPUT_FORMATS.iter().filter(|f| !formats.iter().any(|g| g == *f)) {
+        let path = dir.join(crate::run::outputs::cloud_file(format));
+        if std::fs::symlink_metadata(&path).is_ok_and(|m| m.is_file() || m.file_type().is_symlink()) {
+            std::fs::remove_file(&path).with_context(|| format!("removing the stale {}", path.display()))?;
+        }
+    }
+    let frames = dir.join("frames");
+    if std::fs::symlink_metadata(&frames).is_ok_and(|m| m.is_dir()) {
+        for entry in std::fs::read_dir(&frames).with_context(|| format!("reading {}", frames.display()))? {
+            let path = entry.with_context(|| format!("reading {}", frames.display()))?.path();
+            if path.extension().is_some_and(|e| e == "frames") {
+                std::fs::remove_file(&path).with_context(|| format!("removing the stale {}", path.display()))?;
+            }
+        }
+    }
+    Ok(())
 }

@@ -421,3 +421,44 @@ fn a_link_that_did_not_converge_is_rejected_and_the_exit_says_so() {
     assert_eq!((link["converged"].as_bool(), link["accepted"].as_bool()), (Some(false), Some(false)), "{link}");
     assert!(link["reason"].as_str().expect("reason").starts_with("did not converge in 50 iterations"), "{link}");
 }
+
+/// `--out` is match's own (issue 34, W2–W4): a run directory is refused
+/// (its cloud is the run's), so is a directory holding an input (an input
+/// named `cloud.ply` was overwritten), and a second match into the same
+/// directory leaves none of the first one's outputs beside its own.
+#[test]
+fn match_writes_only_into_a_directory_of_its_own_and_leaves_nothing_stale() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let rooms = [data("pcl_room_scans/room_scan1.pcd"), data("pcl_room_scans/room_scan2.pcd")];
+    // W3: a run directory.
+    let run_dir = dir.path().join("run");
+    std::fs::create_dir(&run_dir).expect("dir");
+    std::fs::write(run_dir.join("journal.jsonl"), "").expect("journal");
+    std::fs::write(run_dir.join("cloud.ply"), "the run's").expect("cloud");
+    let (r, _) = run(&rooms, &run_dir);
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(r.stderr.contains("a run directory (it holds journal.jsonl)"), "{}", r.stderr);
+    assert_eq!(std::fs::read_to_string(run_dir.join("cloud.ply")).expect("cloud"), "the run's");
+    // W2: an --out that holds an input.
+    let inputs = dir.path().join("in");
+    std::fs::create_dir(&inputs).expect("dir");
+    let copy = inputs.join("room_scan2.pcd");
+    std::fs::copy(Path::new(&rooms[1]), &copy).expect("copy");
+    let (r, _) = run(&[rooms[0].clone(), copy.clone().into_os_string()], &inputs);
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(r.stderr.contains("holds the input") && r.stderr.contains("room_scan2.pcd"), "{}", r.stderr);
+    // W4: 3DTK with las, then the room pair with ply only, into one --out.
+    let out = dir.path().join("out");
+    let (r, _) = run(&[data("3dtk_dat"), "--formats".into(), "ply,las".into()], &out);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(out.join("cloud.las").is_file() && out.join("frames/scan002.frames").is_file());
+    let (r, _) = run(&rooms, &out);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(!out.join("cloud.las").exists(), "the first match's LAS is gone");
+    let mut frames: Vec<String> = std::fs::read_dir(out.join("frames"))
+        .expect("frames")
+        .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+        .collect();
+    frames.sort();
+    assert_eq!(frames, ["room_scan1.frames", "room_scan2.frames"]);
+}
