@@ -375,7 +375,8 @@ fn write_outputs(
     }
     write_links(&dir.join("links.csv"), scans, report)?;
     let mut written = vec!["poses.json".to_string(), "frames/".into(), "links.csv".into()];
-    written.extend(write_clouds(dir, &args.formats, crs, scans, r)?);
+    let numbers: Vec<u16> = report.scans.iter().map(|s| s.number).collect();
+    written.extend(write_clouds(dir, &args.formats, crs, scans, &numbers, r)?);
     let rrd = dir.join("match.rrd");
     let mut rec = Recorder::new("match", Some(&rrd), &Viewer::None, Vec::new())?;
     if rec.enabled() {
@@ -418,6 +419,7 @@ fn write_clouds(
     formats: &[String],
     crs: &scanner::io::Crs,
     scans: &[InputScan],
+    numbers: &[u16],
     r: &SetResult,
 ) -> Result<Vec<String>> {
     let first = r.world_from_scan[0].translation.vector;
@@ -441,7 +443,6 @@ fn write_clouds(
         ));
     }
     // Each scan moved into the world once, into every file.
-    let numbers = crate::scans::inputs::scan_numbers(scans);
     for (i, s) in scans.iter().enumerate() {
         let pose = r.world_from_scan[i];
         let relative = Isometry3::from_parts((pose.translation.vector - origin).into(), pose.rotation);

@@ -88,10 +88,11 @@ pub fn read(
     }
     for s in &mut scans {
         let all = s.points.len();
+        // One mask for the points and their intensities.
         let keep = super::settings::in_range(&s.points, min_m, max_m);
         let kept = |values: Vec<f32>| values.into_iter().zip(&keep).filter_map(|(v, &k)| k.then_some(v)).collect();
         s.intensity = s.intensity.take().filter(|v| v.len() == keep.len()).map(kept);
-        s.points = super::settings::within_range(std::mem::take(&mut s.points), min_m, max_m);
+        s.points = std::mem::take(&mut s.points).into_iter().zip(&keep).filter_map(|(p, &k)| k.then_some(p)).collect();
         if s.points.len() <= min_points {
             bail!(
                 "{}: {} points between {min_m} m and {max_m} m from its origin ({all} in the file): expected more than {min_points} to match",
