@@ -428,10 +428,13 @@ fn write_clouds(
         origin,
         crs: Some(crs.clone()),
         points: Some(scans.iter().map(|s| s.points.len()).sum()),
-        // What every input scan carries (intensity) or any (its time).
+        // What every input scan carries (intensity, colour, point times
+        // of one base) or any (its time).
         intensity: scans.iter().all(|s| s.intensity.is_some()),
         source: true,
         timed: scans.iter().any(|s| s.gps_time_s.is_some()),
+        color: scans.iter().all(|s| s.color.is_some()),
+        time: point_time_base(scans),
     };
     let mut writers = Vec::with_capacity(formats.len());
     for format in formats {
@@ -451,6 +454,9 @@ fn write_clouds(
             points: fusion::direct::transform(&s.points, &relative),
             source: Some(vec![numbers[i]; n]),
             intensity: s.intensity.clone().filter(|_| header.intensity),
+            color: s.color.clone().filter(|_| header.color),
+            time: s.time.as_ref().filter(|_| header.time.is_some()).map(|(t, _)| t.clone()),
+            time_base: header.time.unwrap_or_default(),
             origin,
             scans: vec![scanner::io::ScanInfo {
                 name: s.name.clone(),
@@ -470,6 +476,14 @@ fn write_clouds(
         files.push(name);
     }
     Ok(files)
+}
+
+/// The base of the scans' point times, when every scan has times and all
+/// count from the same epoch (else the merged cloud carries none).
+fn point_time_base(scans: &[InputScan]) -> Option<scanner::io::TimeBase> {
+    let bases: Option<Vec<_>> = scans.iter().map(|s| s.time.as_ref().map(|(_, b)| *b)).collect();
+    let bases = bases?;
+    bases.first().copied().filter(|b| bases.iter().all(|c| c == b))
 }
 
 fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &MatchReport) -> std::io::Result<()> {

@@ -93,6 +93,8 @@ impl CloudFiles {
             intensity: false,
             source: true,
             timed: false,
+            color: false,
+            time: None,
         };
         let mut files = Vec::with_capacity(mission.output.formats.len());
         for format in &mission.output.formats {

@@ -26,6 +26,11 @@ pub struct InputScan {
     pub intensity: Option<Vec<f32>>,
     /// When it was taken, GPS seconds, when the input says.
     pub gps_time_s: Option<f64>,
+    /// Its points' colours (16 bits a channel), when the input has them.
+    pub color: Option<Vec<[u16; 3]>>,
+    /// Its points' times, when the input has them, and what they count
+    /// from.
+    pub time: Option<(Vec<f64>, scanner::io::TimeBase)>,
 }
 
 /// One entry of an `--init-poses` file.
@@ -60,6 +65,8 @@ pub fn read(
                 start: s.world_from_scan,
                 intensity: s.intensity,
                 gps_time_s: s.gps_time_s,
+                color: s.color,
+                time: s.time.map(|t| (t, s.time_base)),
             }));
         } else {
             let cloud = scanner::io::read(input)?;
@@ -77,6 +84,8 @@ pub fn read(
                 start: Isometry3::identity(),
                 intensity: cloud.intensity,
                 gps_time_s,
+                color: cloud.color,
+                time: cloud.time.map(|t| (t, cloud.time_base)),
             });
         }
     }
@@ -88,11 +97,12 @@ pub fn read(
     }
     for s in &mut scans {
         let all = s.points.len();
-        // One mask for the points and their intensities.
+        // One mask for the points and everything they carry.
         let keep = super::settings::in_range(&s.points, min_m, max_m);
-        let kept = |values: Vec<f32>| values.into_iter().zip(&keep).filter_map(|(v, &k)| k.then_some(v)).collect();
-        s.intensity = s.intensity.take().filter(|v| v.len() == keep.len()).map(kept);
-        s.points = std::mem::take(&mut s.points).into_iter().zip(&keep).filter_map(|(p, &k)| k.then_some(p)).collect();
+        s.intensity = s.intensity.take().and_then(|v| kept(v, &keep));
+        s.color = s.color.take().and_then(|v| kept(v, &keep));
+        s.time = s.time.take().and_then(|(t, base)| kept(t, &keep).map(|t| (t, base)));
+        s.points = kept(std::mem::take(&mut s.points), &keep).unwrap_or_default();
         if s.points.len() <= min_points {
             bail!(
                 "{}: {} points between {min_m} m and {max_m} m from its origin ({all} in the file): expected more than {min_points} to match",
@@ -102,6 +112,11 @@ pub fn read(
         }
     }
     Ok(scans)
+}
+
+/// The values whose `keep` is true, when there is one value per flag.
+fn kept<T>(values: Vec<T>, keep: &[bool]) -> Option<Vec<T>> {
+    (values.len() == keep.len()).then(|| values.into_iter().zip(keep).filter_map(|(v, &k)| k.then_some(v)).collect())
 }
 
 /// A 3DTK directory: every `scanNNN.3d` in order, each with its `.pose`.
@@ -153,6 +168,8 @@ fn threedtk_directory(dir: &Path) -> Result<Vec<InputScan>> {
                 start,
                 intensity: cloud.intensity,
                 gps_time_s: None,
+                color: None,
+                time: None,
             })
         })
         .collect()
@@ -235,6 +252,8 @@ mod tests {
                 start: Isometry3::identity(),
                 intensity: None,
                 gps_time_s: None,
+                color: None,
+                time: None,
             })
             .collect()
     }

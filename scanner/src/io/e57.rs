@@ -2,7 +2,12 @@
 //! cloud, its points in the scan's frame (f32) with the scan's pose (f64),
 //! name, acquisition time and a GUID of its own; points in no scan in one
 //! more `data3D` of world coordinates (f64 when georeferenced); intensity
-//! as a unit float when present; the CRS's WKT in `coordinateMetadata`.
+//! as a unit float, colour as integers (limits 0–255 when every colour of
+//! the `data3D` is an 8-bit one, as scanners and most readers have it —
+//! pye57 reads no other — else 0–65,535) and each
+//! point's `timeStamp` (f64 seconds after its scan's `acquisitionStart`,
+//! which is the first point's time when the scan states none) when
+//! present; the CRS's WKT in `coordinateMetadata`.
 //! Reading takes every point cloud in the file with its pose applied
 //! ([`read`]), or each one in its own frame with its pose
 //! ([`read_e57_scans`]).
@@ -10,34 +15,126 @@
 use std::path::Path;
 
 use e57::{
-    CartesianCoordinate, DateTime, E57Reader, E57Writer, Quaternion, Record, RecordValue, Transform, Translation,
+    CartesianCoordinate, ColorLimits, DateTime, E57Reader, E57Writer, Quaternion, Record, RecordDataType, RecordName,
+    RecordValue, Transform, Translation,
 };
 use nalgebra::{Isometry3, Point3};
 
-use super::PointCloud;
+use super::{PointCloud, TimeBase};
 use crate::error::{Result, ScannerError};
+
+/// The colour records we write, 8 or 16 bits, and the `timeStamp` record.
+const COLOR_NAMES: [RecordName; 3] = [RecordName::ColorRed, RecordName::ColorGreen, RecordName::ColorBlue];
+const TIME_STAMP_F64: Record = Record { name: RecordName::TimeStamp, data_type: RecordDataType::F64 };
+
+/// One `data3D`'s points as read: coordinates (with or without its pose)
+/// and what every valid point carries.
+#[derive(Default)]
+struct Read {
+    points: Vec<Point3<f32>>,
+    intensity: Option<Vec<f32>>,
+    color: Option<Vec<[u16; 3]>>,
+    /// Seconds after `acquisitionStart` (or of an unstated epoch).
+    time: Option<Vec<f64>>,
+}
+
+/// Reads `pc`'s valid points (`posed`: with its pose applied); each
+/// attribute kept when every valid point has it. Colours are scaled from
+/// the file's limits to 16 bits.
+fn read_data3d(
+    reader: &mut E57Reader<std::io::BufReader<std::fs::File>>,
+    path: &Path,
+    k: usize,
+    pc: &e57::PointCloud,
+    posed: bool,
+) -> Result<Read> {
+    // The simple reader gives no timeStamp: read from the raw records,
+    // point for point in the same order.
+    let stamps: Option<Vec<Option<f64>>> = match pc.prototype.iter().position(|r| r.name == RecordName::TimeStamp) {
+        None => None,
+        Some(at) => {
+            let dt = pc.prototype[at].data_type.clone();
+            let invalid = pc.prototype.iter().position(|r| r.name == RecordName::IsTimeStampInvalid);
+            let raw = reader.pointcloud_raw(pc).map_err(|e| ScannerError::whole_file(path, e))?;
+            let mut all = Vec::new();
+            for (i, values) in raw.enumerate() {
+                let values =
+                    values.map_err(|e| ScannerError::whole_file(path, format!("data3D[{k}] point {i}: {e}")))?;
+                let bad = invalid.and_then(|j| values.get(j)).is_some_and(|v| !matches!(v, RecordValue::Integer(0)));
+                let t = values.get(at).and_then(|v| v.to_f64(&dt).ok()).filter(|t| t.is_finite() && !bad);
+                all.push(t);
+            }
+            Some(all)
+        }
+    };
+    let mut iter = reader.pointcloud_simple(pc).map_err(|e| ScannerError::whole_file(path, e))?;
+    iter.apply_pose(posed);
+    iter.normalize_intensity(false);
+    let mut out = Read {
+        intensity: Some(Vec::new()),
+        color: pc.has_color().then(Vec::new),
+        time: stamps.as_ref().map(|_| Vec::new()),
+        ..Read::default()
+    };
+    for (i, p) in iter.enumerate() {
+        let p = p.map_err(|e| ScannerError::whole_file(path, format!("data3D[{k}] point {i}: {e}")))?;
+        let Some(point) = cartesian(path, &format!("data3D[{k}] point {i}"), &p.cartesian)? else { continue };
+        out.points.push(point);
+        keep(&mut out.intensity, p.intensity);
+        let unit = |v: f32| (f64::from(v).clamp(0.0, 1.0) * 65_535.0).round() as u16;
+        keep(&mut out.color, p.color.map(|c| [unit(c.red), unit(c.green), unit(c.blue)]));
+        keep(&mut out.time, stamps.as_ref().and_then(|s| s.get(i).copied().flatten()));
+    }
+    if out.points.is_empty() {
+        out.intensity = None;
+    }
+    Ok(out)
+}
+
+/// Appends `more` to `all`, or drops `all` when a part has none.
+fn extend<T>(all: &mut Option<Vec<T>>, more: Option<Vec<T>>) {
+    *all = all.take().zip(more).map(|(mut all, more)| {
+        all.extend(more);
+        all
+    });
+}
+
+/// Appends `value` to `all`, or drops `all` when a point has none.
+fn keep<T>(all: &mut Option<Vec<T>>, value: Option<T>) {
+    *all = all.take().zip(value).map(|(mut all, v)| {
+        all.push(v);
+        all
+    });
+}
 
 pub(super) fn read(path: &Path) -> Result<PointCloud> {
     let mut reader = E57Reader::from_file(path).map_err(|e| ScannerError::whole_file(path, e))?;
-    let mut cloud = PointCloud::default();
-    let mut intensity = Vec::new();
-    let mut all_have_intensity = true;
-    for pc in reader.pointclouds() {
-        let mut points = reader.pointcloud_simple(&pc).map_err(|e| ScannerError::whole_file(path, e))?;
-        points.normalize_intensity(false);
-        for (i, p) in points.enumerate() {
-            let p = p.map_err(|e| ScannerError::whole_file(path, format!("point {i}: {e}")))?;
-            if let Some(point) = cartesian(path, &format!("point {i}"), &p.cartesian)? {
-                cloud.points.push(point);
-                match p.intensity {
-                    Some(v) => intensity.push(v),
-                    None => all_have_intensity = false,
-                }
-            }
+    let mut cloud = PointCloud {
+        intensity: Some(Vec::new()),
+        color: Some(Vec::new()),
+        time: Some(Vec::new()),
+        ..PointCloud::default()
+    };
+    let mut bases = Vec::new();
+    for (k, pc) in reader.pointclouds().into_iter().enumerate() {
+        let part = read_data3d(&mut reader, path, k, &pc, true)?;
+        let n = part.points.len();
+        cloud.points.extend(part.points);
+        if n > 0 {
+            extend(&mut cloud.intensity, part.intensity);
+            extend(&mut cloud.color, part.color);
+            let start = pc.acquisition_start.as_ref().map(|t| t.gps_time);
+            bases.push(if start.is_some() { TimeBase::Gps } else { TimeBase::Relative });
+            extend(&mut cloud.time, part.time.map(|t| t.into_iter().map(|t| t + start.unwrap_or(0.0)).collect()));
         }
     }
-    if all_have_intensity && !cloud.points.is_empty() {
-        cloud.intensity = Some(intensity);
+    if cloud.points.is_empty() {
+        (cloud.intensity, cloud.color, cloud.time) = (None, None, None);
+    }
+    // Times of different bases make no one column.
+    cloud.time_base = bases.first().copied().unwrap_or_default();
+    if cloud.time.is_none() || bases.iter().any(|b| *b != cloud.time_base) {
+        (cloud.time, cloud.time_base) = (None, TimeBase::default());
     }
     Ok(cloud)
 }
@@ -68,6 +165,15 @@ pub struct E57Scan {
     /// Their intensities as recorded (not normalised), when every point
     /// has one.
     pub intensity: Option<Vec<f32>>,
+    /// Their colours (16 bits a channel, from the file's limits), when
+    /// every point has one.
+    pub color: Option<Vec<[u16; 3]>>,
+    /// Their times, when every point has one: GPS seconds when the scan
+    /// states its `acquisitionStart`, else the file's `timeStamp`
+    /// ([`TimeBase::Relative`]).
+    pub time: Option<Vec<f64>>,
+    /// What `time` counts from (the default when there are no times).
+    pub time_base: TimeBase,
     /// When it was taken (its `acquisitionStart`), GPS seconds.
     pub gps_time_s: Option<f64>,
 }
@@ -100,24 +206,20 @@ pub fn read_e57_scans(path: &Path) -> Result<Vec<E57Scan>> {
             ))
         })?;
         let name = pc.name.clone().unwrap_or_else(|| format!("data3D[{k}]"));
-        let mut iter = reader.pointcloud_simple(&pc).map_err(|e| ScannerError::whole_file(path, e))?;
-        iter.apply_pose(false);
-        iter.normalize_intensity(false);
-        let mut points = Vec::new();
-        let mut intensity = Some(Vec::new());
-        for (i, p) in iter.enumerate() {
-            let p = p.map_err(|e| ScannerError::whole_file(path, format!("data3D[{k}] point {i}: {e}")))?;
-            if let Some(point) = cartesian(path, &format!("data3D[{k}] point {i}"), &p.cartesian)? {
-                points.push(point);
-                intensity = intensity.zip(p.intensity).map(|(mut all, v)| {
-                    all.push(v);
-                    all
-                });
-            }
-        }
-        let intensity = intensity.filter(|v| !v.is_empty());
+        let read = read_data3d(&mut reader, path, k, &pc, false)?;
         let gps_time_s = pc.acquisition_start.as_ref().map(|t| t.gps_time);
-        scans.push(E57Scan { name, world_from_scan, points, intensity, gps_time_s });
+        let time = read.time.map(|t| t.into_iter().map(|t| t + gps_time_s.unwrap_or(0.0)).collect());
+        let time_base = if gps_time_s.is_none() && time.is_some() { TimeBase::Relative } else { TimeBase::Gps };
+        scans.push(E57Scan {
+            name,
+            world_from_scan,
+            points: read.points,
+            intensity: read.intensity,
+            color: read.color,
+            time,
+            time_base,
+            gps_time_s,
+        });
     }
     Ok(scans)
 }
@@ -158,7 +260,12 @@ impl E57Stream {
                 let local = scan_from_world * nalgebra::Point3::from(part.coordinates(i));
                 (i, [local.x, local.y, local.z].map(|v| RecordValue::Single(v as f32)))
             });
-            let meta = Data3d { name: &scan.name, pose: Some(&scan.world_from_scan), gps_time_s: scan.gps_time_s };
+            let meta = Data3d {
+                name: &scan.name,
+                pose: Some(&scan.world_from_scan),
+                gps_time_s: start_time(part, scan.points.clone(), scan.gps_time_s),
+                eight_bit: eight_bit(part, scan.points.clone()),
+            };
             add_data3d(writer, path, part, &meta, false, points)?;
             self.data3d += 1;
         }
@@ -181,7 +288,9 @@ impl E57Stream {
             };
             (i, values)
         });
-        let meta = Data3d { name: "cps-survey-cloud", pose: None, gps_time_s: None };
+        let start = start_time(part, (0..part.len()).filter(|&i| keep(i)), None);
+        let eight_bit = eight_bit(part, (0..part.len()).filter(|&i| keep(i)));
+        let meta = Data3d { name: "cps-survey-cloud", pose: None, gps_time_s: start, eight_bit };
         add_data3d(&mut self.writer, &self.path, part, &meta, georeferenced, points)?;
         self.data3d += 1;
         Ok(())
@@ -190,8 +299,14 @@ impl E57Stream {
     /// Finishes the file (an empty cloud gets one empty `data3D`).
     pub(super) fn finish(mut self, cloud: &super::CloudHeader) -> Result<()> {
         if self.data3d == 0 {
-            let empty =
-                PointCloud { origin: cloud.origin, intensity: cloud.intensity.then(Vec::new), ..PointCloud::default() };
+            let empty = PointCloud {
+                origin: cloud.origin,
+                intensity: cloud.intensity.then(Vec::new),
+                color: cloud.color.then(Vec::new),
+                time: cloud.time.map(|_| Vec::new()),
+                time_base: cloud.time.unwrap_or_default(),
+                ..PointCloud::default()
+            };
             self.add_world(&empty, |_| true)?;
         }
         let path = self.path.clone();
@@ -199,11 +314,29 @@ impl E57Stream {
     }
 }
 
+/// A `data3D`'s `acquisitionStart` for `points` of `part`: the scan's
+/// own (`given`), else its first point's GPS time; none for times of an
+/// unstated epoch (their `timeStamp`s are written as they are).
+fn start_time(part: &PointCloud, mut points: impl Iterator<Item = usize>, given: Option<f64>) -> Option<f64> {
+    match (&part.time, part.time_base) {
+        (Some(_), TimeBase::Relative) => None,
+        (Some(t), TimeBase::Gps) => given.or_else(|| points.next().map(|i| t[i])),
+        (None, _) => given,
+    }
+}
+
+/// Whether every colour of `points` of `part` is an 8-bit one (× 257).
+fn eight_bit(part: &PointCloud, mut points: impl Iterator<Item = usize>) -> bool {
+    part.color.as_ref().is_none_or(|c| points.all(|i| c[i].iter().all(|v| v % 257 == 0)))
+}
+
 /// What a `data3D` says of itself.
 struct Data3d<'a> {
     name: &'a str,
     pose: Option<&'a Isometry3<f64>>,
     gps_time_s: Option<f64>,
+    /// Colours written in 8 bits (every one is an 8-bit value).
+    eight_bit: bool,
 }
 
 /// Adds one `data3D` of `points` (index in `cloud`, coordinates) with
@@ -224,7 +357,26 @@ fn add_data3d(
     if cloud.intensity.is_some() {
         prototype.push(Record::INTENSITY_UNIT_F32);
     }
+    let (data_type, max) =
+        if meta.eight_bit { (RecordDataType::U8, u8::MAX.into()) } else { (RecordDataType::U16, u16::MAX.into()) };
+    if cloud.color.is_some() {
+        prototype.extend(COLOR_NAMES.map(|name| Record { name, data_type: data_type.clone() }));
+    }
+    if cloud.time.is_some() {
+        prototype.push(TIME_STAMP_F64);
+    }
     let mut pc = writer.add_pointcloud(&guid(), prototype).map_err(|e| ScannerError::whole_file(path, e))?;
+    if cloud.color.is_some() {
+        let (lo, hi) = (Some(RecordValue::Integer(0)), Some(RecordValue::Integer(max)));
+        pc.set_color_limits(Some(ColorLimits {
+            red_min: lo.clone(),
+            red_max: hi.clone(),
+            green_min: lo.clone(),
+            green_max: hi.clone(),
+            blue_min: lo,
+            blue_max: hi,
+        }));
+    }
     pc.set_name(Some(meta.name.to_string()));
     pc.set_transform(meta.pose.map(transform));
     pc.set_acquisition_start(meta.gps_time_s.map(|gps_time| DateTime { gps_time, atomic_reference: false }));
@@ -232,6 +384,13 @@ fn add_data3d(
         let mut values = xyz.to_vec();
         if let Some(v) = &cloud.intensity {
             values.push(RecordValue::Single(v[i]));
+        }
+        if let Some(c) = &cloud.color {
+            let scale = if meta.eight_bit { 257 } else { 1 };
+            values.extend(c[i].map(|v| RecordValue::Integer(i64::from(v / scale))));
+        }
+        if let Some(t) = &cloud.time {
+            values.push(RecordValue::Double(t[i] - meta.gps_time_s.unwrap_or(0.0)));
         }
         pc.add_point(values).map_err(|e| ScannerError::whole_file(path, format!("point {i}: {e}")))?;
     }

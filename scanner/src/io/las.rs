@@ -1,6 +1,7 @@
-//! LAS 1.4 and LAZ through the `las` crate: point format 6 (each point's
-//! scan in `point_source_id`, its scan's time as adjusted standard GPS
-//! time, intensity, return 1 of 1), scale 0.1 mm, offset at the cloud's
+//! LAS 1.4 and LAZ through the `las` crate: point format 6, or 7 with
+//! colour (each point's scan in `point_source_id`; its own time, else its
+//! scan's, as adjusted standard GPS time — or GPS week time for times of an
+//! unstated epoch; intensity; return 1 of 1), scale 0.1 mm, offset at the cloud's
 //! lower corner (rounded to metres) plus its origin, the CRS as an OGC WKT
 //! VLR. Records are encoded in parallel and handed to the crate in batches
 //! (LAZ chunks compressed in parallel). COPC is that LAZ re-ordered into an octree by `copc-writer`,
@@ -16,7 +17,7 @@ use las::{Builder, GpsTimeType, PointDataBuilder, Reader, Transform, Vector, Vlr
 use nalgebra::Point3;
 use rayon::prelude::*;
 
-use super::{CloudHeader, PointCloud};
+use super::{CloudHeader, PointCloud, TimeBase};
 use crate::error::{Location, Result, ScannerError};
 
 /// Coordinate resolution of the LAS files we write, metres.
@@ -114,6 +115,10 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
     }
     let mut cloud = PointCloud::default();
     let mut intensity = Vec::new();
+    let format = *header.point_format();
+    let standard_time = header.gps_time_type() == GpsTimeType::Standard;
+    let mut color = format.has_color.then(Vec::new);
+    let mut time = format.has_gps_time.then(Vec::new);
     let mut data = las::PointDataBuilder::new().for_header(reader.header()).build();
     let mut read = 0u64;
     while read < count {
@@ -146,10 +151,23 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
             }
             cloud.points.push(point);
             intensity.push(f32::from(p.intensity));
+            if let (Some(all), Some(c)) = (color.as_mut(), p.color) {
+                all.push([c.red, c.green, c.blue]);
+            }
+            if let (Some(all), Some(t)) = (time.as_mut(), p.gps_time) {
+                all.push(if standard_time { t + ADJUSTED_GPS_OFFSET_S } else { t });
+            }
         }
         read += n;
     }
     cloud.intensity = Some(intensity);
+    cloud.color = color.filter(|c| c.len() == cloud.points.len());
+    // A file whose times are all zero (a writer's "none") carries none.
+    let zero = if standard_time { ADJUSTED_GPS_OFFSET_S } else { 0.0 };
+    cloud.time = time.filter(|t| t.len() == cloud.points.len() && t.iter().any(|&v| v != zero));
+    if cloud.time.is_some() && !standard_time {
+        cloud.time_base = TimeBase::Relative;
+    }
     Ok(cloud)
 }
 
@@ -169,6 +187,9 @@ const BATCH_POINTS: usize = 1 << 20;
 /// the length against the format and reads the records back for the
 /// header's bounds and counts.
 const FORMAT_6_LEN: usize = 30;
+
+/// Format 7 (table 17): format 6 and red, green, blue (u16 each).
+const FORMAT_7_LEN: usize = 36;
 
 /// A LAS or LAZ file written part by part: the `las` crate's writer,
 /// which counts the points and their bounds and writes the header when
@@ -190,6 +211,8 @@ pub(super) struct LasStream {
     /// The records' raw (scaled integer) extremes so far, per axis: the
     /// header's bounds are written from them exactly.
     raw_bounds: Option<([i32; 3], [i32; 3])>,
+    /// A record's length: format 6's, or format 7's with colour.
+    record_len: usize,
 }
 
 impl std::fmt::Debug for LasStream {
@@ -210,11 +233,13 @@ impl LasStream {
             path: path.to_path_buf(),
             raw_bounds: None,
             disarmed: Arc::new(AtomicBool::new(false)),
+            record_len: if cloud.color { FORMAT_7_LEN } else { FORMAT_6_LEN },
         })
     }
 
     /// The writer, opened with the offset at the first part's lower
-    /// corner (its times, if any, are adjusted standard GPS time).
+    /// corner (its times, if any, are adjusted standard GPS time, or GPS
+    /// week time when the points' own times have no stated epoch).
     fn writer(&mut self, first: &PointCloud) -> Result<&mut Writer<Disarmable>> {
         if self.writer.is_none() {
             let path = &self.path;
@@ -224,8 +249,11 @@ impl LasStream {
             });
             let corner = lo.map(|v| if v.is_finite() { v.floor() } else { 0.0 });
             let header = header(path, &self.cloud, corner, self.compressed)?;
-            if usize::from(header.point_format().len()) != FORMAT_6_LEN {
-                return Err(ScannerError::whole_file(path, "the header's point format is not format 6"));
+            if usize::from(header.point_format().len()) != self.record_len {
+                return Err(ScannerError::whole_file(
+                    path,
+                    format!("the header's point format is not {}-byte records", self.record_len),
+                ));
             }
             let file = File::create(path).map_err(|e| ScannerError::io(path, e))?;
             let stream = Disarmable { inner: BufWriter::with_capacity(1 << 20, file), disarmed: self.disarmed.clone() };
@@ -235,20 +263,25 @@ impl LasStream {
         self.writer.as_mut().ok_or_else(|| ScannerError::whole_file(&self.path, "the LAS writer is not open"))
     }
 
-    /// Appends `part`'s points (each with its scan's time).
+    /// Appends `part`'s points (each with its own time, else its scan's).
     pub(super) fn push(&mut self, part: &PointCloud) -> Result<()> {
         let path = self.path.clone();
         let path = &path;
+        let len = self.record_len;
         let writer = self.writer(part)?;
         let mut scans: Vec<_> = part.scans.iter().filter(|s| !s.points.is_empty()).collect();
         scans.sort_by_key(|s| s.points.start);
-        let gps_time = |i: usize| {
-            let k = scans.partition_point(|s| s.points.end <= i);
-            scans
-                .get(k)
-                .filter(|s| s.points.contains(&i))
-                .and_then(|s| s.gps_time_s)
-                .map_or(0.0, |t| t - ADJUSTED_GPS_OFFSET_S)
+        let gps_time = |i: usize| match (&part.time, part.time_base) {
+            (Some(t), TimeBase::Gps) => t[i] - ADJUSTED_GPS_OFFSET_S,
+            (Some(t), TimeBase::Relative) => t[i],
+            (None, _) => {
+                let k = scans.partition_point(|s| s.points.end <= i);
+                scans
+                    .get(k)
+                    .filter(|s| s.points.contains(&i))
+                    .and_then(|s| s.gps_time_s)
+                    .map_or(0.0, |t| t - ADJUSTED_GPS_OFFSET_S)
+            }
         };
         let offset = *writer.header().transforms();
         let n = part.points.len();
@@ -258,11 +291,11 @@ impl LasStream {
             let start = self.pending.len();
             if self.compressed && self.pending.capacity() == 0 {
                 // A batch and a part: no reallocation before the flush.
-                self.pending.reserve_exact(2 * BATCH_POINTS * FORMAT_6_LEN);
+                self.pending.reserve_exact(2 * BATCH_POINTS * len);
             }
-            self.pending.resize(start + (end - batch) * FORMAT_6_LEN, 0);
+            self.pending.resize(start + (end - batch) * len, 0);
             self.pending[start..]
-                .par_chunks_mut(FORMAT_6_LEN)
+                .par_chunks_mut(len)
                 .enumerate()
                 .try_for_each(|(k, record)| {
                     let i = batch + k;
@@ -280,6 +313,12 @@ impl LasStream {
                     // 15..20: flags, classification, user data, scan angle: 0.
                     record[20..22].copy_from_slice(&part.source.as_ref().map_or(0, |s| s[i]).to_le_bytes());
                     record[22..30].copy_from_slice(&gps_time(i).to_le_bytes());
+                    if len == FORMAT_7_LEN {
+                        let rgb = part.color.as_ref().map_or([0; 3], |c| c[i]);
+                        for (k, v) in rgb.iter().enumerate() {
+                            record[30 + 2 * k..32 + 2 * k].copy_from_slice(&v.to_le_bytes());
+                        }
+                    }
                     Ok(())
                 })
                 .map_err(|i: usize| {
@@ -292,8 +331,8 @@ impl LasStream {
                         ),
                     )
                 })?;
-            self.raw_bounds = raw_extremes(&self.pending[start..], self.raw_bounds);
-            if self.pending.len() >= BATCH_POINTS * FORMAT_6_LEN {
+            self.raw_bounds = raw_extremes(&self.pending[start..], len, self.raw_bounds);
+            if self.pending.len() >= BATCH_POINTS * len {
                 self.flush()?;
             }
         }
@@ -405,10 +444,11 @@ fn patch_header(file: &mut File, raw: Option<([i32; 3], [i32; 3])>, t: &Vector<T
     Ok(())
 }
 
-/// Folds the raw X, Y, Z of format 6 `records` into `bounds`.
-fn raw_extremes(records: &[u8], bounds: Option<([i32; 3], [i32; 3])>) -> Option<([i32; 3], [i32; 3])> {
+/// Folds the raw X, Y, Z of `records` (`len` bytes each, X, Y, Z first)
+/// into `bounds`.
+fn raw_extremes(records: &[u8], len: usize, bounds: Option<([i32; 3], [i32; 3])>) -> Option<([i32; 3], [i32; 3])> {
     records
-        .par_chunks(FORMAT_6_LEN)
+        .par_chunks(len)
         .fold(
             || bounds,
             |b, r| {
@@ -433,12 +473,14 @@ fn raw_extremes(records: &[u8], bounds: Option<([i32; 3], [i32; 3])>) -> Option<
         )
 }
 
-/// The LAS 1.4 header of a cloud: point format 6, compressed or not; the
+/// The LAS 1.4 header of a cloud: point format 6 (7 with colour),
+/// compressed or not; the
 /// offsets at the cloud's origin plus `corner` (whole metres: the scaled
 /// integers stay small, the coordinates exact to the scale).
 fn header(path: &Path, cloud: &CloudHeader, corner: [f64; 3], compressed: bool) -> Result<las::Header> {
     let mut builder = Builder::from((1, 4));
-    let mut format = las::point::Format::new(6).map_err(|e| ScannerError::whole_file(path, e))?;
+    let mut format =
+        las::point::Format::new(if cloud.color { 7 } else { 6 }).map_err(|e| ScannerError::whole_file(path, e))?;
     format.is_compressed = compressed;
     builder.point_format = format;
     let o = cloud.origin;
@@ -450,7 +492,8 @@ fn header(path: &Path, cloud: &CloudHeader, corner: [f64; 3], compressed: bool) 
     builder.generating_software = "cps-survey".into();
     builder.system_identifier = "cps-survey CPS team".into(); // at most 32 bytes
     builder.date = Some(today());
-    if cloud.timed {
+    // Points' own times of an unstated epoch are GPS week time to LAS.
+    if cloud.time == Some(TimeBase::Gps) || (cloud.timed && cloud.time.is_none()) {
         builder.gps_time_type = GpsTimeType::Standard;
     }
     if let Some(crs) = &cloud.crs {

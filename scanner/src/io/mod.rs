@@ -6,13 +6,13 @@
 //! | format | read | write | notes |
 //! |---|---|---|---|
 //! | 3DTK `.3d` + `.pose` | ✓ | ✓ | cm, left-handed; (x, y, z)_ours = (z, −x, y)_3dtk / 100 |
-//! | PLY | ✓ ascii, binary LE/BE | ✓ ascii, binary LE | optional intensity |
+//! | PLY | ✓ ascii, binary LE/BE | ✓ ascii, binary LE | optional intensity, colour (8-bit), time |
 //! | XYZ text | ✓ | ✓ | `x y z [intensity]` per line |
-//! | PCD | ✓ ascii, binary, binary_compressed | ✓ all three | F4/F8/U/I fields |
-//! | LAS 1.4 | ✓ | ✓ | point format 6, 0.1 mm scale, WKT CRS, each point's scan and time |
+//! | PCD | ✓ ascii, binary, binary_compressed | ✓ all three | F4/F8/U/I fields; intensity, `rgb`, time |
+//! | LAS 1.4 | ✓ | ✓ | point format 6 (7 with colour), 0.1 mm scale, WKT CRS, each point's scan and time |
 //! | LAZ | ✓ | ✓ | LAS compressed (LASzip) |
 //! | COPC `.copc.laz` | ✓ (as LAZ) | ✓ | LAZ chunks in an octree, streamed by `copc-writer` |
-//! | E57 | ✓ | ✓ | one `data3D` per scan with its pose, name and time; CRS in `coordinateMetadata` |
+//! | E57 | ✓ | ✓ | one `data3D` per scan with its pose, name and time; intensity, colour, `timeStamp`; CRS in `coordinateMetadata` |
 //!
 //! A cloud can also be written part by part, a scan at a time
 //! ([`CloudWriter`]): one part in memory instead of the whole.
@@ -68,8 +68,63 @@ pub struct PointCloud {
     /// The coordinate reference system of `origin + p`, if known.
     pub crs: Option<Crs>,
     /// The scans the points came from, each a run of points, when known
-    /// (E57 writes one `data3D` each; LAS takes each point's time from it).
+    /// (E57 writes one `data3D` each; LAS takes each point's time from it
+    /// when the points have none of their own).
     pub scans: Vec<ScanInfo>,
+    /// Colour per point, 16 bits a channel (red, green, blue) as LAS holds
+    /// it: an 8-bit source's values are scaled by 257 (255 → 65,535), and
+    /// 8-bit formats are written with the value / 257, rounded.
+    pub color: Option<Vec<[u16; 3]>>,
+    /// Acquisition time per point, seconds, counted as `time_base` says.
+    pub time: Option<Vec<f64>>,
+    /// What `time` counts from (the default when there are no times).
+    pub time_base: TimeBase,
+}
+
+/// What a cloud's per-point times count from.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum TimeBase {
+    /// GPS time: seconds since 1980-01-06 00:00 UTC, without leap seconds
+    /// (LAS's adjusted standard GPS time + 10⁹; an E57 `timeStamp` plus its
+    /// scan's `acquisitionStart`).
+    #[default]
+    Gps,
+    /// Seconds from an epoch the file does not state: LAS's GPS week time,
+    /// an E57 `timeStamp` of a scan without `acquisitionStart`, a PLY or
+    /// PCD time field without our GPS comment. Written back as it was read
+    /// (LAS as GPS week time).
+    Relative,
+}
+
+impl TimeBase {
+    /// The comment PLY and PCD headers carry for times of this base.
+    pub(crate) fn comment(self) -> &'static str {
+        match self {
+            TimeBase::Gps => "time: GPS seconds since 1980-01-06 00:00 UTC",
+            TimeBase::Relative => "time: seconds from an unstated epoch",
+        }
+    }
+
+    /// The base a PLY or PCD header's comments state (relative unless one
+    /// says GPS).
+    pub(crate) fn from_comments<'a>(comments: impl IntoIterator<Item = &'a str>) -> Self {
+        let gps = TimeBase::Gps.comment();
+        if comments.into_iter().any(|c| c.trim().trim_start_matches('#').trim() == gps) {
+            TimeBase::Gps
+        } else {
+            TimeBase::Relative
+        }
+    }
+}
+
+/// 8-bit colour to our 16 bits (× 257: 255 → 65,535).
+pub(crate) fn color_from_8bit(v: u8) -> u16 {
+    u16::from(v) * 257
+}
+
+/// Our 16-bit colour to 8 bits (÷ 257, rounded).
+pub(crate) fn color_to_8bit(v: u16) -> u8 {
+    ((u32::from(v) + 128) / 257) as u8
 }
 
 /// What a cloud written part by part ([`CloudWriter`]) is, known before
@@ -93,6 +148,10 @@ pub struct CloudHeader {
     /// Whether the parts' scans carry their times (LAS then says its
     /// times are adjusted standard GPS time).
     pub timed: bool,
+    /// Whether the parts have colours.
+    pub color: bool,
+    /// Whether the parts have per-point times, and their base.
+    pub time: Option<TimeBase>,
 }
 
 impl CloudHeader {
@@ -105,6 +164,8 @@ impl CloudHeader {
             intensity: cloud.intensity.is_some(),
             source: cloud.source.is_some(),
             timed: cloud.scans.iter().any(|s| s.gps_time_s.is_some()),
+            color: cloud.color.is_some(),
+            time: cloud.time.as_ref().map(|_| cloud.time_base),
         }
     }
 
@@ -292,6 +353,11 @@ pub(crate) fn check(cloud: &PointCloud) -> std::result::Result<(), String> {
     };
     per_point("intensities", cloud.intensity.as_ref().map(Vec::len))?;
     per_point("scan indices", cloud.source.as_ref().map(Vec::len))?;
+    per_point("colours", cloud.color.as_ref().map(Vec::len))?;
+    per_point("times", cloud.time.as_ref().map(Vec::len))?;
+    if let Some(i) = cloud.time.as_ref().and_then(|t| t.iter().position(|v| !v.is_finite())) {
+        return Err(format!("point {i}'s time is not finite: expected seconds"));
+    }
     if !cloud.origin.iter().all(|v| v.is_finite()) {
         return Err(format!("origin {:?}: expected finite coordinates", cloud.origin.as_slice()));
     }

@@ -2,8 +2,11 @@
 //! `ascii`, `binary` (point records) or `binary_compressed` (u32 compressed
 //! size, u32 raw size, an LZF stream of the field-major data). Reads x, y,
 //! z and an optional `intensity` of types F4/F8/I1–I8/U1–U8; other fields
-//! are skipped. Points with a non-finite coordinate are PCL's marker for
-//! "no return" in organised clouds and are left out.
+//! are skipped. Reads and writes colour as PCL packs it (`rgb`, F4 or U4:
+//! the bits 0x00RRGGBB, written F4 as PCL declares it; `rgba` U4) and a time field (`time`, `timestamp`
+//! or `gps_time`, F8 when written; GPS time when the header's comment says
+//! so). Points with a non-finite coordinate are PCL's marker for "no
+//! return" in organised clouds and are left out.
 
 use std::io::Write;
 use std::path::Path;
@@ -55,6 +58,24 @@ impl Field {
             _ => return None,
         })
     }
+
+    /// The first element's 32 bits (PCL's packed colour), as a number.
+    fn bits(&self, b: &[u8]) -> Option<f64> {
+        (self.size == 4).then(|| b.get(..4).map(|b| f64::from(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))))?
+    }
+}
+
+/// The names PCD time fields go by.
+const TIME_NAMES: [&str; 3] = ["time", "timestamp", "gps_time"];
+
+/// Packed PCL colour bits 0x00RRGGBB as our 16-bit colour.
+fn unpack_rgb(bits: u32) -> [u16; 3] {
+    [16, 8, 0].map(|shift| super::color_from_8bit((bits >> shift) as u8))
+}
+
+/// Our colour as PCL's packed bits.
+fn pack_rgb(rgb: [u16; 3]) -> u32 {
+    rgb.iter().fold(0, |bits, &v| (bits << 8) | u32::from(super::color_to_8bit(v)))
 }
 
 /// Where each field starts when fields of `width(f)` follow each other.
@@ -185,9 +206,16 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
         return Err(ScannerError::file(path, Location::File, "FIELDS lacks x, y or z"));
     };
     let ii = find("intensity");
-    let wanted: Vec<usize> = [Some(ix), Some(iy), Some(iz), ii].into_iter().flatten().collect();
+    let irgb = find("rgb").or_else(|| find("rgba")).filter(|&f| h.fields[f].size == 4);
+    let itime = TIME_NAMES.iter().find_map(|n| find(n));
+    // Slots: x, y, z, then intensity, colour, time as present.
+    let wanted: Vec<usize> = [Some(ix), Some(iy), Some(iz), ii, irgb, itime].into_iter().flatten().collect();
+    let slot_of = |f: Option<usize>| f.and_then(|f| wanted.iter().position(|&w| w == f));
+    let (si, srgb, stime) = (slot_of(ii), slot_of(irgb), slot_of(itime));
+    // The colour's bits, not its value as a float.
+    let get = |f: usize, b: &[u8]| if Some(f) == irgb { h.fields[f].bits(b) } else { h.fields[f].value(b) };
     for &f in &wanted {
-        if h.fields[f].value(&[0u8; 8]).is_none() {
+        if get(f, &[0u8; 8]).is_none() {
             let fd = &h.fields[f];
             return Err(ScannerError::file(
                 path,
@@ -237,6 +265,19 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
                     })?;
                     let v: f64 = if t.eq_ignore_ascii_case("nan") {
                         f64::NAN
+                    } else if Some(f) == irgb {
+                        // PCL prints the packed colour as an integer, also
+                        // when its type is F; some writers as the float of
+                        // its bits.
+                        let float = || t.parse::<f32>().ok().filter(|_| h.fields[f].kind == b'F').map(f32::to_bits);
+                        let bits = t.parse::<u32>().ok().or_else(float);
+                        bits.map(f64::from).ok_or_else(|| {
+                            ScannerError::file(
+                                path,
+                                Location::Line(header_lines + k + 1),
+                                format!("'{t}' is not a packed colour"),
+                            )
+                        })?
                     } else {
                         t.parse().map_err(|_| {
                             ScannerError::file(
@@ -274,7 +315,7 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
             for i in 0..n {
                 let rec = &data[i * record..(i + 1) * record];
                 for (slot, &f) in wanted.iter().enumerate() {
-                    values[slot].push(h.fields[f].value(&rec[offsets[f]..]).unwrap_or(f64::NAN));
+                    values[slot].push(get(f, &rec[offsets[f]..]).unwrap_or(f64::NAN));
                 }
             }
         }
@@ -335,13 +376,19 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
             for (slot, &f) in wanted.iter().enumerate() {
                 let fd = &h.fields[f];
                 values[slot]
-                    .extend((0..n).map(|i| fd.value(&plain[field_start[f] + i * fd.bytes()..]).unwrap_or(f64::NAN)));
+                    .extend((0..n).map(|i| get(f, &plain[field_start[f] + i * fd.bytes()..]).unwrap_or(f64::NAN)));
             }
         }
     }
+    let comments = std::str::from_utf8(&bytes[..h.offset]).unwrap_or_default();
     let mut cloud = PointCloud {
         points: Vec::with_capacity(n),
-        intensity: ii.map(|_| Vec::with_capacity(n)),
+        intensity: si.map(|_| Vec::with_capacity(n)),
+        color: srgb.map(|_| Vec::with_capacity(n)),
+        time: stime.map(|_| Vec::with_capacity(n)),
+        time_base: stime.map_or_else(Default::default, |_| {
+            super::TimeBase::from_comments(comments.lines().filter(|l| l.trim_start().starts_with('#')))
+        }),
         ..PointCloud::default()
     };
     for (i, ((x, y), z)) in values[0].iter().zip(&values[1]).zip(&values[2]).enumerate() {
@@ -349,8 +396,18 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
             continue;
         }
         cloud.points.push(Point3::new(*x as f32, *y as f32, *z as f32));
-        if let Some(v) = cloud.intensity.as_mut() {
-            v.push(values[3][i] as f32);
+        if let (Some(v), Some(s)) = (cloud.intensity.as_mut(), si) {
+            v.push(values[s][i] as f32);
+        }
+        if let (Some(v), Some(s)) = (cloud.color.as_mut(), srgb) {
+            v.push(unpack_rgb(values[s][i] as u32));
+        }
+        if let (Some(v), Some(s)) = (cloud.time.as_mut(), stime) {
+            let t = values[s][i];
+            if !t.is_finite() {
+                return Err(ScannerError::file(path, Location::File, format!("point {i}'s time {t} is not finite")));
+            }
+            v.push(t);
         }
     }
     Ok(cloud)
@@ -371,11 +428,13 @@ pub(super) fn write_header(w: &mut impl Write, header: &super::CloudHeader, data
     let n = header.points.map_or_else(|| COUNT_PLACEHOLDER.to_string(), |n| n.to_string());
     // Georeferenced: x, y, z as 8-byte doubles (origin + p).
     let xyz_size = if header.georeferenced() { 8 } else { 4 };
-    let (fields, sizes, types, counts) = if header.intensity {
-        ("x y z intensity", format!("{xyz_size} {xyz_size} {xyz_size} 4"), "F F F F", "1 1 1 1")
-    } else {
-        ("x y z", format!("{xyz_size} {xyz_size} {xyz_size}"), "F F F", "1 1 1")
-    };
+    let columns = columns(header.intensity, header.color, header.time.is_some());
+    let names: Vec<&str> = columns.iter().map(|c| c.name()).collect();
+    let sizes: Vec<String> = columns.iter().map(|c| if c.is_xyz() { xyz_size } else { c.size() }.to_string()).collect();
+    let types = vec!["F"; columns.len()];
+    let (fields, sizes, types, counts) =
+        (names.join(" "), sizes.join(" "), types.join(" "), vec!["1"; columns.len()].join(" "));
+    let comment = header.time.map(|b| format!("# {}\n", b.comment())).unwrap_or_default();
     let encoding = match data {
         PcdData::Ascii => "ascii",
         PcdData::Binary => "binary",
@@ -383,7 +442,7 @@ pub(super) fn write_header(w: &mut impl Write, header: &super::CloudHeader, data
     };
     write!(
         w,
-        "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS {fields}\nSIZE {sizes}\nTYPE {types}\nCOUNT {counts}\nWIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA {encoding}\n"
+        "# .PCD v0.7 - Point Cloud Data file format\n{comment}VERSION 0.7\nFIELDS {fields}\nSIZE {sizes}\nTYPE {types}\nCOUNT {counts}\nWIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA {encoding}\n"
     )
 }
 
@@ -403,20 +462,84 @@ pub(super) fn patch_count(header: &[u8], n: usize) -> Option<Vec<u8>> {
     (out.len() == header.len()).then(|| out.into_bytes())
 }
 
-/// Field `f` of point `i` of `cloud`: its little-endian bytes (appended to
+/// A field we write.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Column {
+    X,
+    Y,
+    Z,
+    Intensity,
+    /// PCL's packed colour: F4 as PCL declares it (the bits 0x00RRGGBB),
+    /// an integer in ASCII as PCL writes it.
+    Rgb,
+    /// F8 seconds.
+    Time,
+}
+
+impl Column {
+    fn name(self) -> &'static str {
+        match self {
+            Column::X => "x",
+            Column::Y => "y",
+            Column::Z => "z",
+            Column::Intensity => "intensity",
+            Column::Rgb => "rgb",
+            Column::Time => "time",
+        }
+    }
+
+    fn is_xyz(self) -> bool {
+        matches!(self, Column::X | Column::Y | Column::Z)
+    }
+
+    /// Bytes (x, y, z: 4, or 8 when georeferenced).
+    fn size(self) -> usize {
+        if self == Column::Time { 8 } else { 4 }
+    }
+}
+
+/// The fields of a cloud with these attributes, in order.
+fn columns(intensity: bool, color: bool, time: bool) -> Vec<Column> {
+    let mut c = vec![Column::X, Column::Y, Column::Z];
+    c.extend(intensity.then_some(Column::Intensity));
+    c.extend(color.then_some(Column::Rgb));
+    c.extend(time.then_some(Column::Time));
+    c
+}
+
+fn columns_of(cloud: &PointCloud) -> Vec<Column> {
+    columns(cloud.intensity.is_some(), cloud.color.is_some(), cloud.time.is_some())
+}
+
+/// Field `c` of point `i` of `cloud`: its little-endian bytes (appended to
 /// `bytes`) and its text.
-fn value(cloud: &PointCloud, i: usize, f: usize, bytes: &mut Vec<u8>) -> String {
-    if f < 3 && cloud.georeferenced() {
-        let v = cloud.coordinates(i)[f];
+fn value(cloud: &PointCloud, i: usize, c: Column, bytes: &mut Vec<u8>) -> String {
+    let axis = match c {
+        Column::X => 0,
+        Column::Y => 1,
+        Column::Z => 2,
+        Column::Intensity => {
+            let v = cloud.intensity.as_ref().map_or(0.0, |v| v[i]);
+            bytes.extend_from_slice(&v.to_le_bytes());
+            return v.to_string();
+        }
+        Column::Rgb => {
+            let v = pack_rgb(cloud.color.as_ref().map_or([0; 3], |c| c[i]));
+            bytes.extend_from_slice(&v.to_le_bytes());
+            return v.to_string();
+        }
+        Column::Time => {
+            let v = cloud.time.as_ref().map_or(0.0, |t| t[i]);
+            bytes.extend_from_slice(&v.to_le_bytes());
+            return v.to_string();
+        }
+    };
+    if cloud.georeferenced() {
+        let v = cloud.coordinates(i)[axis];
         bytes.extend_from_slice(&v.to_le_bytes());
         format!("{v:.4}")
     } else {
-        let v = match f {
-            0 => cloud.points[i].x,
-            1 => cloud.points[i].y,
-            2 => cloud.points[i].z,
-            _ => cloud.intensity.as_ref().map_or(0.0, |v| v[i]),
-        };
+        let v = cloud.points[i][axis];
         bytes.extend_from_slice(&v.to_le_bytes());
         v.to_string()
     }
@@ -425,16 +548,16 @@ fn value(cloud: &PointCloud, i: usize, f: usize, bytes: &mut Vec<u8>) -> String 
 /// The records of `cloud`'s points (ascii or binary: one point after the
 /// other, so a cloud can be written part by part).
 pub(super) fn write_points(w: &mut impl Write, cloud: &PointCloud, data: PcdData) -> std::io::Result<()> {
-    let nf = if cloud.intensity.is_some() { 4 } else { 3 };
+    let columns = columns_of(cloud);
     let mut scratch = Vec::with_capacity(8);
     for i in 0..cloud.points.len() {
         if data == PcdData::Ascii {
-            let row: Vec<String> = (0..nf).map(|f| value(cloud, i, f, &mut scratch)).collect();
+            let row: Vec<String> = columns.iter().map(|&c| value(cloud, i, c, &mut scratch)).collect();
             writeln!(w, "{}", row.join(" "))?;
         } else {
-            for f in 0..nf {
+            for &c in &columns {
                 scratch.clear();
-                value(cloud, i, f, &mut scratch);
+                value(cloud, i, c, &mut scratch);
                 w.write_all(&scratch)?;
             }
         }
@@ -446,11 +569,13 @@ pub(super) fn write_points(w: &mut impl Write, cloud: &PointCloud, data: PcdData
 /// (the whole cloud at once).
 fn write_compressed(w: &mut impl Write, cloud: &PointCloud) -> std::io::Result<()> {
     let n = cloud.points.len();
-    let nf = if cloud.intensity.is_some() { 4 } else { 3 };
-    let mut plain = Vec::with_capacity(n * (nf * 4 + if cloud.georeferenced() { 12 } else { 0 }));
-    for f in 0..nf {
+    let columns = columns_of(cloud);
+    let xyz = if cloud.georeferenced() { 8 } else { 4 };
+    let record: usize = columns.iter().map(|c| if c.is_xyz() { xyz } else { c.size() }).sum();
+    let mut plain = Vec::with_capacity(n * record);
+    for &c in &columns {
         for i in 0..n {
-            value(cloud, i, f, &mut plain);
+            value(cloud, i, c, &mut plain);
         }
     }
     let packed =

@@ -1,7 +1,11 @@
 //! PLY through `ply-rs-bw`: reads ascii and binary (either endianness)
-//! vertices with x, y, z of any numeric type and an optional intensity
-//! (`intensity`, `scalar_intensity`, `scalar_Intensity`); writes float x, y, z
-//! (+ intensity) in ascii or binary little endian.
+//! vertices with x, y, z of any numeric type, an optional intensity
+//! (`intensity`, `scalar_intensity`, `scalar_Intensity`), colour (`red`,
+//! `green`, `blue` as uchar or ushort) and time (`time`, `gps_time`,
+//! `timestamp`, `scalar_time`, `scalar_gps_time`, `scalar_GpsTime`; GPS
+//! time when the header's comment says so); writes float x, y, z
+//! (+ intensity, uchar colour, double `time`) in ascii or binary little
+//! endian.
 
 use std::io::{BufReader, Write};
 use std::path::Path;
@@ -27,11 +31,16 @@ pub enum PlyEncoding {
 }
 
 const INTENSITY_NAMES: [&str; 3] = ["intensity", "scalar_intensity", "scalar_Intensity"];
+const COLOR_NAMES: [&str; 3] = ["red", "green", "blue"];
+const TIME_NAMES: [&str; 6] = ["time", "gps_time", "timestamp", "scalar_time", "scalar_gps_time", "scalar_GpsTime"];
 
 #[derive(Debug, Clone, Copy, Default)]
 struct Vertex {
     p: [f32; 3],
     intensity: f32,
+    /// Colour, 16 bits a channel.
+    rgb: [u16; 3],
+    time: f64,
 }
 
 /// A vertex of a georeferenced cloud: double x, y, z (origin + p).
@@ -39,6 +48,13 @@ struct Vertex {
 struct GeoVertex {
     c: [f64; 3],
     intensity: f32,
+    rgb: [u16; 3],
+    time: f64,
+}
+
+/// A colour channel's 8 bits, by its property name.
+fn channel(rgb: &[u16; 3], name: &str) -> Option<u8> {
+    COLOR_NAMES.iter().position(|n| *n == name).map(|k| super::color_to_8bit(rgb[k]))
 }
 
 impl PropertyAccess for GeoVertex {
@@ -51,6 +67,7 @@ impl PropertyAccess for GeoVertex {
             "x" => Some(self.c[0]),
             "y" => Some(self.c[1]),
             "z" => Some(self.c[2]),
+            "time" => Some(self.time),
             _ => None,
         }
     }
@@ -58,6 +75,10 @@ impl PropertyAccess for GeoVertex {
     fn get_float(&self, _name: &str) -> Option<f32> {
         // The one float field, under whatever name the header gives it.
         Some(self.intensity)
+    }
+
+    fn get_uchar(&self, name: &str) -> Option<u8> {
+        channel(&self.rgb, name)
     }
 }
 
@@ -67,6 +88,24 @@ impl PropertyAccess for Vertex {
     }
 
     fn set_property(&mut self, name: &str, property: Property) -> PropertyAccessResult {
+        if let Some(k) = COLOR_NAMES.iter().position(|n| *n == name) {
+            self.rgb[k] = match property {
+                Property::UChar(v) => super::color_from_8bit(v),
+                Property::UShort(v) => v,
+                _ => return PropertyAccessResult::Ignored,
+            };
+            return PropertyAccessResult::Set;
+        }
+        if TIME_NAMES.contains(&name) {
+            self.time = match property {
+                Property::Double(v) => v,
+                other => match other.to_f32_lossy() {
+                    Some(v) => f64::from(v),
+                    None => return PropertyAccessResult::Ignored,
+                },
+            };
+            return PropertyAccessResult::Set;
+        }
         let slot = match name {
             "x" => &mut self.p[0],
             "y" => &mut self.p[1],
@@ -91,6 +130,14 @@ impl PropertyAccess for Vertex {
             // The one scalar field, under whatever name the header gives it.
             _ => Some(self.intensity),
         }
+    }
+
+    fn get_double(&self, name: &str) -> Option<f64> {
+        (name == "time").then_some(self.time)
+    }
+
+    fn get_uchar(&self, name: &str) -> Option<u8> {
+        channel(&self.rgb, name)
     }
 }
 
@@ -209,9 +256,23 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
         }
         found = true;
         let has_intensity = INTENSITY_NAMES.iter().any(|n| element.properties.contains_key(*n));
+        let has_color = COLOR_NAMES.iter().all(|n| {
+            element
+                .properties
+                .get(*n)
+                .is_some_and(|p| matches!(p.data_type, PropertyType::Scalar(ScalarType::UChar | ScalarType::UShort)))
+        });
+        let has_time = TIME_NAMES.iter().any(|n| element.properties.contains_key(*n));
         cloud.points = items.iter().map(|v| Point3::from(v.p)).collect();
         if has_intensity {
             cloud.intensity = Some(items.iter().map(|v| v.intensity).collect());
+        }
+        if has_color {
+            cloud.color = Some(items.iter().map(|v| v.rgb).collect());
+        }
+        if has_time {
+            cloud.time = Some(items.iter().map(|v| v.time).collect());
+            cloud.time_base = super::TimeBase::from_comments(header.comments.iter().map(String::as_str));
         }
     }
     if !found {
@@ -224,12 +285,17 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
             format!("vertex {i} is not finite: {:?}", cloud.points[i]),
         ));
     }
+    if let Some(i) = cloud.time.as_ref().and_then(|t| t.iter().position(|v| !v.is_finite())) {
+        return Err(ScannerError::file(path, Location::File, format!("vertex {i}'s time is not finite")));
+    }
     Ok(cloud)
 }
 
 /// The PLY header of a cloud: x, y, z (double when georeferenced: the
-/// coordinates, origin + p), `intensity` if it has one, its CRS in two
-/// comments (its name, then its WKT on one line), its point count.
+/// coordinates, origin + p), `intensity` if it has one, uchar `red`,
+/// `green`, `blue` if it has colours, double `time` (with a comment on its
+/// base) if it has times, its CRS in two comments (its name, then its WKT
+/// on one line), its point count.
 pub(super) fn cloud_header(cloud: &super::CloudHeader, encoding: PlyEncoding) -> Header {
     let mut comments: Vec<String> =
         cloud.crs.iter().flat_map(|c| [format!("crs {}", c.name), format!("crs_wkt {}", c.wkt)]).collect();
@@ -241,10 +307,24 @@ pub(super) fn cloud_header(cloud: &super::CloudHeader, encoding: PlyEncoding) ->
         ScalarType::Float
     };
     let names: &[&str] = if cloud.intensity { &["intensity"] } else { &[] };
+    let mut extra: Vec<(&str, ScalarType)> = Vec::new();
+    if cloud.color {
+        extra.extend(COLOR_NAMES.map(|n| (n, ScalarType::UChar)));
+    }
+    if let Some(base) = cloud.time {
+        extra.push(("time", ScalarType::Double));
+        comments.push(base.comment().to_string());
+    }
     // A cloud with a CRS is in the world (its axes east, north, up); one
     // without is in a body's frame (a scan in its scanner's).
     let axes = if cloud.crs.is_some() { WORLD_AXES } else { BODY_AXES };
-    header(xyz, axes, comments, names, encoding, cloud.points.unwrap_or(COUNT_PLACEHOLDER))
+    let mut h = header(xyz, axes, comments, names, encoding, cloud.points.unwrap_or(COUNT_PLACEHOLDER));
+    if let Some(vertex) = h.elements.get_mut("vertex") {
+        for (name, t) in extra {
+            vertex.properties.add(PropertyDef::new(name.to_string(), PropertyType::Scalar(t)));
+        }
+    }
+    h
 }
 
 /// The vertex count of a header written before it was known (20 digits).
@@ -269,12 +349,23 @@ pub(super) fn write_header(w: &mut impl Write, header: &Header) -> std::io::Resu
 /// part.
 pub(super) fn write_points(w: &mut impl Write, cloud: &PointCloud, header: &Header) -> std::io::Result<()> {
     let scalar_at = |i: usize| cloud.intensity.as_ref().map_or(0.0, |v| v[i]);
+    let rgb_at = |i: usize| cloud.color.as_ref().map_or([0; 3], |c| c[i]);
+    let time_at = |i: usize| cloud.time.as_ref().map_or(0.0, |t| t[i]);
     if cloud.georeferenced() {
-        let items = (0..cloud.len()).map(|i| GeoVertex { c: cloud.coordinates(i), intensity: scalar_at(i) });
+        let items = (0..cloud.len()).map(|i| GeoVertex {
+            c: cloud.coordinates(i),
+            intensity: scalar_at(i),
+            rgb: rgb_at(i),
+            time: time_at(i),
+        });
         write_vertices(w, header, &items.collect())
     } else {
-        let items =
-            cloud.points.iter().enumerate().map(|(i, p)| Vertex { p: [p.x, p.y, p.z], intensity: scalar_at(i) });
+        let items = cloud.points.iter().enumerate().map(|(i, p)| Vertex {
+            p: [p.x, p.y, p.z],
+            intensity: scalar_at(i),
+            rgb: rgb_at(i),
+            time: time_at(i),
+        });
         write_vertices(w, header, &items.collect())
     }
 }
@@ -291,7 +382,11 @@ pub(super) fn write_scalar(
     let header = header(ScalarType::Float, WORLD_AXES, Vec::new(), names, encoding, points.len());
     write_header(w, &header)?;
     let scalar_at = |i: usize| scalar.map_or(0.0, |(_, v)| v[i]);
-    let items = points.iter().enumerate().map(|(i, p)| Vertex { p: [p.x, p.y, p.z], intensity: scalar_at(i) });
+    let items = points.iter().enumerate().map(|(i, p)| Vertex {
+        p: [p.x, p.y, p.z],
+        intensity: scalar_at(i),
+        ..Vertex::default()
+    });
     write_vertices(w, &header, &items.collect())
 }
 

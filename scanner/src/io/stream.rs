@@ -93,6 +93,9 @@ impl CloudWriter {
                 crs: header.crs.clone(),
                 intensity: header.intensity.then(Vec::new),
                 source: header.source.then(Vec::new),
+                color: header.color.then(Vec::new),
+                time: header.time.map(|_| Vec::new()),
+                time_base: header.time.unwrap_or_default(),
                 ..PointCloud::default()
             }),
             Format::Pcd(data) => open(Kind::Pcd(data))?,
@@ -118,8 +121,8 @@ impl CloudWriter {
     }
 
     /// Appends `part`: its points (relative to the header's origin), their
-    /// intensities and scans as the header says, and its scans (their
-    /// point ranges within the part).
+    /// intensities, scans, colours and times as the header says, and its
+    /// scans (their point ranges within the part).
     pub fn push(&mut self, part: &PointCloud) -> Result<()> {
         let path = self.path.clone();
         let refuse = |message: String| ScannerError::file(&path, Location::File, message);
@@ -139,6 +142,16 @@ impl CloudWriter {
                 if part.source.is_some() { "" } else { "out" },
                 h.intensity,
                 h.source
+            )));
+        }
+        let part_time = part.time.as_ref().map(|_| part.time_base);
+        if part.color.is_some() != h.color || part_time != h.time {
+            return Err(refuse(format!(
+                "a part with colours {} and times {:?}: expected the cloud's (colours {}, times {:?})",
+                part.color.is_some(),
+                part_time,
+                h.color,
+                h.time
             )));
         }
         if let Some(n) = h.points
@@ -251,6 +264,12 @@ fn append(cloud: &mut PointCloud, part: &PointCloud) {
         all.extend_from_slice(more);
     }
     if let (Some(all), Some(more)) = (cloud.source.as_mut(), part.source.as_ref()) {
+        all.extend_from_slice(more);
+    }
+    if let (Some(all), Some(more)) = (cloud.color.as_mut(), part.color.as_ref()) {
+        all.extend_from_slice(more);
+    }
+    if let (Some(all), Some(more)) = (cloud.time.as_mut(), part.time.as_ref()) {
         all.extend_from_slice(more);
     }
     cloud.scans.extend(

@@ -363,6 +363,57 @@ fn match_keeps_the_inputs_scan_numbers_names_and_intensities() {
     assert_eq!(las_intensities(&again.join("cloud.las")), want, "through E57 and back");
 }
 
+/// `match` keeps each point's colour and time (issue 33, item 13): LAS
+/// inputs with 16-bit colours and adjusted standard GPS times come out of
+/// LAS (read by the `las` crate) and E57 with every point's colour and
+/// time, paired by the time; PLY has them in 8 bits.
+#[test]
+fn match_keeps_every_points_colour_and_time() {
+    use scanner::io::{Format, TimeBase};
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut inputs = Vec::new();
+    let mut want = std::collections::BTreeMap::new(); // time (µs) → colour
+    let mut t = 1_448_000_000.0;
+    for name in ["target", "source"] {
+        let mut cloud = scanner::io::read(Path::new(&data(&format!("small_gicp_pair/{name}.ply")))).expect("PLY");
+        let n = cloud.len();
+        cloud.color = Some((0..n).map(|i| [(i * 7919 % 65_536) as u16, (i % 65_536) as u16, 40_000]).collect());
+        cloud.time = Some((0..n).map(|i| t + i as f64 * 1e-5).collect());
+        cloud.time_base = TimeBase::Gps;
+        t += 10.0;
+        for (c, t) in cloud.color.iter().flatten().zip(cloud.time.iter().flatten()) {
+            want.insert((t * 1e6).round() as i64, *c);
+        }
+        let path = dir.path().join(format!("{name}.las"));
+        scanner::io::write(&path, &cloud, Format::Las).expect("written");
+        inputs.push(path.into_os_string());
+    }
+    let out = dir.path().join("out");
+    let mut args = inputs.clone();
+    args.extend(["--formats".into(), "las,e57,ply".into()]);
+    let (r, _) = run(&args, &out);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let points = las_points(&out.join("cloud.las"));
+    assert!(points.len() > want.len() * 9 / 10, "{} of {} points", points.len(), want.len());
+    for p in &points {
+        let key = ((p.gps_time.expect("a time") + 1e9) * 1e6).round() as i64;
+        let c = p.color.expect("a colour");
+        assert_eq!(want.get(&key), Some(&[c.red, c.green, c.blue]), "LAS point at {key} µs");
+    }
+    for scan in scanner::io::read_e57_scans(&out.join("cloud.e57")).expect("E57") {
+        assert_eq!(scan.time_base, TimeBase::Gps, "{}", scan.name);
+        for (t, c) in scan.time.expect("times").iter().zip(scan.color.expect("colours")) {
+            assert_eq!(want.get(&((t * 1e6).round() as i64)), Some(&c), "E57 {} point at {t}", scan.name);
+        }
+    }
+    let ply = scanner::io::read(&out.join("cloud.ply")).expect("PLY");
+    assert_eq!((ply.len(), ply.time_base), (points.len(), TimeBase::Gps));
+    for (t, c) in ply.time.expect("times").iter().zip(ply.color.expect("colours")) {
+        let w = want[&((t * 1e6).round() as i64)];
+        assert!((0..3).all(|k| (i32::from(w[k]) - i32::from(c[k])).abs() <= 128), "PLY {c:?} for {w:?}");
+    }
+}
+
 fn las_points(path: &Path) -> Vec<las::Point> {
     let mut reader = las::Reader::from_path(path).expect("LAS");
     reader.read_all().expect("points").points().map(|p| p.expect("a point")).collect()
