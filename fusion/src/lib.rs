@@ -26,6 +26,7 @@ pub mod icp;
 pub mod links;
 pub mod multiview;
 pub mod pipe;
+pub mod scale;
 pub mod scanset;
 pub mod se3;
 

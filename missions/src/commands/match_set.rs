@@ -46,7 +46,8 @@ pub struct MatchArgs {
     /// frame).
     #[arg(long, value_name = "FILE")]
     pub init_poses: Option<PathBuf>,
-    /// Coarse-to-fine stages "VOXEL/MAXDIST,…" in metres.
+    /// Coarse-to-fine stages "VOXEL/MAXDIST,…" in metres; refused when a
+    /// stage leaves a scan fewer than 50 voxel cells.
     #[arg(long, default_value = "0.5/2,0.25/1,0.1/0.5,0.05/0.2")]
     pub schedule: String,
     /// Error metric.
@@ -133,6 +134,24 @@ pub(crate) struct MatchReport {
     variance_factor: Option<f64>,
     /// Registration time, seconds (reading the scans and writing excluded).
     seconds: f64,
+    /// The length scales measured on the scans and the schedule used.
+    settings: SettingsReport,
+}
+
+/// What the scans measured and the settings they were matched with.
+#[derive(Debug, Clone, Serialize, schemars::JsonSchema)]
+struct SettingsReport {
+    /// The median distance from a point to its nearest neighbour over the
+    /// scans' surfaces (one point per cell of a fiftieth of the radius),
+    /// metres: the median over the scans.
+    spacing_m: f64,
+    /// The 90th percentile of a scan's points' distances from their
+    /// centroid, metres: the median over the scans.
+    radius_m: f64,
+    /// The stages, [voxel, correspondence distance] in metres.
+    schedule: Vec<[f64; 2]>,
+    /// The Huber width, metres (0: least squares).
+    huber_m: f64,
 }
 
 /// One scan in a [`MatchReport`].
@@ -239,6 +258,7 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
         bail!("{}: one scan: expected at least two to match", scans[0].file);
     }
     let points: Vec<&[nalgebra::Point3<f32>]> = scans.iter().map(|s| s.points.as_slice()).collect();
+    let settings = check_schedule(args, &scans, &points, &config)?;
     let starts: Vec<Isometry3<f64>> = scans.iter().map(|s| s.start).collect();
     rayon::broadcast(|_| ());
     let started = Instant::now();
@@ -251,7 +271,7 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
     bar.finish_and_clear();
     let result = result.map_err(|e| named(e, &scans))?;
     let seconds = started.elapsed().as_secs_f64();
-    let report = report(args.mode, &crs, &scans, &result, seconds);
+    let report = report(args.mode, &crs, &scans, &result, seconds, settings);
     let written = write_outputs(args, &crs, &scans, &result, &report)?;
     if args.json {
         crate::view::document::write_line(out, &report)?;
@@ -304,7 +324,56 @@ fn matrix<const R: usize, const C: usize>(f: impl Fn(usize, usize) -> f64) -> [[
     std::array::from_fn(|r| std::array::from_fn(|c| f(r, c)))
 }
 
-fn report(mode: ModeArg, crs: &scanner::io::Crs, scans: &[InputScan], r: &SetResult, seconds: f64) -> MatchReport {
+/// Occupied voxel cells a scan needs at every stage of a given schedule:
+/// fewer and ICP has nothing to fit (the coarsest stage of a 0.5 m
+/// schedule holds a 0.27 m object in 3 cells).
+const MIN_CELLS: usize = 50;
+
+/// The scans' length scales, with every stage of the schedule checked to
+/// leave each scan at least [`MIN_CELLS`] voxel cells (else refused naming
+/// the stage, the scan and the spacing found, before any match).
+fn check_schedule(
+    args: &MatchArgs,
+    scans: &[InputScan],
+    points: &[&[nalgebra::Point3<f32>]],
+    config: &SetConfig,
+) -> Result<SettingsReport> {
+    use fusion::scale::{SetScale, occupied_cells};
+    let Some(scale) = SetScale::of(points) else {
+        bail!("{}: no two distinct points in any scan: nothing to measure or match", scans[0].file);
+    };
+    for stage in &config.stages {
+        for (s, p) in scans.iter().zip(points) {
+            let cells = occupied_cells(p, stage.voxel_m);
+            if cells < MIN_CELLS {
+                bail!(
+                    "--schedule {}: stage {}/{} leaves {} in {cells} voxel cells (its points lie {:.3e} m apart over the surface, the scans' radius is {:.3e} m): expected at least {MIN_CELLS}; give stages whose voxels suit the scans (the finest near the spacing)",
+                    args.schedule,
+                    stage.voxel_m,
+                    stage.max_correspondence_m,
+                    s.file,
+                    scale.spacing_m,
+                    scale.radius_m
+                );
+            }
+        }
+    }
+    Ok(SettingsReport {
+        spacing_m: scale.spacing_m,
+        radius_m: scale.radius_m,
+        schedule: config.stages.iter().map(|s| [s.voxel_m, s.max_correspondence_m]).collect(),
+        huber_m: args.huber,
+    })
+}
+
+fn report(
+    mode: ModeArg,
+    crs: &scanner::io::Crs,
+    scans: &[InputScan],
+    r: &SetResult,
+    seconds: f64,
+    settings: SettingsReport,
+) -> MatchReport {
     use clap::ValueEnum;
     let numbers = crate::scans::inputs::scan_numbers(scans);
     MatchReport {
@@ -346,6 +415,7 @@ fn report(mode: ModeArg, crs: &scanner::io::Crs, scans: &[InputScan], r: &SetRes
         matches: r.matches,
         variance_factor: r.variance_factor,
         seconds,
+        settings,
     }
 }
 

@@ -363,6 +363,40 @@ fn match_keeps_the_inputs_scan_numbers_names_and_intensities() {
     assert_eq!(las_intensities(&again.join("cloud.las")), want, "through E57 and back");
 }
 
+/// The 3DTK scans at 1:100 (a 5 cm set) under the building schedule: the
+/// 0.5 m stage leaves a scan a handful of cells — refused before any match,
+/// naming the stage, the scan and the spacing found (issue 38: it failed
+/// with "target point count = 3 is out of range", blaming a good scan).
+/// The report states the spacing and radius it measured.
+#[test]
+fn a_schedule_too_coarse_for_the_scans_is_refused_with_the_spacing_found() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut inputs = Vec::new();
+    for k in 0..2 {
+        let mut cloud = scanner::io::read(Path::new(&data(&format!("3dtk_dat/scan{k:03}.3d")))).expect("scan");
+        cloud.points.iter_mut().for_each(|p| *p *= 0.01);
+        let path = dir.path().join(format!("small{k}.ply"));
+        scanner::io::write(&path, &cloud, scanner::io::Format::Ply(scanner::io::PlyEncoding::BinaryLittleEndian))
+            .expect("PLY");
+        inputs.push(path.into_os_string());
+    }
+    let (r, _) = run(&inputs, &dir.path().join("out"));
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    for part in
+        ["--schedule 0.5/2,0.25/1,0.1/0.5,0.05/0.2: stage 0.5/2 leaves", "small0.ply in", "apart over the surface"]
+    {
+        assert!(r.stderr.contains(part), "{part}: {}", r.stderr);
+    }
+    assert!(!dir.path().join("out").exists(), "refused before anything was written");
+    // The same scans at full size: the scales in the report.
+    let (r, v) = run(&[data("3dtk_dat")], &dir.path().join("full"));
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let settings = &v.expect("JSON")["settings"];
+    let (spacing, radius) = (settings["spacing_m"].as_f64().expect("m"), settings["radius_m"].as_f64().expect("m"));
+    assert!((0.03..0.1).contains(&spacing) && (4.0..8.0).contains(&radius), "{settings}");
+    assert_eq!(settings["schedule"][3], serde_json::json!([0.05, 0.2]));
+}
+
 /// `match` keeps each point's colour and time (issue 33, item 13): LAS
 /// inputs with 16-bit colours and adjusted standard GPS times come out of
 /// LAS (read by the `las` crate) and E57 with every point's colour and
