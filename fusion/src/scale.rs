@@ -1,11 +1,14 @@
 //! The length scales of a scan set — how far apart its points lie and how
-//! large its scans are — measured on the scans, and the voxel cells a scan
-//! occupies (what a coarse-to-fine stage has to match): `match` reports
-//! them and refuses a schedule that leaves a scan too few cells.
+//! large its scans are — measured on the scans; the coarse-to-fine
+//! schedule and metre-valued settings they call for, so that the same set
+//! registers the same way at 1:100 and at 100:1; and the voxel cells a
+//! scan occupies (what a stage has to match).
 
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nalgebra::Point3;
 use rayon::prelude::*;
+
+use crate::icp::Stage;
 
 /// A scan's radius: this quantile of its points' distances from their
 /// centroid (a range scan's points crowd near the scanner: the median
@@ -17,6 +20,21 @@ const CELLS_PER_RADIUS: f64 = 50.0;
 
 /// Points per scan whose nearest neighbour is measured.
 const SAMPLES: usize = 2000;
+
+/// The building recipe (voxel, correspondence distance), metres: the
+/// schedule the 3DTK and PCL results were measured with.
+const RECIPE: [(f64, f64); 4] = [(0.5, 2.0), (0.25, 1.0), (0.1, 0.5), (0.05, 0.2)];
+
+/// The first stage's voxel as a fraction of the scans' radius: on the
+/// 3DTK hall scans (radius 5.46 m) it gives the recipe's 0.5 m.
+const FIRST_VOXEL_OF_RADIUS: f64 = 1.0 / 11.0;
+
+/// The recipe's settings per metre of its last voxel (5 cm): Huber width
+/// 2 cm, convergence below 0.1 mm; and per metre of its first voxel
+/// (0.5 m): the start's step σ 0.1 m.
+const HUBER_OF_LAST_VOXEL: f64 = 0.4;
+const TOLERANCE_OF_LAST_VOXEL: f64 = 2e-3;
+const STEP_SIGMA_OF_FIRST_VOXEL: f64 = 0.2;
 
 /// The length scales of a scan set (medians over its scans).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -41,6 +59,40 @@ impl SetScale {
         let spacing_m = median(each.iter().map(|e| e.0).collect());
         let radius_m = median(each.iter().map(|e| e.1).collect());
         Some(Self { spacing_m, radius_m })
+    }
+
+    /// The coarse-to-fine schedule for this set: the building recipe
+    /// (0.5/2, 0.25/1, 0.1/0.5, 0.05/0.2 m) scaled so that its first voxel
+    /// is an eleventh of the scans' radius — the recipe itself (× 0.99) on
+    /// the 3DTK hall scans, a hundredth of it on the same scans at 1:100.
+    pub fn schedule(&self) -> Vec<Stage> {
+        let k = self.radius_m * FIRST_VOXEL_OF_RADIUS / RECIPE[0].0;
+        RECIPE.iter().map(|&(v, d)| Stage { voxel_m: v * k, max_correspondence_m: d * k }).collect()
+    }
+}
+
+/// The metre-valued settings of a set registered with a schedule, scaled
+/// from the building recipe's (0.5 m → 5 cm voxels: Huber 2 cm, step σ
+/// 0.1 m, convergence 0.1 mm) by its first and last voxels.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScaledSettings {
+    /// Huber kernel width, metres.
+    pub huber_m: f64,
+    /// σ of the start's step between scans, metres.
+    pub step_sigma_m: f64,
+    /// ICP's translation convergence tolerance, metres.
+    pub translation_tolerance_m: f64,
+}
+
+impl ScaledSettings {
+    /// The settings for `stages` (`None` when empty).
+    pub fn of(stages: &[Stage]) -> Option<Self> {
+        let (first, last) = (stages.first()?.voxel_m, stages.last()?.voxel_m);
+        Some(Self {
+            huber_m: HUBER_OF_LAST_VOXEL * last,
+            step_sigma_m: STEP_SIGMA_OF_FIRST_VOXEL * first,
+            translation_tolerance_m: TOLERANCE_OF_LAST_VOXEL * last,
+        })
     }
 }
 
@@ -130,7 +182,28 @@ mod tests {
             let f = f64::from(factor);
             assert!((other.spacing_m / (scale.spacing_m * f) - 1.0).abs() < 1e-5, "{other:?}");
             assert!((other.radius_m / (scale.radius_m * f) - 1.0).abs() < 1e-5, "{other:?}");
+            for (a, b) in other.schedule().iter().zip(scale.schedule()) {
+                assert!((a.voxel_m / (b.voxel_m * f) - 1.0).abs() < 1e-5);
+                assert!((a.max_correspondence_m / (b.max_correspondence_m * f) - 1.0).abs() < 1e-5);
+            }
         }
+    }
+
+    #[test]
+    fn the_schedule_is_the_recipe_scaled_to_the_radius() {
+        let s = SetScale { spacing_m: 0.001, radius_m: 5.5 }.schedule();
+        for (stage, (v, d)) in s.iter().zip(RECIPE) {
+            assert!((stage.voxel_m - v).abs() < 1e-12 && (stage.max_correspondence_m - d).abs() < 1e-12, "{s:?}");
+        }
+        let small = SetScale { spacing_m: 0.001, radius_m: 0.055 }.schedule();
+        assert!((small[3].voxel_m - 5e-4).abs() < 1e-15 && (small[0].max_correspondence_m - 0.02).abs() < 1e-15);
+        // The recipe's settings at its own scale, and a hundredth of them.
+        let set = ScaledSettings::of(&s).expect("settings");
+        assert!((set.huber_m - 0.02).abs() < 1e-12 && (set.step_sigma_m - 0.1).abs() < 1e-12, "{set:?}");
+        assert!((set.translation_tolerance_m - 1e-4).abs() < 1e-15, "{set:?}");
+        let set = ScaledSettings::of(&small).expect("settings");
+        assert!((set.huber_m - 2e-4).abs() < 1e-15 && (set.step_sigma_m - 1e-3).abs() < 1e-15, "{set:?}");
+        assert_eq!(ScaledSettings::of(&[]), None);
     }
 
     #[test]

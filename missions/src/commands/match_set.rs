@@ -46,16 +46,19 @@ pub struct MatchArgs {
     /// frame).
     #[arg(long, value_name = "FILE")]
     pub init_poses: Option<PathBuf>,
-    /// Coarse-to-fine stages "VOXEL/MAXDIST,…" in metres; refused when a
-    /// stage leaves a scan fewer than 50 voxel cells.
-    #[arg(long, default_value = "0.5/2,0.25/1,0.1/0.5,0.05/0.2")]
+    /// Coarse-to-fine stages "VOXEL/MAXDIST,…" in metres, or "auto": the
+    /// building recipe 0.5/2,0.25/1,0.1/0.5,0.05/0.2 scaled so that its
+    /// first voxel is an eleventh of the scans' radius (measured on them).
+    /// A stage that leaves a scan fewer than 50 voxel cells is refused.
+    #[arg(long, default_value = "auto")]
     pub schedule: String,
     /// Error metric.
     #[arg(long, value_enum, default_value = "point-to-plane")]
     pub method: MethodArg,
-    /// Huber kernel width, metres (0: plain least squares).
-    #[arg(long, default_value_t = 0.02)]
-    pub huber: f64,
+    /// Huber kernel width, metres (0: plain least squares). Default: 0.4 ×
+    /// the last stage's voxel (2 cm at the recipe's 5 cm).
+    #[arg(long)]
+    pub huber: Option<f64>,
     /// graph: each scan is linked to at most this many earlier scans, those
     /// it overlaps most.
     #[arg(long, default_value_t = 10)]
@@ -148,10 +151,18 @@ struct SettingsReport {
     /// The 90th percentile of a scan's points' distances from their
     /// centroid, metres: the median over the scans.
     radius_m: f64,
+    /// Whether the schedule was derived from the scans (`--schedule auto`).
+    auto_schedule: bool,
     /// The stages, [voxel, correspondence distance] in metres.
     schedule: Vec<[f64; 2]>,
     /// The Huber width, metres (0: least squares).
     huber_m: f64,
+    /// σ of the start's step between scans, metres (0.2 × the first
+    /// voxel).
+    step_sigma_m: f64,
+    /// ICP's convergence tolerance in translation, metres (0.002 × the
+    /// last voxel).
+    translation_tolerance_m: f64,
 }
 
 /// One scan in a [`MatchReport`].
@@ -213,9 +224,12 @@ impl crate::view::document::Document for MatchReport {
 /// Runs `match`.
 pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
     crate::scans::settings::check_range(args.min_range, args.max_range)?;
-    let stages = crate::scans::settings::schedule(&args.schedule)?;
-    if !(args.huber.is_finite() && args.huber >= 0.0) {
-        bail!("--huber {}: expected a width ≥ 0 in metres (0: least squares)", args.huber);
+    let given =
+        (args.schedule.trim() != "auto").then(|| crate::scans::settings::schedule(&args.schedule)).transpose()?;
+    if let Some(h) = args.huber
+        && !(h.is_finite() && h >= 0.0)
+    {
+        bail!("--huber {h}: expected a width ≥ 0 in metres (0: least squares)");
     }
     for (k, f) in args.formats.iter().enumerate() {
         if !crate::mission::OUTPUT_FORMATS.contains(&f.as_str()) {
@@ -236,11 +250,10 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
     if args.max_partners == 0 {
         bail!("--max-partners 0: expected at least 1");
     }
-    let mut config = SetConfig { mode: mode(args.mode), stages, ..SetConfig::default() };
+    let mut config = SetConfig { mode: mode(args.mode), ..SetConfig::default() };
     config.link.max_partners = args.max_partners;
     let icp = &mut config.link.multiview.icp;
     icp.degeneracy_ratio = (args.degeneracy_ratio > 0.0).then_some(args.degeneracy_ratio);
-    icp.kernel = if args.huber > 0.0 { Kernel::Huber { width_m: args.huber } } else { Kernel::None };
     if args.method == MethodArg::PointToPoint {
         icp.method = Method::PointToPoint;
         // Back faces need the target's normals, which point-to-point does not estimate.
@@ -258,7 +271,7 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
         bail!("{}: one scan: expected at least two to match", scans[0].file);
     }
     let points: Vec<&[nalgebra::Point3<f32>]> = scans.iter().map(|s| s.points.as_slice()).collect();
-    let settings = check_schedule(args, &scans, &points, &config)?;
+    let settings = scale_settings(args, given, &scans, &points, &mut config)?;
     let starts: Vec<Isometry3<f64>> = scans.iter().map(|s| s.start).collect();
     rayon::broadcast(|_| ());
     let started = Instant::now();
@@ -329,25 +342,32 @@ fn matrix<const R: usize, const C: usize>(f: impl Fn(usize, usize) -> f64) -> [[
 /// schedule holds a 0.27 m object in 3 cells).
 const MIN_CELLS: usize = 50;
 
-/// The scans' length scales, with every stage of the schedule checked to
-/// leave each scan at least [`MIN_CELLS`] voxel cells (else refused naming
-/// the stage, the scan and the spacing found, before any match).
-fn check_schedule(
+/// The scans' length scales, and the schedule and metre-valued settings
+/// they call for, set into `config`: the schedule given or derived
+/// ([`fusion::scale::SetScale::schedule`]), each stage checked to leave
+/// every scan at least [`MIN_CELLS`] voxel cells (else refused naming the
+/// stage, the scan and the spacing found, before any match); the Huber
+/// width given or scaled, the step σ and the convergence tolerance scaled
+/// to the schedule ([`fusion::scale::ScaledSettings`]).
+fn scale_settings(
     args: &MatchArgs,
+    given: Option<Vec<fusion::icp::Stage>>,
     scans: &[InputScan],
     points: &[&[nalgebra::Point3<f32>]],
-    config: &SetConfig,
+    config: &mut SetConfig,
 ) -> Result<SettingsReport> {
-    use fusion::scale::{SetScale, occupied_cells};
+    use fusion::scale::{ScaledSettings, SetScale, occupied_cells};
     let Some(scale) = SetScale::of(points) else {
         bail!("{}: no two distinct points in any scan: nothing to measure or match", scans[0].file);
     };
-    for stage in &config.stages {
+    let auto = given.is_none();
+    let stages = given.unwrap_or_else(|| scale.schedule());
+    for stage in &stages {
         for (s, p) in scans.iter().zip(points) {
             let cells = occupied_cells(p, stage.voxel_m);
             if cells < MIN_CELLS {
                 bail!(
-                    "--schedule {}: stage {}/{} leaves {} in {cells} voxel cells (its points lie {:.3e} m apart over the surface, the scans' radius is {:.3e} m): expected at least {MIN_CELLS}; give stages whose voxels suit the scans (the finest near the spacing)",
+                    "--schedule {}: stage {}/{} leaves {} in {cells} voxel cells (its points lie {:.3e} m apart over the surface, the scans' radius is {:.3e} m): expected at least {MIN_CELLS}; give stages whose voxels suit the scans (the finest near the spacing), or --schedule auto",
                     args.schedule,
                     stage.voxel_m,
                     stage.max_correspondence_m,
@@ -358,11 +378,21 @@ fn check_schedule(
             }
         }
     }
+    let scaled = ScaledSettings::of(&stages).context("an empty schedule")?;
+    let huber_m = args.huber.unwrap_or(scaled.huber_m);
+    let icp = &mut config.link.multiview.icp;
+    icp.kernel = if huber_m > 0.0 { Kernel::Huber { width_m: huber_m } } else { Kernel::None };
+    icp.translation_tolerance_m = scaled.translation_tolerance_m;
+    config.link.step_sigma_m = scaled.step_sigma_m;
+    config.stages = stages;
     Ok(SettingsReport {
         spacing_m: scale.spacing_m,
         radius_m: scale.radius_m,
+        auto_schedule: auto,
         schedule: config.stages.iter().map(|s| [s.voxel_m, s.max_correspondence_m]).collect(),
-        huber_m: args.huber,
+        huber_m,
+        step_sigma_m: scaled.step_sigma_m,
+        translation_tolerance_m: scaled.translation_tolerance_m,
     })
 }
 
