@@ -122,3 +122,39 @@ fn adjust_on_a_full_disk_keeps_the_last_listing_whole() {
     assert_eq!(std::fs::read(&listing).expect("listing"), before, "the last listing, whole");
     assert!(!out.join("adjustment.txt.partial").exists(), "no partial file left");
 }
+
+/// `match` whose recording (1,625 KB) cannot be written whole under a
+/// file-size limit its LAZ cloud (787 KB) fits in — 1,560 blocks: 799 KB
+/// of 512 bytes (dash) or 1,597 KB of 1,024 (bash) (issue 34, F3: a
+/// truncated match.rrd was left): exit 2 naming match.rrd, no match.rrd
+/// and no `.partial`, what was written kept.
+#[test]
+fn a_match_recording_that_cannot_be_written_leaves_no_truncated_file() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/pcl_room_scans");
+    let odometry = std::fs::read_to_string(data.join("odometry_T_scan1_scan2.txt")).expect("odometry");
+    let rows: Vec<String> = odometry
+        .lines()
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| format!("[{}]", l.split_whitespace().collect::<Vec<_>>().join(",")))
+        .collect();
+    let init = dir.path().join("init.json");
+    std::fs::write(&init, format!("[{{\"file\": \"room_scan2.pcd\", \"world_from_scan\": [{}]}}]", rows.join(",")))
+        .expect("init");
+    let out = dir.path().join("full");
+    let script = "ulimit -f 1560; trap '' XFSZ; exec \"$0\" \"$@\"";
+    let output = Command::new("sh")
+        .args(["-c", script, env!("CARGO_BIN_EXE_cps-survey"), "match"])
+        .args([data.join("room_scan1.pcd"), data.join("room_scan2.pcd")])
+        .arg("--init-poses")
+        .arg(&init)
+        .args(["--formats", "laz", "--out"])
+        .arg(&out)
+        .output()
+        .expect("sh runs");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("match.rrd"), "{stderr}");
+    assert!(!out.join("match.rrd").exists() && !out.join("match.rrd.partial").exists(), "no truncated recording");
+    assert!(out.join("cloud.laz").is_file() && out.join("poses.json").is_file(), "what was written is kept");
+}

@@ -357,6 +357,7 @@ fn scale_settings(
     config: &mut SetConfig,
 ) -> Result<SettingsReport> {
     use fusion::scale::{ScaledSettings, SetScale, occupied_cells};
+    check_distinct(scans)?;
     let Some(scale) = SetScale::of(points) else {
         bail!("{}: no two distinct points in any scan: nothing to measure or match", scans[0].file);
     };
@@ -394,6 +395,29 @@ fn scale_settings(
         step_sigma_m: scaled.step_sigma_m,
         translation_tolerance_m: scaled.translation_tolerance_m,
     })
+}
+
+/// Refuses a scan whose points all lie at one position (nothing to match:
+/// issue 34, U5 blamed its reduced count) and two scans that hold the same
+/// points (the same file or E57 scan given twice: U3), naming them.
+fn check_distinct(scans: &[InputScan]) -> Result<()> {
+    use std::hash::{Hash, Hasher};
+    let mut seen: std::collections::HashMap<u64, usize> = std::collections::HashMap::new();
+    for (i, s) in scans.iter().enumerate() {
+        if s.points.iter().all(|p| *p == s.points[0]) {
+            bail!("{}: its {} points all lie at one position: expected a scan of surfaces", s.file, s.points.len());
+        }
+        let mut h = std::collections::hash_map::DefaultHasher::new();
+        s.points.len().hash(&mut h);
+        s.points.iter().for_each(|p| [p.x, p.y, p.z].map(f32::to_bits).hash(&mut h));
+        if let Some(&j) = seen.get(&h.finish())
+            && scans[j].points == s.points
+        {
+            bail!("{} and {} hold the same points: expected each scan once", scans[j].file, s.file);
+        }
+        seen.insert(h.finish(), i);
+    }
+    Ok(())
 }
 
 fn report(
@@ -460,6 +484,11 @@ fn write_outputs(
     let dir = &args.out;
     let frames = dir.join("frames");
     remove_stale_outputs(dir, &args.formats)?;
+    // A link in frames' place is replaced by match's own directory, never
+    // followed.
+    if std::fs::symlink_metadata(&frames).is_ok_and(|m| m.file_type().is_symlink()) {
+        std::fs::remove_file(&frames).with_context(|| format!("removing the link {}", frames.display()))?;
+    }
     std::fs::create_dir_all(&frames).with_context(|| format!("creating {}", frames.display()))?;
     crate::view::document::write_file(&dir.join("poses.json"), report)?;
     let mut names = std::collections::HashSet::new();
@@ -478,13 +507,30 @@ fn write_outputs(
     let numbers: Vec<u16> = report.scans.iter().map(|s| s.number).collect();
     written.extend(write_clouds(dir, &args.formats, crs, scans, &numbers, r)?);
     let rrd = dir.join("match.rrd");
-    let mut rec = Recorder::new("match", Some(&rrd), &Viewer::None, Vec::new())?;
-    if rec.enabled() {
+    // Recorded into a new file beside it (a link or file there removed,
+    // not followed) and renamed into place when whole: a full disk leaves
+    // no truncated recording, a link at match.rrd is replaced.
+    let partial = dir.join("match.rrd.partial");
+    if std::fs::symlink_metadata(&partial).is_ok() {
+        std::fs::remove_file(&partial).with_context(|| format!("removing {}", partial.display()))?;
+    }
+    let recorded = (|| -> Result<bool> {
+        let mut rec = Recorder::new("match", Some(&partial), &Viewer::None, Vec::new())?;
+        if !rec.enabled() {
+            return Ok(false);
+        }
         for (i, s) in scans.iter().enumerate() {
             rec.scan("before", &s.name, fusion::direct::transform(&s.points, &s.start))?;
             rec.scan("after", &s.name, fusion::direct::transform(&s.points, &r.world_from_scan[i]))?;
         }
         rec.finish()?;
+        std::fs::rename(&partial, &rrd).with_context(|| format!("writing {}", rrd.display()))?;
+        Ok(true)
+    })();
+    if !matches!(recorded, Ok(true)) {
+        let _ = std::fs::remove_file(&partial);
+    }
+    if recorded.with_context(|| format!("writing {}", rrd.display()))? {
         written.push("match.rrd".into());
     }
     Ok(written)
@@ -658,6 +704,21 @@ fn check_out(args: &MatchArgs) -> Result<()> {
             "--out {}: a run directory (it holds journal.jsonl): match writes its outputs into a directory of its own",
             out.display()
         );
+    }
+    // An output's name taken by something match cannot replace (a
+    // directory where a file goes, a file where frames/ goes) is refused
+    // now, not after the registration (with a `.partial` left).
+    let files = ["poses.json", "links.csv", "match.rrd"].map(String::from);
+    let clouds = args.formats.iter().map(|f| crate::run::outputs::cloud_file(f));
+    for name in files.into_iter().chain(clouds) {
+        let path = out.join(&name);
+        if std::fs::symlink_metadata(&path).is_ok_and(|m| m.is_dir()) {
+            bail!("--out {}: {name} is a directory: expected match's output file there (or nothing)", out.display());
+        }
+    }
+    let frames = out.join("frames");
+    if std::fs::symlink_metadata(&frames).is_ok_and(|m| !m.is_dir() && !m.file_type().is_symlink()) {
+        bail!("--out {}: frames is a file: expected match's frames/ directory there (or nothing)", out.display());
     }
     let Ok(out_real) = out.canonicalize() else { return Ok(()) }; // not there yet: nothing in it
     for input in &args.inputs {

@@ -387,7 +387,11 @@ pub(crate) fn check(cloud: &PointCloud) -> std::result::Result<(), String> {
 /// error (reported against `path`).
 pub(crate) fn finish_write<T>(path: &Path, tmp: &Path, result: Result<T>) -> Result<T> {
     match result {
-        Ok(value) => std::fs::rename(tmp, path).map(|()| value).map_err(|e| ScannerError::io(path, e)),
+        Ok(value) => std::fs::rename(tmp, path).map(|()| value).map_err(|e| {
+            // (A directory in the way, say: no `.partial` left behind.)
+            let _ = std::fs::remove_file(tmp);
+            ScannerError::io(path, e)
+        }),
         Err(e) => {
             let _ = std::fs::remove_file(tmp);
             Err(against(path, e))

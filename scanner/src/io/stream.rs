@@ -68,6 +68,15 @@ impl CloudWriter {
             ));
         }
         let tmp = temporary(path);
+        // Whatever is at the temporary names (a link left there, a stale
+        // file) is removed, not followed: every sink creates its file anew.
+        let mut copc_laz = tmp.file_name().map(|n| n.to_os_string()).unwrap_or_default();
+        copc_laz.push(".laz");
+        for stale in [tmp.clone(), tmp.with_file_name(copc_laz)] {
+            if std::fs::symlink_metadata(&stale).is_ok() {
+                std::fs::remove_file(&stale).map_err(|e| ScannerError::io(&stale, e))?;
+            }
+        }
         let open = |kind: Kind| -> Result<Sink> {
             let mut w = create_hashed(&tmp).map_err(|e| against(path, e))?;
             let mut bytes = Vec::new();

@@ -204,8 +204,9 @@ pub fn write_3dtk_frames(path: &Path, world_from_scan: &Isometry3<f64>) -> Resul
     let values: Vec<String> =
         (0..4).flat_map(|c| (0..4).map(move |r| (r, c))).map(|(r, c)| m[(r, c)].to_string()).collect();
     let text = format!("{} 1\n", values.join(" "));
-    let tmp = super::temporary(path);
-    std::fs::write(&tmp, text).and_then(|()| std::fs::rename(&tmp, path)).map_err(|e| ScannerError::io(path, e))
+    // A new file renamed into place: a link at `path` is replaced, never
+    // written through.
+    super::replace_file(path, text.as_bytes())
 }
 
 /// Reads a 3DTK `.frames` file: the transform of its last line (16

@@ -443,6 +443,16 @@ fn a_schedule_too_coarse_for_the_scans_is_refused_with_the_spacing_found() {
         assert!(r.stderr.contains(part), "{part}: {}", r.stderr);
     }
     assert!(!dir.path().join("out").exists(), "refused before anything was written");
+    // Issue 34, S10: a stage that leaves a scan one point ran "0 ICP runs",
+    // exit 0.
+    let rooms = [data("pcl_room_scans/room_scan1.pcd"), data("pcl_room_scans/room_scan2.pcd")];
+    let (r, _) = run(&[&rooms[..], &["--schedule".into(), "1e6/1e6".into()]].concat(), &dir.path().join("s10"));
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(
+        r.stderr.contains("stage 1000000/1000000 leaves") && r.stderr.contains("expected at least 50"),
+        "{}",
+        r.stderr
+    );
     // The same scans at full size: the scales in the report.
     let (r, v) = run(&[data("3dtk_dat")], &dir.path().join("full"));
     assert_eq!(r.code, 0, "{}", r.stderr);
@@ -550,6 +560,76 @@ fn a_set_at_national_grid_coordinates_reports_the_sigma_it_has_at_the_origin() {
         let (deg, m) = error(&q, &(offset * p));
         assert!(deg < 1e-6 && m < 1e-4, "scan {k}: {deg}° {m} m from the origin's result shifted");
     }
+}
+
+/// `match`'s outputs replace what is in their place, never write through
+/// it (issue 34, W1: links at frames/, match.rrd and the temporary names
+/// wrote into the linked directory and files); a directory where an
+/// output file goes is refused before the registration, with nothing
+/// written and no `.partial` left (F4); a scan of one repeated point and a
+/// scan given twice are named (U5, U3). (F3, a recording that cannot be
+/// written whole: `missions/tests/disk_full.rs`.)
+#[test]
+#[cfg(unix)]
+fn match_replaces_links_and_leaves_no_partial_file() {
+    use std::os::unix::fs::symlink;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let init = room_odometry(dir.path());
+    let rooms = [data("pcl_room_scans/room_scan1.pcd"), data("pcl_room_scans/room_scan2.pcd")];
+    let args = |extra: &[&str]| -> Vec<OsString> {
+        let mut a = rooms.to_vec();
+        a.extend(["--init-poses".into(), init.clone().into_os_string()]);
+        a.extend(extra.iter().map(OsString::from));
+        a
+    };
+    // W1: links in every output's place.
+    let (victim, out) = (dir.path().join("victim"), dir.path().join("o"));
+    std::fs::create_dir_all(victim.join("fr")).expect("victim");
+    std::fs::create_dir_all(&out).expect("out");
+    for (link, target) in [
+        ("poses.json", "poses.json"),
+        ("frames", "fr"),
+        ("match.rrd", "m.rrd"),
+        ("match.rrd.partial", "p.rrd"),
+        ("cloud.ply.partial", "c.ply"),
+        ("links.csv", "l.csv"),
+    ] {
+        symlink(victim.join(target), out.join(link)).expect("link");
+    }
+    symlink(victim.join("f1"), victim.join("fr/room_scan1.frames")).expect("link");
+    let (r, _) = run(&args(&[]), &out);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let mut left: Vec<String> = std::fs::read_dir(&victim)
+        .expect("victim")
+        .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+        .collect();
+    left.sort();
+    assert_eq!(left, ["fr"], "nothing written into the linked places");
+    assert_eq!(std::fs::read_dir(victim.join("fr")).expect("fr").count(), 1, "only the link that was there");
+    for name in ["poses.json", "match.rrd", "links.csv", "cloud.ply"] {
+        let meta = std::fs::symlink_metadata(out.join(name)).expect(name);
+        assert!(meta.is_file(), "{name} is match's own file");
+    }
+    assert!(std::fs::symlink_metadata(out.join("frames")).expect("frames").is_dir());
+    assert!(!out.join("match.rrd.partial").exists() && !out.join("cloud.ply.partial").exists());
+
+    // F4: a directory where the cloud goes.
+    let blocked = dir.path().join("blocked");
+    std::fs::create_dir_all(blocked.join("cloud.ply")).expect("dir");
+    let (r, _) = run(&args(&[]), &blocked);
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(r.stderr.contains("cloud.ply is a directory"), "{}", r.stderr);
+    assert_eq!(std::fs::read_dir(&blocked).expect("blocked").count(), 1, "nothing written");
+
+    // U5, U3.
+    let same = dir.path().join("same.xyz");
+    std::fs::write(&same, "1 2 3\n".repeat(1000)).expect("xyz");
+    let (r, _) = run(&[same.into_os_string(), rooms[0].clone()], &dir.path().join("u5"));
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(r.stderr.contains("same.xyz: its 1000 points all lie at one position"), "{}", r.stderr);
+    let (r, _) = run(&[rooms[0].clone(), rooms[0].clone()], &dir.path().join("u3"));
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(r.stderr.contains("hold the same points: expected each scan once"), "{}", r.stderr);
 }
 
 /// A link whose match hit the iteration cap is not used (issue 34, S6: a
