@@ -191,4 +191,11 @@ fn resume_refuses_another_mission_and_a_missing_run() {
     let refused = run(&other, &out, &["--resume"]);
     assert_eq!(refused.status.code(), Some(2));
     assert!(stderr(&refused).contains("not the mission this run started with"), "{}", stderr(&refused));
+    // Issue 34, U10: the same mission with another seed names the seeds,
+    // not the mission file.
+    let seeded = run(&m, &out, &["--resume", "--seed", "9"]);
+    assert_eq!(seeded.status.code(), Some(2));
+    let text = stderr(&seeded);
+    assert!(text.contains("started with seed") && text.contains("this resume has seed 9"), "{text}");
+    assert!(!text.contains("not the mission"), "{text}");
 }

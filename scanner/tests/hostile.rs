@@ -140,3 +140,40 @@ fn errors_name_the_place_and_say_what_was_expected() {
     refused(&ply, "line 9: '1 2 x' is not a row of element 'vertex': expected x y z");
     assert!(!read(&ply).expect_err("bad row").to_string().contains("String:"));
 }
+
+/// An E57 scan whose pose quaternion is w = 1e300 (its norm overflows to
+/// ∞, the rotation to NaN): refused naming the data3D and the norm, not an
+/// ICP error later (issue 34, U4); a slightly unnormalised one (1 + 1e-5)
+/// is read, normalised.
+#[test]
+fn an_e57_pose_that_is_no_unit_quaternion_is_refused() {
+    use e57::{E57Writer, Quaternion, Record, RecordValue, Transform, Translation};
+    let dir = tempfile::tempdir().expect("temp dir");
+    for (w, ok) in [(1e300, false), (2.0, false), (1.0 + 1e-5, true)] {
+        let path = dir.path().join("q.e57");
+        let mut writer = E57Writer::from_file(&path, "{a1b2c3d4-0000-4000-8000-000000000001}").expect("writer");
+        let prototype = vec![Record::CARTESIAN_X_F64, Record::CARTESIAN_Y_F64, Record::CARTESIAN_Z_F64];
+        let mut pc = writer.add_pointcloud("{a1b2c3d4-0000-4000-8000-000000000002}", prototype).expect("pc");
+        pc.set_transform(Some(Transform {
+            rotation: Quaternion { w, x: 0.0, y: 0.0, z: 0.0 },
+            translation: Translation { x: 1.0, y: 2.0, z: 3.0 },
+        }));
+        for i in 0..10 {
+            pc.add_point(vec![RecordValue::Double(f64::from(i)), RecordValue::Double(0.0), RecordValue::Double(1.0)])
+                .expect("point");
+        }
+        pc.finalize().expect("finalised");
+        writer.finalize().expect("written");
+        match scanner::io::read_e57_scans(&path) {
+            Ok(scans) => {
+                assert!(ok, "w = {w}: read");
+                assert!(scans[0].world_from_scan.rotation.angle() < 1e-12, "normalised to the identity");
+            }
+            Err(e) => {
+                assert!(!ok, "w = {w}: {e}");
+                let text = e.to_string();
+                assert!(text.contains("data3D[0]") && text.contains("quaternion norm"), "{text}");
+            }
+        }
+    }
+}

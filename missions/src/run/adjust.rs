@@ -53,6 +53,8 @@ pub fn network(
     let order = planner::network::reading_order(dance);
     let mut readings = Vec::with_capacity(order.len());
     let mut stations: Vec<ParentPose> = vec![dance.station_pose(0)];
+    // The readings' keys so far, with their journal lines.
+    let mut seen: Vec<(usize, crate::run::journal::MeasureKey)> = Vec::new();
     for n in &read.events {
         match &n.event {
             Event::Measure(m) => {
@@ -74,13 +76,24 @@ pub fn network(
                     }
                 };
                 if !matches {
+                    // In words, not the record's JSON and a Rust value
+                    // (issue 34, U7); a reading recorded twice said so.
+                    let recorded = key_words(k);
+                    let planned = taken_words(expected, &dance.control);
+                    if let Some((line, _)) = seen.iter().find(|(_, key)| key == k) {
+                        bail!(
+                            "{}:{}: {recorded} again (line {line} recorded it): each reading once, the plan's next is {planned}",
+                            path.display(),
+                            n.line
+                        );
+                    }
                     bail!(
-                        "{}:{}: the journal records {} where the plan takes {expected:?}: the journal belongs to another plan",
+                        "{}:{}: the journal records {recorded} where the plan takes {planned}: the journal belongs to another plan",
                         path.display(),
                         n.line,
-                        n.event.describe()
                     );
                 }
+                seen.push((n.line, k.clone()));
                 let reading = m.data.measurement().to_reading(instrument);
                 for v in reading.to_vector().iter() {
                     if !v.is_finite() {
@@ -567,4 +580,31 @@ impl AdjustmentOutcome {
 /// The adjusted covariance of station `k` from a report.
 pub fn station_covariance(report: &AdjustmentReport, k: usize) -> Option<Matrix4<f64>> {
     report.stations.get(k).map(|s| Matrix4::from_fn(|i, j| s.covariance[i][j]))
+}
+
+/// A journal reading's key in words: "the fix reading of child 1 in cycle 2".
+fn key_words(k: &crate::run::journal::MeasureKey) -> String {
+    use crate::run::journal::Phase;
+    let phase = match k.phase {
+        Phase::Placement => "placement",
+        Phase::Fix => "fix",
+        Phase::Control => "control",
+    };
+    match (&k.control, k.child) {
+        (Some(name), _) => format!("the {phase} reading of control point {name} in cycle {}", k.cycle),
+        (None, Some(child)) => format!("the {phase} reading of child {child} in cycle {}", k.cycle),
+        (None, None) => format!("a {phase} reading in cycle {}", k.cycle),
+    }
+}
+
+/// A planned reading in words, as [`key_words`] says a recorded one.
+fn taken_words(t: &Taken, control: &[planner::control::ControlPoint]) -> String {
+    match *t {
+        Taken::Placement { cycle, child, .. } => format!("the placement reading of child {child} in cycle {cycle}"),
+        Taken::Fix { cycle, child, .. } => format!("the fix reading of child {child} in cycle {cycle}"),
+        Taken::Control { cycle, control: c, .. } => {
+            let name = control.get(c).map_or_else(|| format!("#{c}"), |p| p.name.clone());
+            format!("the control reading of control point {name} in cycle {cycle}")
+        }
+    }
 }

@@ -59,7 +59,18 @@ pub fn open(
             Some((_, text)) => std::fs::read_to_string(dir.join("scene.toml")).ok().as_ref() != Some(text),
             None => false,
         };
-        if as_run != mission.source.text || start.seed != mission.backend.seed || scene_changed {
+        if as_run == mission.source.text && !scene_changed && start.seed != mission.backend.seed {
+            // (Issue 34, U10: this blamed the mission file.)
+            bail!(
+                "the run in {} started with seed {} (its journal's start); this resume has seed {}: resume with \
+                 --seed {} (or the mission's own seed, without --seed)",
+                dir.display(),
+                start.seed,
+                mission.backend.seed,
+                start.seed
+            );
+        }
+        if as_run != mission.source.text || scene_changed {
             bail!(
                 "{} is not the mission this run started with ({}{}); resume with that file",
                 mission.source.file.display(),

@@ -43,16 +43,19 @@ fn global(report: &AdjustmentReport) -> String {
     if let Some(a) = &report.global_test_after_snooping
         && let Some(hi) = a.upper
     {
-        text += &format!(
-            "; after snooping's {} removal(s) vᵀPv = {:.2} ≤ {hi:.2} (χ²_{}({:.3})): {}",
-            report.removed.len(),
-            a.statistic,
-            a.dof,
-            1.0 - a.alpha / 2.0,
-            if a.statistic <= hi { "PASS" } else { "FAIL" }
-        );
+        text += &after_snooping(report.removed.len(), a.statistic, hi, a.dof, a.alpha);
     }
     text
+}
+
+/// The global test after snooping's `removed` removals, its relation as it
+/// is (issue 34, U8 printed "80.81 ≤ 77.38 … FAIL").
+fn after_snooping(removed: usize, statistic: f64, hi: f64, dof: usize, alpha: f64) -> String {
+    let (relation, verdict) = if statistic <= hi { ("≤", "PASS") } else { (">", "FAIL") };
+    format!(
+        "; after snooping's {removed} removal(s) vᵀPv = {statistic:.2} {relation} {hi:.2} (χ²_{dof}({:.3})): {verdict}",
+        1.0 - alpha / 2.0,
+    )
 }
 
 /// The full listing (`adjustment.txt`).
@@ -325,4 +328,18 @@ pub fn summary(out: &mut dyn Write, report: &AdjustmentReport) -> std::io::Resul
     }
     summary_lines(&mut s, report);
     out.write_all(s.as_bytes())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::after_snooping;
+
+    #[test]
+    fn the_global_test_after_snooping_states_the_relation_it_found() {
+        assert_eq!(
+            after_snooping(1, 80.81, 77.38, 58, 0.05),
+            "; after snooping's 1 removal(s) vᵀPv = 80.81 > 77.38 (χ²_58(0.975)): FAIL"
+        );
+        assert!(after_snooping(0, 50.0, 77.38, 58, 0.05).ends_with("50.00 ≤ 77.38 (χ²_58(0.975)): PASS"));
+    }
 }

@@ -194,10 +194,15 @@ pub fn read_e57_scans(path: &Path) -> Result<Vec<E57Scan>> {
         let world_from_scan = pc.transform.as_ref().map_or(Ok(Isometry3::identity()), |t| {
             let q = nalgebra::Quaternion::new(t.rotation.w, t.rotation.x, t.rotation.y, t.rotation.z);
             let values = [q.w, q.i, q.j, q.k, t.translation.x, t.translation.y, t.translation.z];
-            if !values.iter().all(|v| v.is_finite()) || q.norm() < 1e-9 {
+            // A unit quaternion, as E57 says, to 1e-3 (normalised then);
+            // w = 1e300 squared overflows to a NaN rotation (issue 34, U4).
+            let norm = q.norm();
+            if !values.iter().all(|v| v.is_finite()) || !norm.is_finite() || (norm - 1.0).abs() > 1e-3 {
                 return Err(ScannerError::whole_file(
                     path,
-                    format!("data3D[{k}]: pose {values:?}: expected a finite unit quaternion and translation"),
+                    format!(
+                        "data3D[{k}]: pose {values:?} (quaternion norm {norm:e}): expected a finite unit quaternion and translation"
+                    ),
                 ));
             }
             Ok(Isometry3::from_parts(

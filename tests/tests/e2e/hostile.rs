@@ -98,6 +98,22 @@ fn a_changed_scan_file_is_refused_and_a_lost_pose_file_rewritten() {
     assert_eq!(fused.code, 2);
     assert!(fused.stderr.contains("scans/scan005.3d") && fused.stderr.contains("has changed"), "{}", fused.stderr);
     assert!(!out.join("fusion").exists(), "nothing written");
+    // A reading recorded twice (issue 34, U7: a 900-byte line with the
+    // record's JSON and a Rust value): named in words, both lines.
+    let journal = std::fs::read_to_string(out.join("journal.jsonl")).expect("journal");
+    let mut lines: Vec<&str> = journal.lines().collect();
+    let k = lines
+        .iter()
+        .position(|l| l.contains("\"event\":\"measure\"") && l.contains("\"phase\":\"fix\""))
+        .expect("a fix");
+    lines.insert(k, lines[k]);
+    std::fs::write(out.join("journal.jsonl"), lines.join("\n") + "\n").expect("journal");
+    let adjusted = cps_survey(["adjust", out.to_str().expect("utf-8")]);
+    assert_eq!(adjusted.code, 2, "{}", adjusted.stderr);
+    let want = format!("journal.jsonl:{}: the fix reading of child 0 in cycle", k + 2);
+    assert!(adjusted.stderr.contains(&want), "{want}: {}", adjusted.stderr);
+    assert!(adjusted.stderr.contains(&format!("again (line {} recorded it)", k + 1)), "{}", adjusted.stderr);
+    assert!(!adjusted.stderr.contains('{') && adjusted.stderr.len() < 300, "{}", adjusted.stderr);
 }
 
 #[test]
