@@ -177,3 +177,17 @@ fn an_e57_pose_that_is_no_unit_quaternion_is_refused() {
         }
     }
 }
+
+/// An ASCII PLY row "nan 0 0" (issue 34, U6: "is not a row of element
+/// 'vertex'"): its line, the value and that it is not finite.
+#[test]
+fn a_ply_row_with_a_nan_says_so() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut text = String::from(
+        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n",
+    );
+    text.push_str("1 2 3\nnan 0 0\n4 5 6\n");
+    let path = file(dir.path(), "nan.ply", text.as_bytes());
+    refused(&path, "line 9");
+    refused(&path, "'nan 0 0': the value nan is not finite: expected finite numbers");
+}

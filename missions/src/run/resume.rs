@@ -45,6 +45,9 @@ pub fn open(
             dir.display()
         );
     }
+    if !resume && !journal_path.exists() {
+        refuse_others_outputs(dir)?;
+    }
     if resume {
         if !journal_path.exists() {
             bail!("{} does not exist: there is no run to resume there", journal_path.display());
@@ -216,4 +219,27 @@ pub fn load(dir: &Path) -> Result<RunDir> {
         }
     }
     Ok(RunDir { mission, planned, journal, views })
+}
+
+/// Refuses a new run into a directory that holds a run's outputs but no
+/// journal (issue 34, W5: `report.json`, `stations.csv`, `adjustment.txt`,
+/// `cloud.ply` there were overwritten): they are another run's, or
+/// another command's, and not this one's to replace.
+fn refuse_others_outputs(dir: &Path) -> Result<()> {
+    let mut names: Vec<String> = ["report.json", "stations.csv", "adjustment.txt", "mission.toml", "scene.toml"]
+        .into_iter()
+        .chain(["mission.rrd", "scans", "fusion", super::inspection::DEVIATION_FILE])
+        .map(String::from)
+        .collect();
+    names.extend(crate::mission::OUTPUT_FORMATS.iter().map(|f| super::outputs::cloud_file(f)));
+    let found: Vec<&String> = names.iter().filter(|n| std::fs::symlink_metadata(dir.join(n)).is_ok()).collect();
+    if !found.is_empty() {
+        bail!(
+            "{} holds {} but no journal.jsonl: outputs that are not this run's to overwrite; choose another --out \
+             directory (or an empty one)",
+            dir.display(),
+            found.iter().map(|n| n.as_str()).collect::<Vec<_>>().join(", ")
+        );
+    }
+    Ok(())
 }

@@ -151,6 +151,12 @@ fn ply_error(path: &Path, e: &ply_rs_bw::parser::ParseError, data: Option<(&Elem
     let text = e.to_string();
     let row = text.split_once("String: '").and_then(|(_, rest)| rest.split_once('\'')).map(|(row, _)| row.trim());
     if let (Some(row), Some((element, Encoding::Ascii))) = (row, data) {
+        // A NaN or an infinity is a number the parser does not take (issue
+        // 34, U6 called the row malformed).
+        if let Some(t) = row.split_whitespace().find(|t| t.parse::<f64>().is_ok_and(|v| !v.is_finite())) {
+            let message = format!("'{row}': the value {t} is not finite: expected finite numbers");
+            return ScannerError::file(path, location, message);
+        }
         let names: Vec<&str> = element.properties.keys().map(String::as_str).collect();
         let message = format!("'{row}' is not a row of element '{}': expected {}", element.name, names.join(" "));
         return ScannerError::file(path, location, message);

@@ -319,3 +319,20 @@ fn outputs_replace_their_files_never_write_through_links() {
         assert!(!std::fs::symlink_metadata(matched.join(name)).expect("meta").file_type().is_symlink(), "{name}");
     }
 }
+
+/// A new run into a directory that holds a run's outputs but no journal
+/// (issue 34, W5: `report.json` and the rest were overwritten) is refused,
+/// naming them, before anything is written.
+#[test]
+fn a_run_into_a_directory_of_others_outputs_is_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("d");
+    std::fs::create_dir(&out).expect("dir");
+    std::fs::write(out.join("report.json"), "precious").expect("report");
+    std::fs::write(out.join("cloud.ply"), "precious").expect("cloud");
+    let r = cps_survey(run_args(&example("hall.toml"), &out, &[]));
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(r.stderr.contains("holds report.json, cloud.ply but no journal.jsonl"), "{}", r.stderr);
+    assert_eq!(std::fs::read_to_string(out.join("report.json")).expect("kept"), "precious");
+    assert_eq!(std::fs::read_dir(&out).expect("d").count(), 2, "nothing written");
+}
