@@ -172,9 +172,13 @@ fn read_name(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<String> {
         let n = s.get_ref();
         let problem = if n.len() > MAX_NAME_BYTES {
             Some(format!("{} bytes long; expected at most {MAX_NAME_BYTES}", n.len()))
-        } else if let Some(c) = n.chars().find(|c| matches!(c, '/' | '\\') || c.is_control()) {
+        } else if let Some(c) =
+            n.chars().find(|c| matches!(c, '/' | '\\') || c.is_control() || scanner::io::is_bidi_control(*c))
+        {
+            // (Bidirectional controls: issue 34, S13 — a name that reads
+            // as another names `runs/<name>/`.)
             Some(format!(
-                "\"{}\" holds {c:?}; expected a name without path separators or control characters",
+                "\"{}\" holds {c:?}; expected a name without path separators, control or bidirectional characters",
                 n.escape_debug()
             ))
         } else if n == "." || n == ".." || n != n.trim() {

@@ -26,8 +26,8 @@ pub struct Crs {
 const MAX_WKT_BYTES: usize = 64 * 1024;
 
 /// Unicode's bidirectional controls: they make a name read differently
-/// from what it holds.
-fn is_bidi_control(c: char) -> bool {
+/// from what it holds (`hall\u{202e}gnp.exe` shows as `hallexe.png`).
+pub fn is_bidi_control(c: char) -> bool {
     matches!(c, '\u{202a}'..='\u{202e}' | '\u{2066}'..='\u{2069}' | '\u{200e}' | '\u{200f}' | '\u{061c}')
 }
 

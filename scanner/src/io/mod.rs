@@ -37,7 +37,7 @@ use std::ops::Range;
 
 use nalgebra::{Isometry3, Point3, Vector3};
 
-pub use crs::Crs;
+pub use crs::{Crs, is_bidi_control};
 pub use e57::{E57Scan, read_e57_crs, read_e57_scans};
 pub use pcd::PcdData;
 pub use ply::PlyEncoding;

@@ -34,7 +34,9 @@ fn a_mission_name_is_a_name_not_a_path() {
     // `run` without --out writes to runs/<name>/: a name that is a path is
     // refused, by every command, before anything is written.
     let dir = tempfile::tempdir().expect("tempdir");
-    for name in ["..", "../../x", "/abs/x"] {
+    // (And a name with a bidirectional control, issue 34, S13: it named
+    // `runs/hall\u{202e}gnp.exe/`, shown as "hallexe.png".)
+    for name in ["..", "../../x", "/abs/x", "hall\u{202e}gnp.exe"] {
         let text = std::fs::read_to_string(example("indoor-compact.toml")).expect("example").replacen(
             "name = \"indoor-compact\"",
             &format!("name = \"{name}\""),
