@@ -116,7 +116,11 @@ pub fn visibility(
     if reading.validate(0).is_err() {
         return Err(Unseen::Vertical);
     }
-    if reading.slope_m < instrument.min_range_m || reading.slope_m > instrument.max_range_m {
+    // The documented margin inside the range, as for the children's sight
+    // lines (issue 34, S9: a point 0.1 mm away with min_range_m = 0 was
+    // "seen from station 0 (0.0 m)").
+    let margin = crate::dance::RANGE_MARGIN_M;
+    if reading.slope_m < instrument.min_range_m + margin || reading.slope_m > instrument.max_range_m - margin {
         return Err(Unseen::OutOfRange(reading.slope_m));
     }
     if let Some(scene) = scene
@@ -189,6 +193,12 @@ mod tests {
         assert!(matches!(visibility(&station, &Point3::new(5.5, 4.2, 1.5), &inst, None), Err(Unseen::OutOfRange(_))));
         assert!(matches!(visibility(&station, &Point3::new(39.0, 4.2, 1.5), &inst, None), Err(Unseen::OutOfRange(_))));
         assert_eq!(visibility(&station, &Point3::new(5.0, 4.2, 5.0), &inst, None), Err(Unseen::Vertical));
+        // Within the 5 cm margin of a limit: not planned as seen (S9).
+        assert!(matches!(visibility(&station, &Point3::new(6.52, 4.2, 1.5), &inst, None), Err(Unseen::OutOfRange(_))));
+        assert!(visibility(&station, &Point3::new(6.56, 4.2, 1.5), &inst, None).is_ok());
+        let from_zero = Instrument { min_range_m: 0.0, ..inst };
+        let touching = visibility(&station, &Point3::new(5.0, 4.2001, 1.5), &from_zero, None);
+        assert!(matches!(touching, Err(Unseen::OutOfRange(_))), "{touching:?}");
         // Through a pillar (the hall's pillars stand at y = 6 m).
         let behind =
             visibility(&ParentPose::new(10.0, 3.0, 1.5, 0.0), &Point3::new(10.0, 9.0, 1.5), &inst, Some(&scene));
