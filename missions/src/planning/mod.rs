@@ -194,7 +194,13 @@ fn with_control(mission: &Mission, dance: Dance) -> Result<Dance, Diagnostics> {
         return Ok(dance);
     };
     let control = control_points(mission);
-    let scene = mission.backend.given.then(|| mission.scene().as_ref());
+    // The simulator sights control through its scene whether or not the
+    // mission names one (the built-in hall by default): the plan checks
+    // the same sight lines (issue 34, S14: planned "seen" at 152 m, then
+    // blocked by the hall's wall in the run). On real instruments without
+    // a `[backend]` scene there is no model to check against.
+    let simulated = mission.backend.serial.is_none();
+    let scene = (mission.backend.given || simulated).then(|| mission.scene().as_ref());
     let at = &mission.plan.control_at;
     let unseen = match planner::control::attach(dance.clone(), &control, at, instrument, scene) {
         Ok(dance) => return Ok(dance),

@@ -45,9 +45,6 @@ pub fn open(
             dir.display()
         );
     }
-    if !resume && !journal_path.exists() {
-        refuse_others_outputs(dir)?;
-    }
     if resume {
         if !journal_path.exists() {
             bail!("{} does not exist: there is no run to resume there", journal_path.display());
@@ -96,6 +93,9 @@ pub fn open(
     }
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     directory::refuse_links(dir)?;
+    if !journal_path.exists() {
+        refuse_others_outputs(dir)?;
+    }
     let lock = directory::lock(dir, &format!("run {}", mission.source.file.display()))?;
     let mut journal = Journal::create(&journal_path)?;
     journal.hold(lock);

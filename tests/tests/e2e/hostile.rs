@@ -338,3 +338,36 @@ fn a_run_into_a_directory_of_others_outputs_is_refused() {
     assert_eq!(std::fs::read_to_string(out.join("report.json")).expect("kept"), "precious");
     assert_eq!(std::fs::read_dir(&out).expect("d").count(), 2, "nothing written");
 }
+
+/// The plan sights control through the scene the simulator measures in —
+/// the built-in hall when the mission names none (issue 34, S14: K1 was
+/// planned "seen from station 0 (152.1 m)", through the hall's wall, and
+/// the run stopped after three retries: "blocked by 'hall'").
+#[test]
+fn control_the_plan_sees_is_what_the_simulator_sees() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let text = std::fs::read_to_string(example("paper-1km.toml"))
+        .expect("example")
+        .replacen(
+            "route_m = [[0.0, 0.0, 0.0], [1000.0, 0.0, 0.0]]",
+            "route_m = [[0.0, 0.0, 0.0], [200.0, 0.0, 0.0]]",
+            1,
+        )
+        .replacen("[acceptance]", "control_at = \"every\"\n\n[acceptance]", 1)
+        + "\n[[control]]\nname = \"K1\"\nposition_m = [150.0, 25.0, 1.2]\n";
+    assert!(text.contains("[200.0, 0.0, 0.0]") && !text.contains("[backend]"), "the example changed");
+    let mission = temp_mission(&text);
+    let plan = cps_survey(["plan", mission.path.to_str().expect("utf-8"), "--json"]);
+    let v: serde_json::Value = serde_json::from_str(&plan.stdout).expect("plan JSON");
+    let seen: Vec<u64> = v["control"][0]["seen_from"]
+        .as_array()
+        .expect("seen_from")
+        .iter()
+        .map(|s| s["station"].as_u64().expect("station"))
+        .collect();
+    // Stations 0–3 (x ≤ 30 m) look through the hall (x 0–40 m).
+    assert_eq!(seen.first(), Some(&4), "{seen:?}");
+    let out = dir.path().join("r");
+    let run = cps_survey(run_args(&mission.path, &out, &[]));
+    assert_eq!(run.code, 0, "{}", run.stderr);
+}
