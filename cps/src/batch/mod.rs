@@ -176,6 +176,13 @@ fn station_of(network: &Network) -> impl Fn(&Source) -> Option<usize> + '_ {
 /// `options.snooping` iterative data snooping. An unknown no observation
 /// determines is an error that names it.
 pub fn adjust(network: &Network, options: &AdjustOptions) -> Result<Adjustment> {
+    adjust_without(network, options, &[])
+}
+
+/// [`adjust`] with the scalar observations `left_out` (source, component)
+/// left out from the start — e.g. those another adjustment's data snooping
+/// removed; one that is not in the network is ignored.
+pub fn adjust_without(network: &Network, options: &AdjustOptions, left_out: &[(Source, usize)]) -> Result<Adjustment> {
     network.validate()?;
     for (what, v, lo, hi) in [
         ("alpha", options.alpha, 0.0, 1.0),
@@ -192,6 +199,13 @@ pub fn adjust(network: &Network, options: &AdjustOptions) -> Result<Adjustment> 
     }
     let layout = Layout::new(network);
     let mut groups = network.groups();
+    for (source, component) in left_out {
+        if let Some(g) = groups.iter_mut().find(|g| g.source == *source)
+            && let Some(pos) = g.components.iter().position(|c| c == component)
+        {
+            g.active[pos] = false;
+        }
+    }
     let lambda0 = noncentrality(options.alpha0, options.beta0);
     let w_critical = normal_quantile(1.0 - options.alpha0 / 2.0);
     let station_of = station_of(network);

@@ -161,8 +161,13 @@ pub struct AdjustmentReport {
     pub observations: Vec<ObservationReport>,
     /// The weighted prior coordinates (the start's, the control points').
     pub coordinate_observations: Vec<CoordinateReport>,
-    /// Data snooping's removals, in order.
+    /// Data snooping's removals of readings, in order (indices into
+    /// `observations`).
     pub removed: Vec<usize>,
+    /// Data snooping's removals of weighted prior coordinates, in order
+    /// (indices into `coordinate_observations`).
+    #[serde(default)]
+    pub removed_coordinates: Vec<usize>,
     /// Why snooping stopped early, if it did.
     pub snooping_stopped: Option<String>,
     /// The misclosure at each control point the others can check (module docs).
@@ -319,6 +324,10 @@ pub struct CoordinateReport {
     pub w: Option<f64>,
     /// Minimal detectable bias.
     pub mdb: Option<f64>,
+    /// Removed by data snooping (its w then, its residual at the final
+    /// estimate; no redundancy or MDB).
+    #[serde(default)]
+    pub removed: bool,
 }
 
 /// A misclosure at a control point.
@@ -402,26 +411,7 @@ pub fn adjust(
         })
         .collect();
     let (observations, removed) = observation_reports(&a, net, &name);
-    let coordinate_observations = a
-        .observations
-        .iter()
-        .filter_map(|o| {
-            let (of, names): (String, &[&str]) = match o.source {
-                Source::StationPrior(k) => (format!("station {k}"), &["x", "y", "z", "heading"]),
-                Source::PointPrior(p) => (name(p), &["x", "y", "z"]),
-                Source::Reading(_) => return None,
-            };
-            Some(CoordinateReport {
-                of,
-                coordinate: names.get(o.component).copied().unwrap_or("?").into(),
-                sigma: o.sigma,
-                residual: o.residual,
-                redundancy: o.redundancy,
-                w: o.w,
-                mdb: o.mdb,
-            })
-        })
-        .collect();
+    let (coordinate_observations, removed_coordinates) = coordinate_reports(&a, net, &name);
     let worst_mdb = observations
         .iter()
         .filter(|o: &&ObservationReport| o.redundancy >= cps::batch::testing::WEAKLY_CHECKED)
@@ -451,9 +441,10 @@ pub fn adjust(
         points,
         observations,
         coordinate_observations,
+        removed_coordinates,
         removed,
         snooping_stopped: a.snooping_stopped.clone(),
-        misclosures: misclosures(net, &name),
+        misclosures: misclosures(net, &name, &a.removed.iter().map(|x| (x.source, x.component)).collect::<Vec<_>>()),
         worst_mdb,
     })
 }
@@ -522,8 +513,78 @@ fn observation_reports(
     (out, removed)
 }
 
-/// The misclosures at the control points outside the datum (module docs).
-fn misclosures(net: &DanceNetwork, name: &dyn Fn(usize) -> String) -> Vec<Misclosure> {
+/// The weighted prior coordinates with their statistics, and after them
+/// those data snooping removed (issue 34, S1: they were left out, and "0
+/// removal(s)" reported) with their w then and their residual at the final
+/// estimate; and the removed ones' indices in the order removed.
+fn coordinate_reports(
+    a: &Adjustment,
+    net: &DanceNetwork,
+    name: &dyn Fn(usize) -> String,
+) -> (Vec<CoordinateReport>, Vec<usize>) {
+    let label = |source: Source, component: usize| -> Option<(String, String)> {
+        let (of, names): (String, &[&str]) = match source {
+            Source::StationPrior(k) => (format!("station {k}"), &["x", "y", "z", "heading"]),
+            Source::PointPrior(p) => (name(p), &["x", "y", "z"]),
+            Source::Reading(_) => return None,
+        };
+        Some((of, names.get(component).copied().unwrap_or("?").into()))
+    };
+    let mut out: Vec<CoordinateReport> = a
+        .observations
+        .iter()
+        .filter_map(|o| {
+            let (of, coordinate) = label(o.source, o.component)?;
+            Some(CoordinateReport {
+                of,
+                coordinate,
+                sigma: o.sigma,
+                residual: o.residual,
+                redundancy: o.redundancy,
+                w: o.w,
+                mdb: o.mdb,
+                removed: false,
+            })
+        })
+        .collect();
+    let mut removed = Vec::new();
+    for x in &a.removed {
+        let Some((of, coordinate)) = label(x.source, x.component) else { continue };
+        let (given, adjusted, sigma) = match x.source {
+            Source::StationPrior(k) => {
+                let st = &net.network.stations[k];
+                let v = |p: &cps::ParentPose| [p.position.x, p.position.y, p.position.z, p.heading_rad];
+                let d = v(&a.stations[k])[x.component] - v(&st.pose)[x.component];
+                let d = if x.component == 3 { cps::wrap_angle(d) } else { d };
+                (0.0, d, st.prior.map_or(f64::NAN, |c| c[(x.component, x.component)].sqrt()))
+            }
+            Source::PointPrior(p) => {
+                let pt = &net.network.points[p];
+                let d = a.points[p][x.component] - pt.position[x.component];
+                (0.0, d, pt.prior.map_or(f64::NAN, |c| c[(x.component, x.component)].sqrt()))
+            }
+            Source::Reading(_) => continue,
+        };
+        removed.push(out.len());
+        out.push(CoordinateReport {
+            of,
+            coordinate,
+            sigma,
+            residual: adjusted - given,
+            redundancy: 0.0,
+            w: Some(x.w),
+            mdb: None,
+            removed: true,
+        });
+    }
+    (out, removed)
+}
+
+/// The misclosures at the control points outside the datum (module docs),
+/// without what data snooping removed (`removed`; issue 34, S2: a 0.5 m
+/// blunder, removed, still gave 21–55 mm misclosures beside "model
+/// accepted").
+fn misclosures(net: &DanceNetwork, name: &dyn Fn(usize) -> String, removed: &[(Source, usize)]) -> Vec<Misclosure> {
     let options = AdjustOptions { snooping: false, ..AdjustOptions::default() };
     net.points
         .iter()
@@ -534,7 +595,7 @@ fn misclosures(net: &DanceNetwork, name: &dyn Fn(usize) -> String) -> Vec<Misclo
             let given_cov = without.points[p].prior.take().unwrap_or_else(Matrix3::zeros);
             // Without this point's coordinates the rest may not hold the
             // network (a start resected on two points): no misclosure then.
-            let a = cps::batch::adjust(&without, &options).ok()?;
+            let a = cps::batch::adjust_without(&without, &options, removed).ok()?;
             let given = net.network.points[p].position;
             let d: Point3<f64> = Point3::from(a.points[p] - given);
             let cov: Matrix3<f64> = a.point_covariance(p) + given_cov;

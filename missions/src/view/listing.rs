@@ -43,7 +43,8 @@ fn global(report: &AdjustmentReport) -> String {
     if let Some(a) = &report.global_test_after_snooping
         && let Some(hi) = a.upper
     {
-        text += &after_snooping(report.removed.len(), a.statistic, hi, a.dof, a.alpha);
+        let removals = report.removed.len() + report.removed_coordinates.len();
+        text += &after_snooping(removals, a.statistic, hi, a.dof, a.alpha);
     }
     text
 }
@@ -68,13 +69,14 @@ pub fn listing(mission: &Mission, report: &AdjustmentReport) -> String {
     let _ = writeln!(w, "Input");
     let _ = writeln!(
         w,
-        "  stations {}, points {} ({} control), observations {} ({} removed), prior coordinates {}",
+        "  stations {}, points {} ({} control), observations {} ({} removed), prior coordinates {} ({} removed)",
         report.stations.len(),
         report.points.len(),
         report.points.iter().filter(|p| p.control).count(),
         report.observations.len(),
         report.removed.len(),
-        report.coordinate_observations.len()
+        report.coordinate_observations.len(),
+        report.removed_coordinates.len()
     );
     let _ = writeln!(
         w,
@@ -220,6 +222,18 @@ pub fn listing(mission: &Mission, report: &AdjustmentReport) -> String {
         let _ = writeln!(w);
         let _ = writeln!(w, "Prior coordinates (residual = adjusted − given)");
         for c in &report.coordinate_observations {
+            if c.removed {
+                let _ = writeln!(
+                    w,
+                    "  {:<12} {:<8} residual {:>12} σ {:>12} removed by data snooping (w {:.2})",
+                    c.of,
+                    c.coordinate,
+                    in_unit(&c.coordinate, c.residual),
+                    in_unit(&c.coordinate, c.sigma),
+                    c.w.unwrap_or(f64::NAN)
+                );
+                continue;
+            }
             let _ = writeln!(
                 w,
                 "  {:<12} {:<8} residual {:>12} σ {:>12} r {:>6.3} w {:>7} MDB {:>12}",
@@ -244,8 +258,20 @@ pub fn listing(mission: &Mission, report: &AdjustmentReport) -> String {
 /// The lines both the listing and the terminal give: removals, the worst
 /// MDB, observations nothing checks, w warnings.
 fn summary_lines(w: &mut String, report: &AdjustmentReport) {
-    if report.removed.is_empty() {
+    if report.removed.is_empty() && report.removed_coordinates.is_empty() {
         let _ = writeln!(w, "  data snooping: nothing removed");
+    }
+    for &i in &report.removed_coordinates {
+        if let Some(c) = report.coordinate_observations.get(i) {
+            let _ = writeln!(
+                w,
+                "  removed prior coordinate {} of {}: w = {:.2}, residual {} (adjusted − given)",
+                c.coordinate,
+                c.of,
+                c.w.unwrap_or(f64::NAN),
+                in_unit(&c.coordinate, c.residual)
+            );
+        }
     }
     for (n, &i) in report.removed.iter().enumerate() {
         if let Some(o) = report.observations.get(i) {

@@ -850,7 +850,7 @@ impl Recorder {
             report.sigma0_squared,
             report.redundancy,
             if g.passed { "passed" } else { "FAILED" },
-            report.removed.len(),
+            report.removed.len() + report.removed_coordinates.len(),
             if report.model_accepted { "accepted" } else { "NOT accepted" }
         );
         self.event(level, text)?;

@@ -371,3 +371,57 @@ fn control_the_plan_sees_is_what_the_simulator_sees() {
     let run = cps_survey(run_args(&mission.path, &out, &[]));
     assert_eq!(run.code, 0, "{}", run.stderr);
 }
+
+/// Data snooping's removals count wherever they are (issue 34): S1 — a
+/// control coordinate given 2 cm off is removed and reported so (it was
+/// "0 removal(s)", `removed: []`); S2 — the misclosures leave out what
+/// snooping removed (a 0.5 m blunder, removed, still gave 21–55 mm
+/// misclosures beside "model accepted").
+#[test]
+fn snooping_removals_are_reported_and_left_out_of_the_misclosures() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let hall = example("hall.toml");
+    let json = |out: &std::path::Path, extra: &[&str]| -> serde_json::Value {
+        let mut args = vec!["adjust", out.to_str().expect("utf-8"), "--json"];
+        args.extend(extra);
+        serde_json::from_str(&cps_survey(args).stdout).expect("adjust JSON")
+    };
+    let horizontal = |v: &serde_json::Value| -> Vec<f64> {
+        v["misclosures"]
+            .as_array()
+            .expect("misclosures")
+            .iter()
+            .map(|m| m["horizontal_m"].as_f64().expect("m"))
+            .collect()
+    };
+    // S2.
+    let blunder = dir.path().join("blunder");
+    let run = cps_survey(run_args(&hall, &blunder, &["--sim-fault", "total-station:blunder=5:0.5"]));
+    assert!(run.code <= 1, "{}", run.stderr);
+    let (snooped, plain) = (json(&blunder, &[]), json(&blunder, &["--no-snooping"]));
+    assert!(!snooped["removed"].as_array().expect("removed").is_empty());
+    let (with, without) = (horizontal(&snooped), horizontal(&plain));
+    assert!(!with.is_empty() && with.iter().all(|m| *m < 0.01), "misclosures without the removed: {with:?}");
+    assert!(without.iter().any(|m| *m > 0.015), "with the blunder: {without:?}");
+    // S1.
+    let off = dir.path().join("off");
+    assert_eq!(cps_survey(run_args(&hall, &off, &[])).code, 0);
+    let mission = off.join("mission.toml");
+    let text = std::fs::read_to_string(&mission).expect("mission");
+    assert!(text.contains("position_m = [39.9, 3.0, 1.2]"), "hall.toml's control point E1 moved");
+    std::fs::write(&mission, text.replace("position_m = [39.9, 3.0, 1.2]", "position_m = [39.88, 3.0, 1.2]"))
+        .expect("mission");
+    let v = json(&off, &[]);
+    let removed = v["removed_coordinates"].as_array().expect("removed_coordinates");
+    assert_eq!(removed.len(), 1, "{v}");
+    let c = &v["coordinate_observations"][removed[0].as_u64().expect("index") as usize];
+    assert_eq!(
+        (c["of"].as_str(), c["coordinate"].as_str(), c["removed"].as_bool()),
+        (Some("E1"), Some("x"), Some(true))
+    );
+    let residual = c["residual"].as_f64().expect("residual");
+    assert!((residual - 0.02).abs() < 0.005, "E1 x residual {residual} m: about the 2 cm it was given off");
+    let listing = std::fs::read_to_string(off.join("adjustment.txt")).expect("listing");
+    assert!(listing.contains("removed prior coordinate x of E1") && !listing.contains("nothing removed"), "{listing}");
+    assert!(listing.contains("after snooping's 1 removal(s)"), "{listing}");
+}
