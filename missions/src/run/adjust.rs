@@ -118,8 +118,55 @@ pub fn network(
             _ => {}
         }
     }
-    planner::network::build(dance, instrument, &mission.plan.start_covariance, &stations, &readings)
-        .context("the journal's network")
+    let net = planner::network::build(dance, instrument, &mission.plan.start_covariance, &stations, &readings)
+        .context("the journal's network")?;
+    screen(&net, &seen, path)?;
+    Ok(net)
+}
+
+/// Misclosures beyond these against the journal's own poses are gross
+/// errors, not noise: a reading off by them cannot be adjusted (issue 34,
+/// U2: a 1000 m distance gave "degenerate geometry … station 6").
+const GROSS_DISTANCE_M: f64 = 1.0;
+const GROSS_ANGLE_RAD: f64 = 0.1;
+
+/// Refuses a reading that disagrees grossly with the journal's own poses
+/// (the fixes' stations, the points placed from them), naming its journal
+/// line, what it measured and what the poses give. `lines[k]`: reading
+/// k's journal line and key.
+fn screen(
+    net: &DanceNetwork,
+    lines: &[(usize, crate::run::journal::MeasureKey)],
+    path: &std::path::Path,
+) -> Result<()> {
+    for (k, r) in net.network.readings.iter().enumerate() {
+        let (Some(station), Some(point), Some((line, key))) =
+            (net.network.stations.get(r.station), net.network.points.get(r.point), lines.get(k))
+        else {
+            continue;
+        };
+        let Ok(expected) = cps::observe(&station.pose, &point.position) else { continue };
+        let got = &r.reading;
+        let d_r = got.slope_m - expected.slope_m;
+        let d_phi = cps::wrap_angle(got.azimuth_rad - expected.azimuth_rad);
+        let d_psi = got.elevation_rad - expected.elevation_rad;
+        if d_r.abs() > GROSS_DISTANCE_M || d_phi.abs() > GROSS_ANGLE_RAD || d_psi.abs() > GROSS_ANGLE_RAD {
+            bail!(
+                "{}:{line}: {} measures {:.3} m, {:.4}°, {:.4}° where the journal's poses give {:.3} m, {:.4}°, {:.4}° \
+                 (off by more than {GROSS_DISTANCE_M} m or {:.1}°): a gross error, not noise the adjustment can take",
+                path.display(),
+                key_words(key),
+                got.slope_m,
+                got.azimuth_rad.to_degrees(),
+                got.elevation_rad.to_degrees(),
+                expected.slope_m,
+                expected.azimuth_rad.to_degrees(),
+                expected.elevation_rad.to_degrees(),
+                GROSS_ANGLE_RAD.to_degrees()
+            );
+        }
+    }
+    Ok(())
 }
 
 /// The report of an adjustment (`adjust --json`, `report.json`'s

@@ -424,4 +424,17 @@ fn snooping_removals_are_reported_and_left_out_of_the_misclosures() {
     let listing = std::fs::read_to_string(off.join("adjustment.txt")).expect("listing");
     assert!(listing.contains("removed prior coordinate x of E1") && !listing.contains("nothing removed"), "{listing}");
     assert!(listing.contains("after snooping's 1 removal(s)"), "{listing}");
+    // U2: one distance of 1000 m in the journal gave "degenerate geometry:
+    // no observation determines the y of station 6" — named now.
+    let journal = std::fs::read_to_string(off.join("journal.jsonl")).expect("journal");
+    let mut lines: Vec<String> = journal.lines().map(String::from).collect();
+    let k = lines.iter().position(|l| l.contains("\"phase\":\"fix\"")).expect("a fix reading");
+    let mut event: serde_json::Value = serde_json::from_str(&lines[k]).expect("JSON");
+    event["data"]["slope_raw_m"] = serde_json::json!(1000.0);
+    lines[k] = event.to_string();
+    std::fs::write(off.join("journal.jsonl"), lines.join("\n") + "\n").expect("journal");
+    let r = cps_survey(["adjust", off.to_str().expect("utf-8")]);
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    let want = format!("journal.jsonl:{}: the fix reading of child 0 in cycle 1 measures 1000.000 m", k + 1);
+    assert!(r.stderr.contains(&want) && r.stderr.contains("a gross error"), "{want}: {}", r.stderr);
 }
