@@ -258,6 +258,44 @@ mod tests {
             .collect()
     }
 
+    /// Mutation fuzzing of `--init-poses` (issue 34): a valid file mutated
+    /// 3,000 times — bytes flipped or replaced with JSON's delimiters and
+    /// extremes, the text cut — never panics; an accepted file gives every
+    /// scan a finite rigid pose. Deterministic (seeded).
+    #[test]
+    fn init_poses_survive_mutated_files() {
+        use rand::{Rng, SeedableRng};
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("init.json");
+        let valid = r#"[{"file": "a.3d", "world_from_scan": [[1,0,0,1.5],[0,1,0,-2],[0,0,1,0.25],[0,0,0,1]]},
+ {"file": "b.3d", "world_from_scan": [[0,-1,0,3],[1,0,0,4],[0,0,1,0],[0,0,0,1]]}]"#;
+        let pieces: [&[u8]; 9] = [b"1e308", b"-1e308", b"NaN", b"\"", b"[", b"]", b"{", b"}", b"18446744073709551616"];
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(34);
+        for _ in 0..3000 {
+            let mut m = valid.as_bytes().to_vec();
+            match rng.random_range(0..3) {
+                0 => (0..rng.random_range(1..6)).for_each(|_| {
+                    let at = rng.random_range(0..m.len());
+                    m[at] = rng.random();
+                }),
+                1 => {
+                    let at = rng.random_range(0..m.len());
+                    let piece = pieces[rng.random_range(0..pieces.len())];
+                    m.splice(at..(at + rng.random_range(0..4)).min(m.len()), piece.iter().copied());
+                }
+                _ => m.truncate(rng.random_range(0..m.len())),
+            }
+            std::fs::write(&path, &m).expect("mutated");
+            let mut scans = named(&["a", "b"]);
+            if apply_init_poses(&path, &mut scans).is_ok() {
+                for s in &scans {
+                    let pose = s.start.to_homogeneous();
+                    assert!(pose.iter().all(|v| v.is_finite()), "{}: {pose}", String::from_utf8_lossy(&m));
+                }
+            }
+        }
+    }
+
     #[test]
     fn scans_keep_their_own_numbers_when_these_tell_them_apart() {
         assert_eq!(scan_numbers(&named(&["scan000", "scan002", "scan004"])), [0, 2, 4]);

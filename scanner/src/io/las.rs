@@ -58,6 +58,9 @@ fn check_claims(path: &Path) -> Result<()> {
             format!("the header says {count} points of {record} bytes; the file has {len} bytes in all"),
         ));
     }
+    if compressed {
+        check_laszip_items(path, &mut file, &head, len, record)?;
+    }
     if len < 255 {
         return Ok(());
     }
@@ -94,8 +97,120 @@ fn check_claims(path: &Path) -> Result<()> {
     Ok(())
 }
 
+/// A LAZ file's LASzip VLR (user `laszip encoded`, record 22204) must
+/// describe items whose sizes add up to the header's point record length:
+/// the `laz` crate's parallel decoder asserts it and panics otherwise
+/// (found by mutating a valid LAZ in `hostile.rs`).
+fn check_laszip_items(path: &Path, file: &mut std::fs::File, head: &[u8; 255], len: u64, record: u64) -> Result<()> {
+    use std::io::{Read as _, Seek as _, SeekFrom};
+    let header_size = u64::from(u16::from_le_bytes([head[94], head[95]]));
+    let vlrs = u32::from_le_bytes(head[100..104].try_into().expect("4 bytes"));
+    let bad = |at: u64, message: String| ScannerError::file(path, Location::Byte(at), message);
+    let mut at = header_size;
+    for _ in 0..vlrs.min(1 << 16) {
+        let mut vlr = [0u8; 54];
+        if at + 54 > len || file.seek(SeekFrom::Start(at)).is_err() || file.read_exact(&mut vlr).is_err() {
+            return Ok(()); // the crate says what is wrong with the VLRs
+        }
+        let user = &vlr[2..18];
+        let id = u16::from_le_bytes([vlr[18], vlr[19]]);
+        let length = u64::from(u16::from_le_bytes([vlr[20], vlr[21]]));
+        if user.starts_with(b"laszip encoded") && id == 22204 {
+            let mut data = vec![0u8; length as usize];
+            if at + 54 + length > len || file.read_exact(&mut data).is_err() || data.len() < 34 {
+                return Err(bad(at, format!("the LASzip VLR claims {length} bytes: expected at least 34 in the file")));
+            }
+            let items = usize::from(u16::from_le_bytes([data[32], data[33]]));
+            if data.len() < 34 + 6 * items {
+                return Err(bad(at, format!("the LASzip VLR lists {items} items in {length} bytes")));
+            }
+            let sizes: u64 =
+                (0..items).map(|k| u64::from(u16::from_le_bytes([data[36 + 6 * k], data[37 + 6 * k]]))).sum();
+            if sizes != record {
+                return Err(bad(
+                    at,
+                    format!(
+                        "the LASzip VLR's items are {sizes} bytes a point; the header's point records are {record}: \
+                         expected the same (a corrupt LAZ header)"
+                    ),
+                ));
+            }
+            return check_chunk_table(path, file, head, len);
+        }
+        at += 54 + length;
+    }
+    Ok(())
+}
+
+/// The LAZ chunk table's chunk count is a claim the `laz` crate sizes a
+/// buffer by (a mutated count asked for 68 GB and aborted the process):
+/// each chunk holds at least one point and one byte.
+fn check_chunk_table(path: &Path, file: &mut std::fs::File, head: &[u8; 255], len: u64) -> Result<()> {
+    use std::io::{Read as _, Seek as _, SeekFrom};
+    let points_at = u64::from(u32::from_le_bytes(head[96..100].try_into().expect("4 bytes")));
+    let mut word = [0u8; 8];
+    if points_at + 8 > len || file.seek(SeekFrom::Start(points_at)).is_err() || file.read_exact(&mut word).is_err() {
+        return Ok(());
+    }
+    let table_at = i64::from_le_bytes(word);
+    // -1: written without seeking back (the offset is then at the end).
+    let Ok(table_at) = u64::try_from(table_at) else { return Ok(()) };
+    let mut table = [0u8; 8];
+    if table_at.checked_add(8).is_none_or(|end| end > len)
+        || file.seek(SeekFrom::Start(table_at)).is_err()
+        || file.read_exact(&mut table).is_err()
+    {
+        return Err(ScannerError::file(
+            path,
+            Location::Byte(points_at),
+            format!("the LAZ chunk table is said to start at byte {table_at}; the file has {len} bytes"),
+        ));
+    }
+    let chunks = u64::from(u32::from_le_bytes(table[4..8].try_into().expect("4 bytes")));
+    let legacy = u64::from(u32::from_le_bytes(head[107..111].try_into().expect("4 bytes")));
+    let extended = if (head[24], head[25]) >= (1, 4) {
+        u64::from_le_bytes(head[247..255].try_into().expect("8 bytes"))
+    } else {
+        0
+    };
+    let points = legacy.max(extended);
+    if chunks > len || chunks > points + 1 {
+        return Err(ScannerError::file(
+            path,
+            Location::Byte(table_at),
+            format!(
+                "the LAZ chunk table claims {chunks} chunks for {points} points in {len} bytes: expected at most one a point"
+            ),
+        ));
+    }
+    Ok(())
+}
+
 pub(super) fn read(path: &Path) -> Result<PointCloud> {
     check_claims(path)?;
+    // The `laz` crate's decoder indexes its tables with what it decodes and
+    // panics on corrupt compressed data (index out of bounds in
+    // `decoders.rs`, found by mutating a valid LAZ in `hostile.rs`): a
+    // panic there is this file's error, not the program's.
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| read_checked(path))) {
+        Ok(result) => result,
+        Err(panic) => {
+            let why = panic
+                .downcast_ref::<String>()
+                .map(String::as_str)
+                .or_else(|| panic.downcast_ref::<&str>().copied())
+                .unwrap_or("a panic");
+            Err(ScannerError::file(
+                path,
+                Location::File,
+                format!("the LAZ decoder failed on its compressed points ({why}): expected an uncorrupted file"),
+            ))
+        }
+    }
+}
+
+/// [`read`] after the header's claims were checked.
+fn read_checked(path: &Path) -> Result<PointCloud> {
     let mut reader = Reader::from_path(path).map_err(|e| ScannerError::whole_file(path, e))?;
     let header = reader.header();
     // (Checked against the file's length by `check_claims`.)
