@@ -222,28 +222,23 @@ pub fn listing(mission: &Mission, report: &AdjustmentReport) -> String {
         let _ = writeln!(w);
         let _ = writeln!(w, "Prior coordinates (residual = adjusted − given)");
         for c in &report.coordinate_observations {
-            if c.removed {
-                let _ = writeln!(
-                    w,
-                    "  {:<12} {:<8} residual {:>12} σ {:>12} removed by data snooping (w {:.2})",
-                    c.of,
-                    c.coordinate,
-                    in_unit(&c.coordinate, c.residual),
-                    in_unit(&c.coordinate, c.sigma),
-                    c.w.unwrap_or(f64::NAN)
-                );
-                continue;
-            }
+            let tests = if c.removed {
+                format!("removed by data snooping (w {:.2})", c.w.unwrap_or(f64::NAN))
+            } else {
+                format!(
+                    "r {:>6.3} w {:>7} MDB {:>12}",
+                    c.redundancy,
+                    opt(c.w, |w| format!("{w:.2}")),
+                    opt(c.mdb, |m| in_unit(&c.coordinate, m))
+                )
+            };
             let _ = writeln!(
                 w,
-                "  {:<12} {:<8} residual {:>12} σ {:>12} r {:>6.3} w {:>7} MDB {:>12}",
+                "  {:<12} {:<8} residual {:>12} σ {:>12} {tests}",
                 c.of,
                 c.coordinate,
                 in_unit(&c.coordinate, c.residual),
                 in_unit(&c.coordinate, c.sigma),
-                c.redundancy,
-                opt(c.w, |w| format!("{w:.2}")),
-                opt(c.mdb, |m| in_unit(&c.coordinate, m))
             );
         }
     }
