@@ -34,6 +34,13 @@ pub mod state;
 pub mod stats;
 
 pub use error::{CpsError, Result};
+
+/// The largest coordinate a mission, a scene or a start pose may give,
+/// metres (|x|, |y|, |z|): beyond every projected grid (false northings
+/// reach 10⁷ m), and where f64 still holds 15 nm. Larger ones are refused
+/// when read (issue 34, U1: a route at 3·10¹⁴ m validated, then stopped
+/// the run's recording).
+pub const MAX_COORDINATE_M: f64 = 1e8;
 pub use fix::{FixOptions, ParentFix, Reliability, SightedChild, closed_form_start, fix_parent};
 pub use instrument::{DistanceErrorModel, Instrument, RAD_PER_ARCSEC};
 pub use observation::{ParentPose, Reading, observe, wrap_angle};

@@ -33,9 +33,14 @@ fn out_of_range(what: impl Into<String>, value: f64, expected: &str) -> CpsError
     CpsError::OutOfRange { what: what.into(), value, expected: expected.into() }
 }
 
+/// Finite, and within ±[`crate::MAX_COORDINATE_M`] (sizes and positions
+/// alike).
 fn finite(what: &str, values: &[f64]) -> Result<()> {
-    match values.iter().find(|v| !v.is_finite()) {
-        Some(v) => Err(CpsError::NonFinite { what: what.into(), value: *v }),
+    if let Some(v) = values.iter().find(|v| !v.is_finite()) {
+        return Err(CpsError::NonFinite { what: what.into(), value: *v });
+    }
+    match values.iter().find(|v| v.abs() > crate::MAX_COORDINATE_M) {
+        Some(v) => Err(out_of_range(what, *v, &format!("within ±{:e} m", crate::MAX_COORDINATE_M))),
         None => Ok(()),
     }
 }
@@ -406,5 +411,9 @@ mod tests {
         let o = Opening { segment: 0, from_m: 1.0, to_m: 3.0, z_min_m: 0.0, z_max_m: 1.0 };
         let e = b.wall("w", &path, false, 0.0, 2.0, &[o]).expect_err("opening beyond segment");
         assert!(e.to_string().contains("opening 0"), "{e}");
+        // A scene 3e14 m out (issue 34, U1): beyond every grid.
+        let e = b.sphere("far", Point3::new(3e14, 0.0, 0.0), 1.0).expect_err("too far");
+        assert!(e.to_string().contains("within ±1e8 m"), "{e}");
+        b.sphere("grid", Point3::new(500_000.0, 5_500_000.0, 0.0), 1.0).expect("a national-grid position");
     }
 }

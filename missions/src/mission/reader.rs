@@ -147,6 +147,16 @@ impl<'s> Reader<'s> {
             self.problem(&v.span(), field, format!("expected 3 numbers [x, y, z], found {}", xs.len()));
             return None;
         }
+        // (Issue 34, U1: a route at 3e14 m validated, then stopped the run.)
+        if let Some(x) = xs.iter().find(|x| x.get_ref().abs() > cps::MAX_COORDINATE_M) {
+            let message = format!(
+                "{} m is beyond ±{:e} m: expected coordinates of a survey on Earth",
+                x.get_ref(),
+                cps::MAX_COORDINATE_M
+            );
+            self.problem(&x.span(), field, message);
+            return None;
+        }
         Some(Spanned::new(v.span(), [*xs[0].get_ref(), *xs[1].get_ref(), *xs[2].get_ref()]))
     }
 

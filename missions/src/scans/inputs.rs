@@ -188,6 +188,14 @@ fn apply_init_poses(path: &Path, scans: &mut [InputScan]) -> Result<()> {
         let m = nalgebra::Matrix4::from_fn(|r, c| e.world_from_scan[r][c]);
         let pose = super::settings::rigid(&m)
             .with_context(|| format!("{}: entry {k} (\"{}\"): world_from_scan", path.display(), e.file))?;
+        if let Some(t) = pose.translation.vector.iter().find(|t| t.abs() > cps::MAX_COORDINATE_M) {
+            bail!(
+                "{}: entry {k} (\"{}\"): world_from_scan's translation {t} m is beyond ±{:e} m: expected a position on Earth",
+                path.display(),
+                e.file,
+                cps::MAX_COORDINATE_M
+            );
+        }
         let matches = |s: &InputScan| {
             s.file == e.file || Path::new(&s.file).file_name().is_some_and(|n| n.to_string_lossy() == e.file)
         };
@@ -294,6 +302,17 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A start 3e14 m out (issue 34, U1) is refused, naming the entry.
+    #[test]
+    fn an_init_pose_beyond_the_earth_is_refused() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("init.json");
+        std::fs::write(&path, r#"[{"file": "b.3d", "world_from_scan": [[1,0,0,3e14],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}]"#)
+            .expect("init");
+        let e = apply_init_poses(&path, &mut named(&["a", "b"])).expect_err("refused").to_string();
+        assert!(e.contains("entry 0 (\"b.3d\"): world_from_scan's translation 300000000000000 m"), "{e}");
     }
 
     #[test]

@@ -595,6 +595,13 @@ const CASES: &[Case] = &[
         "give 1.000e302 stations; expected at most 100001",
     ),
     (
+        "a route at 3e14 m (issue 34, U1: it validated, then stopped the run's recording)",
+        ("route_m = [[0.0, 0.0, 0.0], [100.0, 0.0, 0.0]]", "route_m = [[3e14, 0.0, 0.0], [100.0, 0.0, 0.0]]"),
+        "15:13",
+        "plan.route_m[0]",
+        "300000000000000 m is beyond ±1e8 m: expected coordinates of a survey on Earth",
+    ),
+    (
         "an integer beyond 64 bits (it was \"not a finite number\")",
         ("formation_m = [[5.0, 10.0, 0.0], [5.0, -10.0, 0.0]]", PIPE_HUGE_MIN_POINTS),
         "22:14",
