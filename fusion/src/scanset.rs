@@ -104,6 +104,23 @@ pub struct SetResult {
     pub settled: bool,
     /// The link graph's variance factor (graph mode).
     pub variance_factor: Option<f64>,
+    /// Each stage of the schedule: its matches and time.
+    pub stages: Vec<StageRun>,
+}
+
+/// What one stage of the schedule did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StageRun {
+    /// Its voxel, metres.
+    pub voxel_m: f64,
+    /// Its correspondence distance, metres.
+    pub max_correspondence_m: f64,
+    /// ICP runs in it (in graph mode's last stage: the links matched).
+    pub matches: usize,
+    /// Its wall-clock time, seconds.
+    pub seconds: f64,
+    /// False when a simultaneous queue was abandoned at its cap.
+    pub settled: bool,
 }
 
 /// One match of the final stage.
@@ -202,10 +219,19 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
     let mut matches = 0;
     let mut settled = true;
     let mut last = None;
+    let mut runs = Vec::with_capacity(stages);
     for (k, stage) in multiview_stages.iter().enumerate() {
+        let started = std::time::Instant::now();
         let r = register_views(scans, &poses, &stage_config(stage), &mut |done, total| {
             progress(k + 1, stages, done, total)
         })?;
+        runs.push(StageRun {
+            voxel_m: stage.voxel_m,
+            max_correspondence_m: stage.max_correspondence_m,
+            matches: r.matches,
+            seconds: started.elapsed().as_secs_f64(),
+            settled: r.settled,
+        });
         poses.clone_from(&r.world_from_scan);
         matches += r.matches;
         settled &= r.settled;
@@ -217,10 +243,19 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
         // direction the (degeneracy-aware) coarse matches left each scan
         // where the start put it, and a scan no fine link reaches keeps
         // the coarse registration.
+        let started = std::time::Instant::now();
         let g = crate::links::adjust(scans, &poses, &poses, &link, &mut |done, total| {
             progress(stages, stages, done, total)
         })?;
-        return Ok(from_graph(g, matches, settled));
+        let finest = config.stages.last().expect("a stage");
+        runs.push(StageRun {
+            voxel_m: finest.voxel_m,
+            max_correspondence_m: finest.max_correspondence_m,
+            matches: g.links.iter().filter(|l| l.result.is_some()).count(),
+            seconds: started.elapsed().as_secs_f64(),
+            settled: true,
+        });
+        return Ok(from_graph(g, matches, settled, runs));
     }
     let last = last.expect("at least one stage");
     let step = config.link.step_information();
@@ -254,10 +289,11 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
         matches,
         settled,
         variance_factor: None,
+        stages: runs,
     })
 }
 
-fn from_graph(g: LinkGraph, matches: usize, settled: bool) -> SetResult {
+fn from_graph(g: LinkGraph, matches: usize, settled: bool, stages: Vec<StageRun>) -> SetResult {
     let matches = matches + g.links.iter().filter(|l| l.result.is_some()).count();
     SetResult {
         world_from_scan: g.world_from_scan,
@@ -277,6 +313,7 @@ fn from_graph(g: LinkGraph, matches: usize, settled: bool) -> SetResult {
         matches,
         settled,
         variance_factor: Some(g.variance_factor),
+        stages,
     }
 }
 

@@ -139,6 +139,23 @@ pub(crate) struct MatchReport {
     seconds: f64,
     /// The length scales measured on the scans and the schedule used.
     settings: SettingsReport,
+    /// Each stage of the schedule as it ran.
+    stages: Vec<StageReport>,
+}
+
+/// One stage of the schedule as it ran.
+#[derive(Debug, Clone, Serialize, schemars::JsonSchema)]
+struct StageReport {
+    /// Its voxel, metres.
+    voxel_m: f64,
+    /// Its correspondence distance, metres.
+    max_correspondence_m: f64,
+    /// ICP runs in it (graph mode's last stage: the links matched).
+    matches: usize,
+    /// Its wall-clock time, seconds.
+    seconds: f64,
+    /// False when a simultaneous queue was abandoned at its cap.
+    settled: bool,
 }
 
 /// What the scans measured and the settings they were matched with.
@@ -470,6 +487,17 @@ fn report(
         variance_factor: r.variance_factor,
         seconds,
         settings,
+        stages: r
+            .stages
+            .iter()
+            .map(|s| StageReport {
+                voxel_m: s.voxel_m,
+                max_correspondence_m: s.max_correspondence_m,
+                matches: s.matches,
+                seconds: s.seconds,
+                settled: s.settled,
+            })
+            .collect(),
     }
 }
 
@@ -662,6 +690,15 @@ fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &MatchReport) ->
         report.matches,
         report.seconds
     )?;
+    let stages: Vec<String> = report
+        .stages
+        .iter()
+        .map(|s| {
+            let cap = if s.settled { "" } else { ", abandoned at its cap" };
+            format!("{:.3}/{:.3} m: {} runs, {:.3} s{cap}", s.voxel_m, s.max_correspondence_m, s.matches, s.seconds)
+        })
+        .collect();
+    writeln!(out, "stages: {}", stages.join("; "))?;
     for i in unlinked(report) {
         writeln!(
             out,

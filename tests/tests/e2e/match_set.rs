@@ -78,6 +78,12 @@ fn the_3dtk_set_lands_on_the_references_from_its_odometry() {
         assert!(s["degenerate_directions"].as_array().expect("list").is_empty(), "{s}");
         assert_eq!(s["covariance"].as_array().expect("6×6").len(), 6);
     }
+    // Each stage as it ran: its runs add up to the matches.
+    let stages = v["stages"].as_array().expect("stages");
+    assert_eq!(stages.len(), 4, "{stages:?}");
+    let runs: u64 = stages.iter().map(|s| s["matches"].as_u64().expect("runs")).sum();
+    assert_eq!(Some(runs), v["matches"].as_u64());
+    assert!(stages.iter().all(|s| s["seconds"].as_f64().is_some_and(|t| t > 0.0) && s["settled"] == true));
     let links = v["links"].as_array().expect("links");
     assert_eq!(links.len(), 3, "every pair of the three overlaps");
     assert!(links.iter().all(|l| l["accepted"] == true && l["rmse_m"].as_f64().expect("rmse") < 0.1), "{links:?}");
