@@ -427,12 +427,13 @@ fn check_distinct(scans: &[InputScan]) -> Result<()> {
         let mut h = std::collections::hash_map::DefaultHasher::new();
         s.points.len().hash(&mut h);
         s.points.iter().for_each(|p| [p.x, p.y, p.z].map(f32::to_bits).hash(&mut h));
-        if let Some(&j) = seen.get(&h.finish())
+        let key = h.finish();
+        if let Some(&j) = seen.get(&key)
             && scans[j].points == s.points
         {
             bail!("{} and {} hold the same points: expected each scan once", scans[j].file, s.file);
         }
-        seen.insert(h.finish(), i);
+        seen.insert(key, i);
     }
     Ok(())
 }
@@ -539,9 +540,7 @@ fn write_outputs(
     // not followed) and renamed into place when whole: a full disk leaves
     // no truncated recording, a link at match.rrd is replaced.
     let partial = dir.join("match.rrd.partial");
-    if std::fs::symlink_metadata(&partial).is_ok() {
-        std::fs::remove_file(&partial).with_context(|| format!("removing {}", partial.display()))?;
-    }
+    scanner::io::remove_entry(&partial)?;
     let recorded = (|| -> Result<bool> {
         let mut rec = Recorder::new("match", Some(&partial), &Viewer::None, Vec::new())?;
         if !rec.enabled() {
@@ -747,11 +746,12 @@ fn check_out(args: &MatchArgs) -> Result<()> {
     // now, not after the registration (with a `.partial` left).
     let files = ["poses.json", "links.csv", "match.rrd"].map(String::from);
     let clouds = args.formats.iter().map(|f| crate::run::outputs::cloud_file(f));
-    for name in files.into_iter().chain(clouds) {
-        let path = out.join(&name);
-        if std::fs::symlink_metadata(&path).is_ok_and(|m| m.is_dir()) {
-            bail!("--out {}: {name} is a directory: expected match's output file there (or nothing)", out.display());
-        }
+    if let Some((name, meta)) = crate::run::outputs::taken(out, files.into_iter().chain(clouds)) {
+        bail!(
+            "--out {}: {name} is {}: expected match's output file there (or nothing)",
+            out.display(),
+            if meta.is_dir() { "a directory" } else { "not a file" }
+        );
     }
     let frames = out.join("frames");
     if std::fs::symlink_metadata(&frames).is_ok_and(|m| !m.is_dir() && !m.file_type().is_symlink()) {

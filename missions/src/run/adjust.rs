@@ -597,18 +597,19 @@ fn coordinate_reports(
     let mut removed = Vec::new();
     for x in &a.removed {
         let Some((of, coordinate)) = label(x.source, x.component) else { continue };
-        let (given, adjusted, sigma) = match x.source {
+        // Adjusted − given, and the given coordinate's σ.
+        let (residual, sigma) = match x.source {
             Source::StationPrior(k) => {
                 let st = &net.network.stations[k];
                 let v = |p: &cps::ParentPose| [p.position.x, p.position.y, p.position.z, p.heading_rad];
                 let d = v(&a.stations[k])[x.component] - v(&st.pose)[x.component];
                 let d = if x.component == 3 { cps::wrap_angle(d) } else { d };
-                (0.0, d, st.prior.map_or(f64::NAN, |c| c[(x.component, x.component)].sqrt()))
+                (d, st.prior.map_or(f64::NAN, |c| c[(x.component, x.component)].sqrt()))
             }
             Source::PointPrior(p) => {
                 let pt = &net.network.points[p];
                 let d = a.points[p][x.component] - pt.position[x.component];
-                (0.0, d, pt.prior.map_or(f64::NAN, |c| c[(x.component, x.component)].sqrt()))
+                (d, pt.prior.map_or(f64::NAN, |c| c[(x.component, x.component)].sqrt()))
             }
             Source::Reading(_) => continue,
         };
@@ -617,7 +618,7 @@ fn coordinate_reports(
             of,
             coordinate,
             sigma,
-            residual: adjusted - given,
+            residual,
             redundancy: 0.0,
             w: Some(x.w),
             mdb: None,

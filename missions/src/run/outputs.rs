@@ -56,17 +56,21 @@ pub fn check_targets(mission: &Mission, dir: &Path, extra: &[&str]) -> Result<()
     }
     let clouds = mission.output.formats.iter().map(|f| cloud_file(f));
     let pipe = mission.pipe.as_ref().map(|_| DEVIATION_FILE.to_string());
-    for name in clouds.chain(pipe).chain(extra.iter().map(|e| e.to_string())) {
+    // (A symbolic link is the run directory's guard's to name.)
+    if let Some((name, _)) = taken(dir, clouds.chain(pipe).chain(extra.iter().map(|e| e.to_string()))) {
         let path = dir.join(&name);
-        // (A symbolic link is the run directory's guard's to name.)
-        if let Ok(meta) = std::fs::symlink_metadata(&path)
-            && !meta.file_type().is_file()
-            && !meta.file_type().is_symlink()
-        {
-            bail!("{}: exists and is not a file; the outputs write {name} there (remove or rename it)", path.display());
-        }
+        bail!("{}: exists and is not a file; the outputs write {name} there (remove or rename it)", path.display());
     }
     Ok(())
+}
+
+/// The first of `names` in `dir` that exists as neither a file nor a
+/// symbolic link (a directory, say): an output file cannot replace it.
+pub fn taken(dir: &Path, names: impl IntoIterator<Item = String>) -> Option<(String, std::fs::Metadata)> {
+    names.into_iter().find_map(|name| {
+        let meta = std::fs::symlink_metadata(dir.join(&name)).ok()?;
+        (!meta.file_type().is_file() && !meta.file_type().is_symlink()).then_some((name, meta))
+    })
 }
 
 /// The merged cloud's files, one per `[output] formats`, written a scan

@@ -34,8 +34,11 @@ struct Read {
     points: Vec<Point3<f32>>,
     intensity: Option<Vec<f32>>,
     color: Option<Vec<[u16; 3]>>,
-    /// Seconds after `acquisitionStart` (or of an unstated epoch).
+    /// GPS seconds (`timeStamp` + `acquisitionStart`), or the `timeStamp`s
+    /// as they are when the scan states no start.
     time: Option<Vec<f64>>,
+    /// What `time` counts from.
+    time_base: TimeBase,
 }
 
 /// Reads `pc`'s valid points (`posed`: with its pose applied); each
@@ -88,6 +91,11 @@ fn read_data3d(
     if out.points.is_empty() {
         out.intensity = None;
     }
+    match (pc.acquisition_start.as_ref().map(|t| t.gps_time), out.time.as_mut()) {
+        (Some(start), Some(time)) => time.iter_mut().for_each(|t| *t += start),
+        (None, Some(_)) => out.time_base = TimeBase::Relative,
+        (_, None) => {}
+    }
     Ok(out)
 }
 
@@ -123,9 +131,8 @@ pub(super) fn read(path: &Path) -> Result<PointCloud> {
         if n > 0 {
             extend(&mut cloud.intensity, part.intensity);
             extend(&mut cloud.color, part.color);
-            let start = pc.acquisition_start.as_ref().map(|t| t.gps_time);
-            bases.push(if start.is_some() { TimeBase::Gps } else { TimeBase::Relative });
-            extend(&mut cloud.time, part.time.map(|t| t.into_iter().map(|t| t + start.unwrap_or(0.0)).collect()));
+            bases.push(part.time_base);
+            extend(&mut cloud.time, part.time);
         }
     }
     if cloud.points.is_empty() {
@@ -212,18 +219,15 @@ pub fn read_e57_scans(path: &Path) -> Result<Vec<E57Scan>> {
         })?;
         let name = pc.name.clone().unwrap_or_else(|| format!("data3D[{k}]"));
         let read = read_data3d(&mut reader, path, k, &pc, false)?;
-        let gps_time_s = pc.acquisition_start.as_ref().map(|t| t.gps_time);
-        let time = read.time.map(|t| t.into_iter().map(|t| t + gps_time_s.unwrap_or(0.0)).collect());
-        let time_base = if gps_time_s.is_none() && time.is_some() { TimeBase::Relative } else { TimeBase::Gps };
         scans.push(E57Scan {
             name,
             world_from_scan,
             points: read.points,
             intensity: read.intensity,
             color: read.color,
-            time,
-            time_base,
-            gps_time_s,
+            time: read.time,
+            time_base: read.time_base,
+            gps_time_s: pc.acquisition_start.as_ref().map(|t| t.gps_time),
         });
     }
     Ok(scans)

@@ -59,7 +59,7 @@ fn check_claims(path: &Path) -> Result<()> {
         ));
     }
     if compressed {
-        check_laszip_items(path, &mut file, &head, len, record)?;
+        check_laszip_items(path, &mut file, &head, len, (record, count))?;
     }
     if len < 255 {
         return Ok(());
@@ -100,8 +100,15 @@ fn check_claims(path: &Path) -> Result<()> {
 /// A LAZ file's LASzip VLR (user `laszip encoded`, record 22204) must
 /// describe items whose sizes add up to the header's point record length:
 /// the `laz` crate's parallel decoder asserts it and panics otherwise
-/// (found by mutating a valid LAZ in `hostile.rs`).
-fn check_laszip_items(path: &Path, file: &mut std::fs::File, head: &[u8; 255], len: u64, record: u64) -> Result<()> {
+/// (found by mutating a valid LAZ in `hostile.rs`). `(record, points)`:
+/// the header's record length and point count.
+fn check_laszip_items(
+    path: &Path,
+    file: &mut std::fs::File,
+    head: &[u8; 255],
+    len: u64,
+    (record, points): (u64, u64),
+) -> Result<()> {
     use std::io::{Read as _, Seek as _, SeekFrom};
     let header_size = u64::from(u16::from_le_bytes([head[94], head[95]]));
     let vlrs = u32::from_le_bytes(head[100..104].try_into().expect("4 bytes"));
@@ -135,7 +142,7 @@ fn check_laszip_items(path: &Path, file: &mut std::fs::File, head: &[u8; 255], l
                     ),
                 ));
             }
-            return check_chunk_table(path, file, head, len);
+            return check_chunk_table(path, file, head, len, points);
         }
         at += 54 + length;
     }
@@ -145,7 +152,7 @@ fn check_laszip_items(path: &Path, file: &mut std::fs::File, head: &[u8; 255], l
 /// The LAZ chunk table's chunk count is a claim the `laz` crate sizes a
 /// buffer by (a mutated count asked for 68 GB and aborted the process):
 /// each chunk holds at least one point and one byte.
-fn check_chunk_table(path: &Path, file: &mut std::fs::File, head: &[u8; 255], len: u64) -> Result<()> {
+fn check_chunk_table(path: &Path, file: &mut std::fs::File, head: &[u8; 255], len: u64, points: u64) -> Result<()> {
     use std::io::{Read as _, Seek as _, SeekFrom};
     let points_at = u64::from(u32::from_le_bytes(head[96..100].try_into().expect("4 bytes")));
     let mut word = [0u8; 8];
@@ -167,13 +174,6 @@ fn check_chunk_table(path: &Path, file: &mut std::fs::File, head: &[u8; 255], le
         ));
     }
     let chunks = u64::from(u32::from_le_bytes(table[4..8].try_into().expect("4 bytes")));
-    let legacy = u64::from(u32::from_le_bytes(head[107..111].try_into().expect("4 bytes")));
-    let extended = if (head[24], head[25]) >= (1, 4) {
-        u64::from_le_bytes(head[247..255].try_into().expect("8 bytes"))
-    } else {
-        0
-    };
-    let points = legacy.max(extended);
     if chunks > len || chunks > points + 1 {
         return Err(ScannerError::file(
             path,

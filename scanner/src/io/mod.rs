@@ -418,11 +418,7 @@ pub(crate) fn against(path: &Path, e: ScannerError) -> ScannerError {
 pub fn replace_file(path: &Path, bytes: &[u8]) -> Result<()> {
     use std::io::Write as _;
     let tmp = temporary(path);
-    match std::fs::symlink_metadata(&tmp) {
-        Ok(_) => std::fs::remove_file(&tmp).map_err(|e| ScannerError::io(&tmp, e))?,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-        Err(e) => return Err(ScannerError::io(&tmp, e)),
-    }
+    remove_entry(&tmp)?;
     let written = std::fs::OpenOptions::new()
         .write(true)
         .create_new(true)
@@ -436,6 +432,17 @@ pub fn replace_file(path: &Path, bytes: &[u8]) -> Result<()> {
         let _ = std::fs::remove_file(&tmp);
         ScannerError::io(path, e)
     })
+}
+
+/// Removes whatever is at `path` — a file or a symbolic link, never
+/// followed — so that a file can be created there anew; nothing there is
+/// fine.
+pub fn remove_entry(path: &Path) -> Result<()> {
+    match std::fs::symlink_metadata(path) {
+        Ok(_) => std::fs::remove_file(path).map_err(|e| ScannerError::io(path, e)),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(e) => Err(ScannerError::io(path, e)),
+    }
 }
 
 pub(crate) fn temporary(path: &Path) -> PathBuf {

@@ -12,7 +12,7 @@ use super::e57::E57Stream;
 use super::las::{LasStream, convert_to_copc};
 use super::{
     CloudHeader, Format, Hashed, PcdData, PointCloud, against, check, create_hashed, finish_hashed, finish_write, pcd,
-    ply, temporary, text,
+    ply, remove_entry, temporary, text,
 };
 use crate::error::{Location, Result, ScannerError};
 
@@ -68,14 +68,14 @@ impl CloudWriter {
             ));
         }
         let tmp = temporary(path);
+        // COPC is written as LAZ beside it first.
+        let mut name = tmp.file_name().map(|n| n.to_os_string()).unwrap_or_default();
+        name.push(".laz");
+        let copc_laz = tmp.with_file_name(name);
         // Whatever is at the temporary names (a link left there, a stale
         // file) is removed, not followed: every sink creates its file anew.
-        let mut copc_laz = tmp.file_name().map(|n| n.to_os_string()).unwrap_or_default();
-        copc_laz.push(".laz");
-        for stale in [tmp.clone(), tmp.with_file_name(copc_laz)] {
-            if std::fs::symlink_metadata(&stale).is_ok() {
-                std::fs::remove_file(&stale).map_err(|e| ScannerError::io(&stale, e))?;
-            }
+        for stale in [&tmp, &copc_laz] {
+            remove_entry(stale)?;
         }
         let open = |kind: Kind| -> Result<Sink> {
             let mut w = create_hashed(&tmp).map_err(|e| against(path, e))?;
@@ -118,11 +118,8 @@ impl CloudWriter {
                         "a COPC file needs at least one point; the cloud has none",
                     ));
                 }
-                let mut name = tmp.file_name().map(|n| n.to_os_string()).unwrap_or_default();
-                name.push(".laz");
-                let laz = tmp.with_file_name(name);
-                let stream = LasStream::create(&laz, &header, true).map_err(|e| against(path, e))?;
-                Sink::Copc { laz, stream }
+                let stream = LasStream::create(&copc_laz, &header, true).map_err(|e| against(path, e))?;
+                Sink::Copc { laz: copc_laz, stream }
             }
             Format::E57 => Sink::E57(Box::new(E57Stream::create(&tmp, &header).map_err(|e| against(path, e))?)),
         };
