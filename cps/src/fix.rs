@@ -327,8 +327,12 @@ pub fn fix_parent_mixed(
         if !pose.to_vector().iter().all(|v| v.is_finite()) {
             return Err(CpsError::Diverged { what: "parent fix".into(), iterations });
         }
-        let converged =
-            dx.fixed_rows::<3>(0).amax() < options.position_tolerance_m && dx[3].abs() < options.heading_tolerance_rad;
+        // At national-grid coordinates (10⁶–10⁷ m) a step below 1e-10 m is
+        // below the coordinates' own resolution (one ulp of 5·10⁶ is
+        // 9·10⁻¹⁰ m): the tolerance is at least a few ulps of them.
+        let resolution = 8.0 * f64::EPSILON * pose.position.coords.amax();
+        let converged = dx.fixed_rows::<3>(0).amax() < options.position_tolerance_m.max(resolution)
+            && dx[3].abs() < options.heading_tolerance_rad;
         if converged || iterations >= options.max_iterations {
             break (lin, step, converged);
         }
@@ -421,6 +425,30 @@ mod tests {
                 assert_eq!(fix.redundancy, 3 * n - 4);
                 assert!(fix.residuals.iter().all(|v| v.abs() < 1e-9));
             }
+        }
+    }
+
+    #[test]
+    fn converges_at_national_grid_coordinates() {
+        // UTM 32N eastings and northings: one ulp of 5.7·10⁶ m is 9·10⁻¹⁰ m,
+        // above the 1e-10 m tolerance; the fix still reports convergence.
+        let shift = nalgebra::Vector3::new(500_000.0, 5_700_000.0, 300.0);
+        let truth = ParentPose::new(12.3 + shift.x, -4.5 + shift.y, 0.7 + shift.z, 2.9);
+        let children = [Point3::new(20.0, 5.0, 0.2), Point3::new(5.0, -10.0, 1.1), Point3::new(30.0, -20.0, -0.4)];
+        let children: Vec<Point3<f64>> = children.iter().map(|c| c + shift).collect();
+        for n in 2..=3 {
+            // Readings with noise (a few mm and arc seconds), as measured.
+            let mut s = sighted(&truth, &children[..n]);
+            for (k, c) in s.iter_mut().enumerate() {
+                let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
+                c.reading.slope_m += sign * 0.002;
+                c.reading.azimuth_rad -= sign * 1e-5;
+                c.reading.elevation_rad += 7e-6;
+            }
+            let fix = fix_parent(&s, &small_cov(3 * n), &instrument(), &FixOptions::default()).expect("fix");
+            assert!(fix.converged, "{} iterations", fix.iterations);
+            assert!(fix.iterations < 10, "{} iterations", fix.iterations);
+            assert!((fix.pose.position - truth.position).norm() < 0.01, "{:?}", fix.pose);
         }
     }
 

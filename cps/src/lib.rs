@@ -30,6 +30,7 @@ pub mod geom;
 pub mod instrument;
 pub mod observation;
 pub mod placement;
+pub mod screen;
 pub mod state;
 pub mod stats;
 

@@ -234,24 +234,9 @@ impl TeamState {
         readings: &[(usize, Reading, &Instrument)],
         options: &FixOptions,
     ) -> Result<ParentFix> {
-        let mut sighted = Vec::with_capacity(readings.len());
-        for &(j, reading, _) in readings {
-            if j >= self.children.len() {
-                return Err(CpsError::UnknownChild { child: j, team: self.n_children() });
-            }
-            let position = self.child(j).ok_or(CpsError::ChildNotPlaced { child: j })?;
-            sighted.push(SightedChild { child: j, position, reading });
-        }
+        let (sighted, children_cov, c_rows) = self.sighted(readings)?;
         let instruments: Vec<&Instrument> = readings.iter().map(|r| r.2).collect();
-        let m = 3 * sighted.len();
-        let offsets: Vec<usize> = sighted.iter().map(|c| child_offset(c.child)).collect();
         let n = self.covariance.ncols();
-        // cov(C, s) for every state s: the sighted children's rows.
-        let mut c_rows = DMatrix::zeros(m, n);
-        for (k, &o) in offsets.iter().enumerate() {
-            c_rows.rows_mut(3 * k, 3).copy_from(&self.covariance.rows(o, 3));
-        }
-        let children_cov = DMatrix::from_fn(m, m, |a, b| c_rows[(a, offsets[b / 3] + b % 3)]);
         let fix = fix_parent_mixed(&sighted, &children_cov, &instruments, options)?;
         // cov(p, s) = F cov(C, s); the old parent's columns are replaced.
         let mut cross = &fix.f_map * &c_rows;
@@ -267,6 +252,40 @@ impl TeamState {
         self.covariance.fixed_view_mut::<4, 4>(PARENT, PARENT).copy_from(&fix.covariance);
         self.parent = fix.pose;
         Ok(fix)
+    }
+
+    /// The fix [`TeamState::fix_parent_mixed`] would make from `readings`,
+    /// the state unchanged: what a field test tries before the team takes it
+    /// ([`crate::screen::field_test`]).
+    pub fn trial_fix(&self, readings: &[(usize, Reading, &Instrument)], options: &FixOptions) -> Result<ParentFix> {
+        let (sighted, children_cov, _) = self.sighted(readings)?;
+        let instruments: Vec<&Instrument> = readings.iter().map(|r| r.2).collect();
+        fix_parent_mixed(&sighted, &children_cov, &instruments, options)
+    }
+
+    /// The sighted points of `readings` with their positions, their joint
+    /// covariance and their rows of the state's covariance (cov(C, s)).
+    fn sighted(
+        &self,
+        readings: &[(usize, Reading, &Instrument)],
+    ) -> Result<(Vec<SightedChild>, DMatrix<f64>, DMatrix<f64>)> {
+        let mut sighted = Vec::with_capacity(readings.len());
+        for &(j, reading, _) in readings {
+            if j >= self.children.len() {
+                return Err(CpsError::UnknownChild { child: j, team: self.n_children() });
+            }
+            let position = self.child(j).ok_or(CpsError::ChildNotPlaced { child: j })?;
+            sighted.push(SightedChild { child: j, position, reading });
+        }
+        let m = 3 * sighted.len();
+        let offsets: Vec<usize> = sighted.iter().map(|c| child_offset(c.child)).collect();
+        let n = self.covariance.ncols();
+        let mut c_rows = DMatrix::zeros(m, n);
+        for (k, &o) in offsets.iter().enumerate() {
+            c_rows.rows_mut(3 * k, 3).copy_from(&self.covariance.rows(o, 3));
+        }
+        let children_cov = DMatrix::from_fn(m, m, |a, b| c_rows[(a, offsets[b / 3] + b % 3)]);
+        Ok((sighted, children_cov, c_rows))
     }
 }
 

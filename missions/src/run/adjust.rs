@@ -15,12 +15,13 @@
 
 use anyhow::{Context, Result, bail};
 use cps::batch::{AdjustOptions, Adjustment, ScalarStats, Source};
+use cps::screen::{GROSS_ANGLE_RAD, GROSS_DISTANCE_M};
 use cps::{CHI2_2D_95_SQRT, ErrorEllipse, ParentPose, Reading};
 use nalgebra::{Matrix2, Matrix3, Matrix4, Point3};
 use planner::network::{DanceNetwork, PointId, Taken};
 use serde::{Deserialize, Serialize};
 
-use super::journal::{self, Event, Phase};
+use super::journal::{self, Event, MeasureKey, Phase};
 use crate::mission::Mission;
 use crate::planning::Planned;
 use crate::planning::preanalysis::{KINDS, point_name};
@@ -54,9 +55,25 @@ pub fn network(
     let mut readings = Vec::with_capacity(order.len());
     let mut stations: Vec<ParentPose> = vec![dance.station_pose(0)];
     // The readings' keys so far, with their journal lines.
-    let mut seen: Vec<(usize, crate::run::journal::MeasureKey)> = Vec::new();
+    let mut seen: Vec<(usize, MeasureKey)> = Vec::new();
     for n in &read.events {
         match &n.event {
+            Event::Measure(m) if m.key.attempt > 0 => {
+                // A reading measured again after a fix's field test: it
+                // supersedes its earlier attempt (the one before it).
+                let earlier = MeasureKey { attempt: m.key.attempt - 1, ..m.key.clone() };
+                let Some(k) = seen.iter().rposition(|(_, key)| *key == earlier) else {
+                    bail!(
+                        "{}:{}: {} without its attempt {} before it",
+                        path.display(),
+                        n.line,
+                        key_words(&m.key),
+                        earlier.attempt
+                    );
+                };
+                readings[k] = checked_reading(m.data.measurement().to_reading(instrument), path, n)?;
+                seen[k] = (n.line, m.key.clone());
+            }
             Event::Measure(m) => {
                 let Some(expected) = order.get(readings.len()) else {
                     bail!("{}:{}: a measurement beyond the plan's {} readings", path.display(), n.line, order.len());
@@ -94,13 +111,7 @@ pub fn network(
                     );
                 }
                 seen.push((n.line, k.clone()));
-                let reading = m.data.measurement().to_reading(instrument);
-                for v in reading.to_vector().iter() {
-                    if !v.is_finite() {
-                        bail!("{}:{}: a non-finite reading: {}", path.display(), n.line, n.event.describe());
-                    }
-                }
-                readings.push(reading);
+                readings.push(checked_reading(m.data.measurement().to_reading(instrument), path, n)?);
             }
             Event::Fix(f) => {
                 let pose: ParentPose = (&f.data.pose).into();
@@ -124,21 +135,21 @@ pub fn network(
     Ok(net)
 }
 
-/// Misclosures beyond these against the journal's own poses are gross
-/// errors, not noise: a reading off by them cannot be adjusted (issue 34,
-/// U2: a 1000 m distance gave "degenerate geometry … station 6").
-const GROSS_DISTANCE_M: f64 = 1.0;
-const GROSS_ANGLE_RAD: f64 = 0.1;
+/// `reading` of the journal's line `n` when it is finite.
+fn checked_reading(reading: cps::Reading, path: &std::path::Path, n: &journal::Numbered) -> Result<cps::Reading> {
+    if reading.to_vector().iter().any(|v| !v.is_finite()) {
+        bail!("{}:{}: a non-finite reading: {}", path.display(), n.line, n.event.describe());
+    }
+    Ok(reading)
+}
 
-/// Refuses a reading that disagrees grossly with the journal's own poses
+/// Refuses a reading that disagrees grossly ([`cps::screen`]'s bounds: a
+/// reading off by them cannot be adjusted; issue 34, U2: a 1000 m distance
+/// gave "degenerate geometry … station 6") with the journal's own poses
 /// (the fixes' stations, the points placed from them), naming its journal
 /// line, what it measured and what the poses give. `lines[k]`: reading
 /// k's journal line and key.
-fn screen(
-    net: &DanceNetwork,
-    lines: &[(usize, crate::run::journal::MeasureKey)],
-    path: &std::path::Path,
-) -> Result<()> {
+fn screen(net: &DanceNetwork, lines: &[(usize, MeasureKey)], path: &std::path::Path) -> Result<()> {
     for (k, r) in net.network.readings.iter().enumerate() {
         let (Some(station), Some(point), Some((line, key))) =
             (net.network.stations.get(r.station), net.network.points.get(r.point), lines.get(k))
@@ -147,10 +158,7 @@ fn screen(
         };
         let Ok(expected) = cps::observe(&station.pose, &point.position) else { continue };
         let got = &r.reading;
-        let d_r = got.slope_m - expected.slope_m;
-        let d_phi = cps::wrap_angle(got.azimuth_rad - expected.azimuth_rad);
-        let d_psi = got.elevation_rad - expected.elevation_rad;
-        if d_r.abs() > GROSS_DISTANCE_M || d_phi.abs() > GROSS_ANGLE_RAD || d_psi.abs() > GROSS_ANGLE_RAD {
+        if cps::screen::Misclosure::between(got, &expected).is_gross() {
             bail!(
                 "{}:{line}: {} measures {:.3} m, {:.4}°, {:.4}° where the journal's poses give {:.3} m, {:.4}°, {:.4}° \
                  (off by more than {GROSS_DISTANCE_M} m or {:.1}°): a gross error, not noise the adjustment can take",
@@ -692,7 +700,7 @@ pub fn station_covariance(report: &AdjustmentReport, k: usize) -> Option<Matrix4
 }
 
 /// A journal reading's key in words: "the fix reading of child 1 in cycle 2".
-fn key_words(k: &crate::run::journal::MeasureKey) -> String {
+fn key_words(k: &MeasureKey) -> String {
     use crate::run::journal::Phase;
     let phase = match k.phase {
         Phase::Placement => "placement",

@@ -136,6 +136,17 @@ pub struct MeasureKey {
     /// The control point's name (control).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub control: Option<String>,
+    /// 0 for the first measurement of this prism for this purpose; 1, 2, …
+    /// for each time a fix's field test had it measured again (issue 34,
+    /// S7). The later attempt supersedes the earlier, which stays here.
+    #[serde(default, skip_serializing_if = "is_first")]
+    pub attempt: u32,
+}
+
+/// Serde's test for a first attempt (not written, as journals before
+/// attempts were).
+fn is_first(attempt: &u32) -> bool {
+    *attempt == 0
 }
 
 /// `tilt`, `scan`: at which station.

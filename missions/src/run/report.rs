@@ -68,6 +68,24 @@ pub struct RunReport {
     /// station): the same object as `adjust --json`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub adjustment: Option<AdjustmentOutcome>,
+    /// Every reading measured again because it failed a fix's field test
+    /// or lay grossly off its formation point (issue 34, S7), in order. The
+    /// superseded readings stay in the journal.
+    #[serde(default)]
+    pub remeasured: Vec<Remeasured>,
+}
+
+/// A reading measured again (`remeasured[]`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+pub struct Remeasured {
+    /// Dance cycle (0: at the start).
+    pub cycle: usize,
+    /// The point: a child's name or `control point "NAME"`.
+    pub point: String,
+    /// The attempt taken: 1 for the first re-measurement.
+    pub attempt: u32,
+    /// Why, in words.
+    pub why: String,
 }
 
 /// A coordinate reference system in a report.
@@ -333,6 +351,7 @@ impl RunReport {
         pipe: Option<PipeReport>,
         accepted: bool,
         timings: Timings,
+        remeasured: Vec<Remeasured>,
     ) -> Result<Self> {
         let last = stations.last().context("a run has at least the start station")?;
         // Along the true path on the simulator, the estimated one on serial ports.
@@ -358,6 +377,7 @@ impl RunReport {
             accepted,
             timings,
             adjustment: None,
+            remeasured,
         })
     }
 }

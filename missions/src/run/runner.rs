@@ -23,7 +23,8 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
-use cps::{FixOptions, ParentPose, TeamState, observe};
+use cps::screen::{FieldTest, Misclosure};
+use cps::{FixOptions, ParentPose, Reading, TeamState, observe};
 use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
 use nalgebra::{Matrix3, Matrix4, Point3, Vector3};
 use planner::{CyclePrediction, DanceCycle};
@@ -36,10 +37,10 @@ use super::backend::{DeviceKind, Fault, Team};
 use super::fuse::{Fused, ScanView};
 use super::journal::{
     Derived, DriveKey, Driven, EndKey, EndRecord, Event, FixKey, FixRecord, MeasureKey, Measured, Phase, Scanned,
-    StationKey, StepKey, Tilted, matrix_record,
+    StationKey, StepKey, Stop, Tilted, matrix_record,
 };
 use super::outputs::{CloudFiles, Written};
-use super::report::{FusionReport, RunReport, StationRecord, Timings};
+use super::report::{FusionReport, Remeasured, RunReport, StationRecord, Timings};
 use super::steps::Steps;
 use crate::mission::{FusionMode, Mission};
 use crate::planning::Planned;
@@ -51,6 +52,32 @@ pub const DRIVE_SPEED_M_PER_S: f64 = 0.3;
 pub const MEASURE_S: f64 = 4.0;
 /// Nominal duration of a tilt reading, s.
 pub const TILT_S: f64 = 1.0;
+
+/// How many times in one session a reading that fails a fix's field test
+/// is measured again before the run stops (a resume measures again).
+const MAX_REMEASURES: u32 = 2;
+
+/// A total-station sighting of one point: what was aimed at, under which
+/// journal key, and what was read.
+#[derive(Debug, Clone)]
+struct Sighting<'i> {
+    key: MeasureKey,
+    target: Target,
+    /// The point's index in the team state (a child or a control point).
+    point: usize,
+    instrument: &'i cps::Instrument,
+    reading: Reading,
+}
+
+/// A misclosure in words: "10.000 m, 0.0000°, 0.0000° off" style.
+fn misclosure_words(m: &Misclosure) -> String {
+    format!(
+        "off by {:+.3} m, {:+.4}°, {:+.4}° (distance, azimuth, elevation)",
+        m.slope_m,
+        m.azimuth_rad.to_degrees(),
+        m.elevation_rad.to_degrees()
+    )
+}
 
 /// How to run.
 #[derive(Debug, Clone, Default)]
@@ -172,6 +199,8 @@ struct Run<'m> {
     log_icp_iterations: bool,
     /// The team state's index of the first control prism.
     control_index: usize,
+    /// Readings measured again, in order.
+    remeasured: Vec<Remeasured>,
 }
 
 /// Runs `mission` as `planned` into `dir`: a new run (an existing journal
@@ -230,6 +259,7 @@ pub fn run(mission: &Mission, planned: &Planned, dir: &Path, options: &RunOption
         scan_times: Vec::new(),
         stations: Vec::new(),
         timings: Timings::default(),
+        remeasured: Vec::new(),
         log_icp_iterations: options.log_icp_iterations,
         control_index,
     };
@@ -288,16 +318,169 @@ impl Run<'_> {
         self.steps.rec.advance(driven.distance_m / DRIVE_SPEED_M_PER_S);
         self.progress.steps.inc(1);
         let target = Target { prism: Prism::Child(j), predicted: observe(from, at)? };
-        let key = MeasureKey { cycle: cycle.cycle, phase: Phase::Placement, child: Some(j), control: None };
-        let m: Measured = self
-            .steps
-            .step(key, StepKey::Measure, DeviceKind::TotalStation, |team| team.measure(&target).map(Measured::new))?;
-        self.team.place_child(j, &m.measurement().to_reading(instrument), instrument)?;
-        self.steps.rec.advance(MEASURE_S);
-        self.progress.steps.inc(1);
+        let key = MeasureKey { cycle: cycle.cycle, phase: Phase::Placement, child: Some(j), control: None, attempt: 0 };
+        let reading = self.placement_reading(key, &target, instrument)?;
+        self.team.place_child(j, &reading, instrument)?;
         let placed = self.team.child(j).context("a placed child has a position")?;
         self.steps.team.relocalise_child(j, &placed)?;
         self.steps.rec.sight_lines("placement", &from.position, &[(placed, None)])
+    }
+
+    /// One total-station measurement of `target`, as `instrument` reads it;
+    /// with whether the device took it (not the journal's replay).
+    fn measure(&mut self, key: MeasureKey, target: &Target, instrument: &cps::Instrument) -> Result<(Reading, bool)> {
+        let replayed = self.steps.replayed;
+        let m: Measured = self
+            .steps
+            .step(key, StepKey::Measure, DeviceKind::TotalStation, |team| team.measure(target).map(Measured::new))?;
+        self.steps.rec.advance(MEASURE_S);
+        self.progress.steps.inc(1);
+        Ok((m.measurement().to_reading(instrument), self.steps.replayed == replayed))
+    }
+
+    /// A placement's reading. It has no redundancy, so one grossly off the
+    /// formation point (cps::screen's bounds, against the parent's estimate)
+    /// is measured again, and taken when it is near the formation point or
+    /// agrees with the one before it (the child stands off its point: its
+    /// drive, not the reading). Refused after [`MAX_REMEASURES`] attempts
+    /// in this session.
+    fn placement_reading(
+        &mut self,
+        mut key: MeasureKey,
+        target: &Target,
+        instrument: &cps::Instrument,
+    ) -> Result<Reading> {
+        let (mut reading, _) = self.measure(key.clone(), target, instrument)?;
+        let mut previous: Option<Reading> = None;
+        let mut live = 0;
+        loop {
+            let off = Misclosure::between(&reading, &target.predicted);
+            let agrees = previous.is_some_and(|p| !Misclosure::between(&reading, &p).is_gross());
+            if !off.is_gross() || agrees {
+                return Ok(reading);
+            }
+            let what = format!(
+                "cycle {}: the placement reading of {} is {} from its formation point",
+                key.cycle,
+                self.prism_name(key.child.unwrap_or_default()),
+                misclosure_words(&off)
+            );
+            if live >= MAX_REMEASURES {
+                let why = format!("{what}, and {} measurements in this session disagree with each other", live + 1);
+                return Err(self.refuse(&key, why));
+            }
+            self.steps.rec.warn(format!("{what}: measured again"))?;
+            previous = Some(reading);
+            key.attempt += 1;
+            self.note_remeasured(&key, what);
+            let (again, was_live) = self.measure(key.clone(), target, instrument)?;
+            live += u32::from(was_live);
+            reading = again;
+        }
+    }
+
+    /// The parent's fix from `sightings` once they pass the field test
+    /// ([`cps::screen::field_test`]), taken by the team. A reading the test
+    /// names is measured again — the next attempt in the journal, the
+    /// superseded one kept — up to [`MAX_REMEASURES`] times in this
+    /// session; a fix that still fails is refused, never journaled as a
+    /// position (issue 34, S7).
+    fn checked_fix(&mut self, cycle: usize, station: usize, sightings: &mut [Sighting<'_>]) -> Result<cps::ParentFix> {
+        let options = FixOptions::default();
+        let mut live = vec![0; sightings.len()];
+        loop {
+            let readings: Vec<(usize, Reading, &cps::Instrument)> =
+                sightings.iter().map(|s| (s.point, s.reading, s.instrument)).collect();
+            let (k, off) = match cps::screen::field_test(&self.team, &readings, &options) {
+                FieldTest::Passed => return Ok(self.team.fix_parent_mixed(&readings, &options)?),
+                FieldTest::Culprit { index, misclosure } => (index, misclosure),
+                FieldTest::Failed { error, worst } => {
+                    let why = match (error, worst) {
+                        (Some(e), _) => format!("it fails: {e}"),
+                        (None, Some((k, m))) => format!(
+                            "the reading of {} is {} from it, and {}",
+                            self.prism_name(sightings[k].point),
+                            misclosure_words(&m),
+                            if sightings.len() < 3 {
+                                "with two readings no single one can be named"
+                            } else {
+                                "no single reading explains it"
+                            }
+                        ),
+                        (None, None) => "it does not converge".into(),
+                    };
+                    let what = format!(
+                        "cycle {cycle}: the parent's fix at station {station} from {} readings: {why}",
+                        sightings.len()
+                    );
+                    if live.iter().any(|n| *n >= MAX_REMEASURES) {
+                        let key = sightings.last().map(|s| s.key.clone()).context("a fix has sightings")?;
+                        return Err(self.refuse(&key, format!("{what}, also when measured again")));
+                    }
+                    // Too few readings to name one (two points): every one
+                    // is measured again.
+                    self.steps.rec.warn(format!("{what}: every reading measured again"))?;
+                    for k in 0..sightings.len() {
+                        self.remeasure(&mut sightings[k], &mut live[k], &what)?;
+                    }
+                    continue;
+                }
+            };
+            let what = format!(
+                "cycle {cycle}: the reading of {} is {} from the parent's fix at station {station} from the other {}",
+                self.prism_name(sightings[k].point),
+                misclosure_words(&off),
+                sightings.len() - 1
+            );
+            if live[k] >= MAX_REMEASURES {
+                let why = format!("{what}, also when measured again ({} time(s) in this session)", live[k]);
+                return Err(self.refuse(&sightings[k].key, why));
+            }
+            self.steps.rec.warn(format!("{what}: a gross error; measured again"))?;
+            self.remeasure(&mut sightings[k], &mut live[k], &what)?;
+        }
+    }
+
+    /// Measures `sighting` again as its next attempt, `why`; counts it in
+    /// `live` when the device took it.
+    fn remeasure(&mut self, sighting: &mut Sighting<'_>, live: &mut u32, why: &str) -> Result<()> {
+        sighting.key.attempt += 1;
+        self.note_remeasured(&sighting.key, why.to_string());
+        let (reading, was_live) = self.measure(sighting.key.clone(), &sighting.target, sighting.instrument)?;
+        sighting.reading = reading;
+        *live += u32::from(was_live);
+        Ok(())
+    }
+
+    /// Notes the re-measurement `key` for the report.
+    fn note_remeasured(&mut self, key: &MeasureKey, why: String) {
+        let point = match (&key.control, key.child) {
+            (Some(name), _) => format!("control point \"{name}\""),
+            (None, Some(j)) => self.prism_name(j),
+            (None, None) => "?".into(),
+        };
+        self.remeasured.push(Remeasured { cycle: key.cycle, point, attempt: key.attempt, why });
+    }
+
+    /// Stops the run on a measurement that cannot be trusted: journals the
+    /// stop (the readings stay) and returns the error with the resume hint.
+    fn refuse(&mut self, key: &MeasureKey, why: String) -> anyhow::Error {
+        let stop = Stop {
+            device: DeviceKind::TotalStation.name().into(),
+            error: why.clone(),
+            step: StepKey::Measure(key.clone()),
+        };
+        if let Err(e) = self.steps.journal.append(Event::Stop(stop)) {
+            return e;
+        }
+        if let Err(e) = self.steps.rec.error(format!("{why}: mission stopped")) {
+            return e;
+        }
+        anyhow::anyhow!(
+            "{why}. Nothing is taken as a position from it; the mission stopped cleanly and the journal keeps every \
+             reading. Check the prisms and the instrument, then continue (it measures again) with: {}",
+            self.steps.resume_hint
+        )
     }
 
     /// The parent drives to the cycle's station; returns its nominal pose.
@@ -323,21 +506,22 @@ impl Run<'_> {
         station: usize,
         nominal: &ParentPose,
         instrument: &'i cps::Instrument,
-    ) -> Result<Vec<(usize, cps::Reading, &'i cps::Instrument)>> {
-        let dance = &self.planned.dance;
-        let mut readings = Vec::new();
-        for &k in dance.sighted_at(station) {
-            let control = &dance.control[k];
+    ) -> Result<Vec<Sighting<'i>>> {
+        let mut sightings = Vec::new();
+        for k in self.planned.dance.sighted_at(station).to_vec() {
+            let control = &self.planned.dance.control[k];
             let target = Target { prism: Prism::Control(k), predicted: observe(nominal, &control.position)? };
-            let key = MeasureKey { cycle, phase: Phase::Control, child: None, control: Some(control.name.clone()) };
-            let m: Measured = self.steps.step(key, StepKey::Measure, DeviceKind::TotalStation, |team| {
-                team.measure(&target).map(Measured::new)
-            })?;
-            self.steps.rec.advance(MEASURE_S);
-            self.progress.steps.inc(1);
-            readings.push((self.control_index + k, m.measurement().to_reading(instrument), instrument));
+            let key = MeasureKey {
+                cycle,
+                phase: Phase::Control,
+                child: None,
+                control: Some(control.name.clone()),
+                attempt: 0,
+            };
+            let (reading, _) = self.measure(key.clone(), &target, instrument)?;
+            sightings.push(Sighting { key, target, point: self.control_index + k, instrument, reading });
         }
-        Ok(readings)
+        Ok(sightings)
     }
 
     /// At the start: the control points sighted from station 0, and with
@@ -347,11 +531,11 @@ impl Run<'_> {
         let Some(instrument) = self.mission.total_station.clone() else { return Ok(()) };
         let sighting = instrument.without_target_centring();
         let nominal = self.planned.dance.station_pose(0);
-        let readings = self.sight_control(0, 0, &nominal, &sighting)?;
+        let mut sightings = self.sight_control(0, 0, &nominal, &sighting)?;
         if !self.planned.dance.resects_start() {
             return Ok(());
         }
-        let fix = self.team.fix_parent_mixed(&readings, &FixOptions::default())?;
+        let fix = self.checked_fix(0, 0, &mut sightings)?;
         self.journal_fix(0, 0, &fix)?;
         self.progress.steps.inc(1);
         let pose = self.team.parent();
@@ -387,29 +571,25 @@ impl Run<'_> {
     /// control point it sees there and fixes its pose from them (seed 003
     /// eqs 7–16); the fix is journaled, and every blunder suspect logged.
     fn fix_parent(&mut self, cycle: &DanceCycle, nominal: &ParentPose, instrument: &cps::Instrument) -> Result<()> {
-        let mut readings = Vec::with_capacity(cycle.children.len());
+        let mut sightings = Vec::with_capacity(cycle.children.len());
         for (j, at) in cycle.children.iter().enumerate() {
             let target = Target { prism: Prism::Child(j), predicted: observe(nominal, at)? };
-            let key = MeasureKey { cycle: cycle.cycle, phase: Phase::Fix, child: Some(j), control: None };
-            let m: Measured = self.steps.step(key, StepKey::Measure, DeviceKind::TotalStation, |team| {
-                team.measure(&target).map(Measured::new)
-            })?;
-            self.steps.rec.advance(MEASURE_S);
-            self.progress.steps.inc(1);
-            readings.push((j, m.measurement().to_reading(instrument), instrument));
+            let key = MeasureKey { cycle: cycle.cycle, phase: Phase::Fix, child: Some(j), control: None, attempt: 0 };
+            let (reading, _) = self.measure(key.clone(), &target, instrument)?;
+            sightings.push(Sighting { key, target, point: j, instrument, reading });
         }
         let sighting = instrument.without_target_centring();
         let control = self.sight_control(cycle.cycle, cycle.to, nominal, &sighting)?;
-        readings.extend(control);
-        let fix = self.team.fix_parent_mixed(&readings, &FixOptions::default())?;
+        sightings.extend(control);
+        let fix = self.checked_fix(cycle.cycle, cycle.to, &mut sightings)?;
         let pose = self.team.parent();
         self.steps.team.relocalise_parent(&pose)?;
         self.journal_fix(cycle.cycle, cycle.to, &fix)?;
         self.progress.steps.inc(1);
         // Sight lines coloured by each child's largest |w|; a blunder is logged.
         let reliability = fix.reliability();
-        let mut lines = Vec::with_capacity(readings.len());
-        for (k, (j, _, _)) in readings.iter().enumerate() {
+        let mut lines = Vec::with_capacity(sightings.len());
+        for (k, Sighting { point: j, .. }) in sightings.iter().enumerate() {
             let w = reliability.w_statistics[3 * k..3 * k + 3]
                 .iter()
                 .flatten()
@@ -685,8 +865,15 @@ impl Run<'_> {
         // written whatever it says, and its error (a full disk) comes after.
         let recording_end = timed(&mut self.timings.recording_s, || recording.finish());
         self.timings.wall_s = started.elapsed().as_secs_f64();
-        let mut report =
-            RunReport::new(self.mission, &self.stations, fusion, written.pipe.clone(), accepted, self.timings)?;
+        let mut report = RunReport::new(
+            self.mission,
+            &self.stations,
+            fusion,
+            written.pipe.clone(),
+            accepted,
+            self.timings,
+            self.remeasured,
+        )?;
         report.adjustment = adjustment;
         crate::view::document::write_file(&self.dir.join("report.json"), &report)?;
         let adjusted = report.adjustment.as_ref().and_then(AdjustmentOutcome::report);

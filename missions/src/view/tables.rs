@@ -436,6 +436,9 @@ pub fn run_summary(out: &mut dyn Write, mission: &Mission, s: &RunSummary) -> st
         Some(AdjustmentOutcome::Failed { error }) => writeln!(out, "network adjustment failed: {error}")?,
         None => {}
     }
+    for r in &s.report.remeasured {
+        writeln!(out, "measured again: {} (attempt {}): {}", r.point, r.attempt, r.why)?;
+    }
     if s.replayed > 0 {
         writeln!(out, "resumed: {} journal events replayed", s.replayed)?;
     }

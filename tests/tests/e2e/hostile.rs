@@ -394,10 +394,18 @@ fn snooping_removals_are_reported_and_left_out_of_the_misclosures() {
             .map(|m| m["horizontal_m"].as_f64().expect("m"))
             .collect()
     };
-    // S2.
+    // S2. A 0.5 m blunder is measured again in the field now (S7): it is
+    // planted in the journal, as an instrument without that test records it.
     let blunder = dir.path().join("blunder");
-    let run = cps_survey(run_args(&hall, &blunder, &["--sim-fault", "total-station:blunder=5:0.5"]));
-    assert!(run.code <= 1, "{}", run.stderr);
+    let run = cps_survey(run_args(&hall, &blunder, &[]));
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    let journal = std::fs::read_to_string(blunder.join("journal.jsonl")).expect("journal");
+    let mut lines: Vec<String> = journal.lines().map(String::from).collect();
+    let k = lines.iter().position(|l| l.contains("\"phase\":\"fix\"")).expect("a fix reading");
+    let mut event: serde_json::Value = serde_json::from_str(&lines[k]).expect("JSON");
+    event["data"]["slope_raw_m"] = serde_json::json!(event["data"]["slope_raw_m"].as_f64().expect("distance") + 0.5);
+    lines[k] = event.to_string();
+    std::fs::write(blunder.join("journal.jsonl"), lines.join("\n") + "\n").expect("journal");
     let (snooped, plain) = (json(&blunder, &[]), json(&blunder, &["--no-snooping"]));
     assert!(!snooped["removed"].as_array().expect("removed").is_empty());
     let (with, without) = (horizontal(&snooped), horizontal(&plain));
@@ -437,4 +445,94 @@ fn snooping_removals_are_reported_and_left_out_of_the_misclosures() {
     assert_eq!(r.code, 2, "{}", r.stderr);
     let want = format!("journal.jsonl:{}: the fix reading of child 0 in cycle 1 measures 1000.000 m", k + 1);
     assert!(r.stderr.contains(&want) && r.stderr.contains("a gross error"), "{want}: {}", r.stderr);
+}
+
+/// The hall's measurements in order (the simulator counts them for its
+/// blunders): 1–2 the start's control points, 3–4 the first placements, 5–6
+/// the first fix's (cycle 1: "ahead", "behind").
+fn measure_events(out: &std::path::Path) -> Vec<serde_json::Value> {
+    let journal = std::fs::read_to_string(out.join("journal.jsonl")).expect("journal");
+    journal
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).expect("JSON"))
+        .filter(|e| e["event"] == "measure")
+        .collect()
+}
+
+#[test]
+fn a_gross_blunder_is_measured_again_never_journaled_as_a_position() {
+    // S7: one 10 m distance or a 10°–180° angle put the fix 1.8·10⁹ m away,
+    // journaled it, then blamed the total station, and every --resume
+    // replayed it.
+    let dir = tempfile::tempdir().expect("tempdir");
+    let hall = example("hall.toml");
+    let report = |out: &std::path::Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).expect("report")).expect("JSON")
+    };
+    let worst_error = |r: &serde_json::Value| -> f64 {
+        r["stations"].as_array().expect("stations").iter().filter_map(|s| s["error_xy_m"].as_f64()).fold(0.0, f64::max)
+    };
+    let clean = dir.path().join("clean");
+    assert_eq!(cps_survey(run_args(&hall, &clean, &[])).code, 0);
+    let clean_worst = worst_error(&report(&clean));
+    // (fault, the reading measured again: phase, child; every reading of
+    // that fix when two points cannot name one).
+    let cases: [(&str, &str, &[u64]); 6] = [
+        ("total-station:blunder=5:10", "fix", &[0, 1]),
+        ("total-station:blunder=5:-10", "fix", &[0, 1]),
+        ("total-station:blunder-angle=5:36000", "fix", &[0, 1]),
+        ("total-station:blunder-angle=6:648000", "fix", &[0, 1]),
+        ("total-station:blunder=3:10", "placement", &[0]),
+        ("total-station:blunder-angle=4:-36000", "placement", &[1]),
+    ];
+    for (k, (fault, phase, children)) in cases.iter().enumerate() {
+        let out = dir.path().join(format!("b{k}"));
+        let run = cps_survey(run_args(&hall, &out, &["--sim-fault", fault]));
+        assert_eq!(run.code, 0, "{fault}: {}", run.stderr);
+        let again: Vec<(String, u64)> = measure_events(&out)
+            .iter()
+            .filter(|e| e["attempt"] == 1)
+            .map(|e| (e["phase"].as_str().expect("phase").to_string(), e["child"].as_u64().expect("child")))
+            .collect();
+        let want: Vec<(String, u64)> = children.iter().map(|c| (phase.to_string(), *c)).collect();
+        assert_eq!(again, want, "{fault}");
+        let r = report(&out);
+        assert_eq!(r["remeasured"].as_array().expect("remeasured").len(), children.len(), "{fault}: {r}");
+        // The survey is as good as without the blunder (other noise draws
+        // after it): within a few millimetres of the clean run's worst.
+        let worst = worst_error(&r);
+        assert!(worst < clean_worst + 0.003, "{fault}: worst station error {worst} m (clean {clean_worst} m)");
+        assert!(run.stdout.contains("measured again:"), "{fault}: {}", run.stdout);
+    }
+    // Blundered again on each re-measurement of "ahead": the fix is refused,
+    // nothing journaled as its position, the stop named; a resume measures
+    // again and finishes.
+    let out = dir.path().join("refused");
+    let faults = ["total-station:blunder=5:10", "total-station:blunder=7:10", "total-station:blunder=9:10"];
+    let mut args = vec![];
+    for f in faults {
+        args.extend(["--sim-fault", f]);
+    }
+    let run = cps_survey(run_args(&hall, &out, &args));
+    assert_eq!(run.code, 2, "{}", run.stderr);
+    assert!(
+        run.stderr.contains("the parent's fix at station 1")
+            && run.stderr.contains("also when measured again")
+            && run.stderr.contains("--resume"),
+        "{}",
+        run.stderr
+    );
+    let journal = std::fs::read_to_string(out.join("journal.jsonl")).expect("journal");
+    let last: serde_json::Value = serde_json::from_str(journal.lines().last().expect("lines")).expect("JSON");
+    assert_eq!((last["event"].as_str(), last["device"].as_str()), (Some("stop"), Some("total-station")));
+    assert!(!journal.lines().any(|l| l.contains("\"event\":\"fix\"") && l.contains("\"station\":1")));
+    let resumed = cps_survey(run_args(&hall, &out, &["--resume"]));
+    assert_eq!(resumed.code, 0, "{}", resumed.stderr);
+    let attempts: Vec<u64> = measure_events(&out)
+        .iter()
+        .filter(|e| e["cycle"] == 1 && e["phase"] == "fix" && e["child"] == 0)
+        .map(|e| e["attempt"].as_u64().unwrap_or(0))
+        .collect();
+    assert_eq!(attempts, [0, 1, 2, 3], "three in the first session, the fourth on resume");
+    assert!(worst_error(&report(&out)) < clean_worst + 0.003);
 }
