@@ -39,7 +39,7 @@ use rayon::prelude::*;
 use crate::error::{FusionError, Result};
 use crate::graph::Edge;
 use crate::icp::correspondences::Partners;
-use crate::icp::degeneracy::{Observability, lever_arm};
+use crate::icp::degeneracy::{Observability, centroid, lever_arm};
 use crate::icp::solve::align_from;
 use crate::icp::{IcpConfig, IcpResult};
 use crate::multiview::{GATE_CHI2, MultiviewConfig, check, in_scan, prepare};
@@ -76,15 +76,23 @@ impl LinkConfig {
     }
 }
 
+/// The default eigenvalue ratio below which a match's direction is blind
+/// (`match --degeneracy-ratio`), between the measured noise and the real
+/// scans' weakest informative direction (see [`LinkConfig::default`]).
+pub const DEFAULT_DEGENERACY_RATIO: f64 = 2e-3;
+
 impl Default for LinkConfig {
     fn default() -> Self {
         let multiview = MultiviewConfig::default();
         Self {
             multiview: MultiviewConfig {
-                // Noise in the normals (1 mm on a 5 cm grid) gives a blind
-                // direction a spurious ratio of ~1e-4–1e-3; the real scans
-                // here have no direction below 3e-3.
-                icp: IcpConfig { degeneracy_ratio: Some(1e-3), ..multiview.icp },
+                // Analysed about the source's centroid: noise in the
+                // normals (1 mm on a 5 cm grid) gives a corridor's axis a
+                // spurious ratio up to 1.2e-3 (the sewer's axis 1.4e-3);
+                // the real scans here have no direction below 3.1e-3 (the
+                // 3DTK set's coarse stages; 1.6e-2 at its last, the room
+                // and small_gicp pairs 8e-2).
+                icp: IcpConfig { degeneracy_ratio: Some(DEFAULT_DEGENERACY_RATIO), ..multiview.icp },
                 ..multiview
             },
             step_sigma_m: 0.1,
@@ -229,8 +237,8 @@ pub fn adjust<S: AsRef<[Point3<f32>]> + Sync>(
         done += earlier.len();
         progress(done, total);
     }
-    let lever_arm: Vec<f64> = prepared.iter().map(|p| lever_arm(&p.source)).collect();
-    solve(poses, starts, links, &lever_arm, config)
+    let shape: Vec<(Point3<f64>, f64)> = prepared.iter().map(|p| (centroid(&p.source), lever_arm(&p.source))).collect();
+    solve(poses, starts, links, &shape, config)
 }
 
 /// Adjusts the accepted links, leaving out outliers one at a time.
@@ -238,7 +246,7 @@ fn solve(
     poses: &[Isometry3<f64>],
     starts: &[Isometry3<f64>],
     mut links: Vec<Link>,
-    lever_arm: &[f64],
+    shape: &[(Point3<f64>, f64)],
     config: &LinkConfig,
 ) -> Result<LinkGraph> {
     let n = poses.len();
@@ -301,13 +309,17 @@ fn solve(
                 continue;
             }
         }
-        // Each scan's information from its links, in its own frame
-        // (rotation about its scanner, as ICP's lever arm assumes) —
-        // analysed only when blind directions are asked for.
+        // Each scan's information from its links, in its own frame, analysed
+        // about its points' centroid (frame-free) — only when blind
+        // directions are asked for, and never for scan 0, which holds the
+        // frame.
         let unobservable = match config.multiview.icp.degeneracy_ratio {
             None => vec![Vec::new(); n],
             Some(ratio) => (0..n)
                 .map(|i| {
+                    if i == 0 {
+                        return Vec::new();
+                    }
                     let t = &g.world_from_scan[i];
                     let mut h = Matrix6::zeros();
                     for &k in &used {
@@ -318,7 +330,7 @@ fn solve(
                         }
                     }
                     let to_world = adjoint(t);
-                    Observability::new(&h, lever_arm[i], ratio)
+                    Observability::about(&h, &shape[i].0, shape[i].1, ratio)
                         .unobservable()
                         .into_iter()
                         .map(|d| (to_world * d).normalize())

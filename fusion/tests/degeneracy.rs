@@ -51,7 +51,10 @@ fn the_corridor_axis_is_unobservable_and_held_while_the_rest_is_recovered() {
         .collect();
     let start = Isometry3::translation(0.25, 0.0, 0.0);
     let plain = IcpConfig { max_correspondence_m: 0.3, ..IcpConfig::default() };
-    let aware = IcpConfig { degeneracy_ratio: Some(1e-4), ..plain };
+    // (Analysed about the source's centroid, a rotation weighs less than
+    // about the corridor's end: the axis's numerical noise, 1e-4 of the
+    // largest eigenvalue there, asks for 1e-3.)
+    let aware = IcpConfig { degeneracy_ratio: Some(1e-3), ..plain };
     let r = align(&source, &target, &start, &aware).expect("converges");
     assert!(r.converged);
     assert_eq!(r.unobservable.len(), 1, "{:?}", r.unobservable);
@@ -86,7 +89,7 @@ fn a_closed_room_has_no_unobservable_direction_and_the_same_answer() {
     let source: Vec<Point3<f32>> =
         target_points.iter().map(|p| (truth.inverse() * p.cast::<f64>()).cast::<f32>()).collect();
     let plain = IcpConfig { max_correspondence_m: 0.3, ..IcpConfig::default() };
-    let aware = IcpConfig { degeneracy_ratio: Some(1e-4), ..plain };
+    let aware = IcpConfig { degeneracy_ratio: Some(1e-3), ..plain };
     let a = align(&source, &target, &Isometry3::identity(), &plain).expect("plain");
     let b = align(&source, &target, &Isometry3::identity(), &aware).expect("aware");
     assert!(b.unobservable.is_empty(), "{:?}", b.unobservable);

@@ -20,11 +20,17 @@
 
 use nalgebra::{Matrix6, Point3, SymmetricEigen, Vector3, Vector6};
 
+/// The centroid of a point set (the origin for none).
+pub fn centroid(points: &[Point3<f32>]) -> Point3<f64> {
+    let n = points.len().max(1) as f64;
+    Point3::from(points.iter().fold(Vector3::zeros(), |a, p| a + p.coords.cast::<f64>()) / n)
+}
+
 /// The lever arm of a point set: its RMS distance from its centroid (at
 /// least 1 mm).
 pub fn lever_arm(points: &[Point3<f32>]) -> f64 {
     let n = points.len().max(1) as f64;
-    let c = points.iter().fold(Vector3::zeros(), |a, p| a + p.coords.cast::<f64>()) / n;
+    let c = centroid(points).coords;
     (points.iter().map(|p| (p.coords.cast::<f64>() - c).norm_squared()).sum::<f64>() / n).sqrt().max(1e-3)
 }
 
@@ -32,24 +38,47 @@ pub fn lever_arm(points: &[Point3<f32>]) -> f64 {
 /// u) below this is noise.
 pub const SNAP: f64 = 0.05;
 
-/// The normal equations' eigen-analysis in u = (L·ω, v).
+/// The normal equations' eigen-analysis in u = (L·ω, v_c), the twist
+/// about a centre c (v_c the motion of the point at c).
 #[derive(Debug, Clone)]
 pub struct Observability {
     hu: Matrix6<f64>,
     eigen: SymmetricEigen<f64, nalgebra::U6>,
     lever_arm_m: f64,
     min_ratio: f64,
+    /// ξ = A·ξ_c: v = v_c + c × ω.
+    about: Matrix6<f64>,
 }
 
 impl Observability {
-    /// Analyses the normal matrix `h` (of ξ = (ω, v)) with lever arm
-    /// `lever_arm_m` (> 0) and eigenvalue ratio `min_ratio`.
+    /// Analyses the normal matrix `h` (of ξ = (ω, v)) about the frame's
+    /// origin, with lever arm `lever_arm_m` (> 0) and eigenvalue ratio
+    /// `min_ratio`.
     pub fn new(h: &Matrix6<f64>, lever_arm_m: f64, min_ratio: f64) -> Self {
+        Self::about(h, &Point3::origin(), lever_arm_m, min_ratio)
+    }
+
+    /// [`Observability::new`] about `centre` (the matched points'
+    /// centroid, in the frame of `h`): the verdict is then the same in
+    /// every frame — a turn about a far origin no longer weighs as a slide
+    /// (issue 38: a façade scanned from 50 m had 2–5 directions flagged
+    /// blind about its scanner). Directions and information come back in
+    /// the frame of `h`.
+    pub fn about(h: &Matrix6<f64>, centre: &Point3<f64>, lever_arm_m: f64, min_ratio: f64) -> Self {
+        let mut about = Matrix6::identity();
+        about.fixed_view_mut::<3, 3>(3, 0).copy_from(&centre.coords.cross_matrix());
         let s = scale(lever_arm_m);
-        let hu = s * h * s;
+        let hu = s * about.transpose() * h * about * s;
         let hu = (hu + hu.transpose()) * 0.5;
         let eigen = SymmetricEigen::new(hu);
-        Self { hu, eigen, lever_arm_m, min_ratio }
+        Self { hu, eigen, lever_arm_m, min_ratio, about }
+    }
+
+    /// A⁻¹: ξ_c = A⁻¹·ξ.
+    fn about_inverse(&self) -> Matrix6<f64> {
+        let mut inverse = self.about;
+        inverse.fixed_view_mut::<3, 3>(3, 0).scale_mut(-1.0);
+        inverse
     }
 
     fn observed(&self, i: usize) -> bool {
@@ -82,7 +111,7 @@ impl Observability {
     /// (noise components dropped) turned back into ξ = (ω, v) and
     /// normalised.
     pub fn unobservable(&self) -> Vec<Vector6<f64>> {
-        let s = scale(self.lever_arm_m);
+        let s = self.about * scale(self.lever_arm_m);
         self.blind().into_iter().map(|b| (s * b).normalize()).collect()
     }
 
@@ -94,17 +123,17 @@ impl Observability {
         for b in self.blind() {
             p -= b * b.transpose();
         }
-        // H = S⁻¹·H_u·S⁻¹, S⁻¹ = scale(1/L).
-        let inv = scale(1.0 / self.lever_arm_m);
-        let h = inv * (p * self.hu * p) * inv;
+        // H = A⁻ᵀ·S⁻¹·H_u·S⁻¹·A⁻¹, S⁻¹ = scale(1/L).
+        let inv = scale(1.0 / self.lever_arm_m) * self.about_inverse();
+        let h = inv.transpose() * (p * self.hu * p) * inv;
         0.5 * (h + h.transpose())
     }
 
     /// The solution of `h ξ = rhs` within the observed directions only
     /// (zero along the others): Zhang et al.'s remapped update.
     pub fn solve(&self, rhs: &Vector6<f64>) -> Vector6<f64> {
-        let s = scale(self.lever_arm_m);
-        let ru = s * rhs;
+        let s = self.about * scale(self.lever_arm_m);
+        let ru = s.transpose() * rhs;
         let mut u = Vector6::zeros();
         for i in (0..6).filter(|&i| self.observed(i)) {
             let e = self.eigen.eigenvectors.column(i);
@@ -153,6 +182,64 @@ mod tests {
         let o = Observability::new(&noisy, 3.0, 1e-4);
         assert_eq!(o.unobservable().len(), 1);
         assert!((o.observed_part() - h).amax() < 1e-12, "{}", o.observed_part());
+    }
+
+    /// A corridor along x (floor, ceiling, two walls) `offset` from the
+    /// frame's origin: its normal matrix for point-to-plane pairs.
+    fn corridor(offset: Vector3<f64>) -> (Matrix6<f64>, Vec<Point3<f32>>) {
+        let mut h = Matrix6::zeros();
+        let mut points = Vec::new();
+        for i in 0..200 {
+            let x = -10.0 + 0.1 * i as f64;
+            for (p, n) in [
+                (Vector3::new(x, 0.0, -1.2), Vector3::z()),
+                (Vector3::new(x, 0.0, 1.3), -Vector3::z()),
+                (Vector3::new(x, -1.0, 0.1), Vector3::y()),
+                (Vector3::new(x, 1.1, -0.2), -Vector3::y()),
+                (Vector3::new(x, 0.5, 0.6), -Vector3::y()),
+            ] {
+                let q = p + offset;
+                // r = n·(ω × q + v): J = (q × n, n).
+                let j = Vector6::new(0.0, 0.0, 0.0, n.x, n.y, n.z);
+                let mut j = j;
+                j.fixed_rows_mut::<3>(0).copy_from(&q.cross(&n));
+                h += j * j.transpose();
+                points.push(Point3::from(q.cast::<f32>()));
+            }
+        }
+        (h, points)
+    }
+
+    #[test]
+    fn the_verdict_does_not_depend_on_where_the_frame_is() {
+        // At the origin the corridor is blind along its axis only; 50 m
+        // away the analysis about the origin flags more (a turn about the
+        // far origin weighs as a slide), about the centroid the same one.
+        let (h0, p0) = corridor(Vector3::zeros());
+        let o0 = Observability::about(&h0, &centroid(&p0), lever_arm(&p0), 1e-3);
+        let blind0 = o0.unobservable();
+        assert_eq!(blind0.len(), 1, "{blind0:?}");
+        assert!((blind0[0].abs() - Vector6::new(0.0, 0.0, 0.0, 1.0, 0.0, 0.0)).norm() < 1e-9, "{}", blind0[0]);
+        for offset in [Vector3::new(0.0, 50.0, 0.0), Vector3::new(30.0, -40.0, 20.0), Vector3::new(0.0, 0.0, 500.0)] {
+            let (h, p) = corridor(offset);
+            let far = Observability::new(&h, lever_arm(&p), 1e-3).unobservable();
+            assert!(far.len() > 1, "{offset}: about the far origin {far:?}");
+            let o = Observability::about(&h, &centroid(&p), lever_arm(&p), 1e-3);
+            let blind = o.unobservable();
+            assert_eq!(blind.len(), 1, "{offset}: {blind:?}");
+            // The axis is a pure slide wherever the frame is.
+            assert!((blind[0].abs() - Vector6::new(0.0, 0.0, 0.0, 1.0, 0.0, 0.0)).norm() < 1e-9, "{}", blind[0]);
+            // The observed part keeps everything but the axis: H along any
+            // direction orthogonal to it is unchanged.
+            let kept = o.observed_part();
+            let e = Vector6::new(0.3, -0.2, 0.1, 0.0, 1.0, -0.5);
+            let ratio = (e.transpose() * kept * e)[(0, 0)] / (e.transpose() * h * e)[(0, 0)];
+            assert!((ratio - 1.0).abs() < 1e-6, "{offset}: {ratio}");
+            // Solving about the centroid is solving in the frame.
+            let rhs = h * Vector6::new(0.01, -0.02, 0.005, 0.0, 0.3, -0.1);
+            let x = o.solve(&rhs);
+            assert!((h * x - rhs).norm() < 1e-6 * rhs.norm(), "{offset}: {x}");
+        }
     }
 
     #[test]

@@ -180,6 +180,9 @@ fn align_impl(
     // The lever arm that makes rotation comparable with translation: the
     // source's RMS radius about its centroid (at least 1 mm).
     let lever_arm_m = config.degeneracy_ratio.map_or(1.0, |_| super::degeneracy::lever_arm(source));
+    // The analysis runs about the source's centroid (where the estimate puts
+    // it in the target's frame): the same verdict in every frame.
+    let centre = super::degeneracy::centroid(source);
     while iterations < config.max_iterations {
         let sums = accumulate(source, target, &estimate, max_sq, config, &mut partners, moved);
         last = sums;
@@ -210,7 +213,7 @@ fn align_impl(
                 };
                 let delta = match config.degeneracy_ratio {
                     Some(ratio) => {
-                        let o = Observability::new(&h, lever_arm_m, ratio);
+                        let o = Observability::about(&h, &(estimate * centre), lever_arm_m, ratio);
                         unobservable = o.unobservable();
                         o.solve(&(-b))
                     }
@@ -248,7 +251,7 @@ fn align_impl(
         // What the match cannot see it does not know: its information
         // leaves those directions out (to the prior, another match, or
         // odometry in a pose graph).
-        let o = Observability::new(&information, lever_arm_m, ratio);
+        let o = Observability::about(&information, &(estimate * centre), lever_arm_m, ratio);
         unobservable = o.unobservable();
         information = o.observed_part();
     }

@@ -64,9 +64,10 @@ pub struct MatchArgs {
     #[arg(long, default_value_t = 10)]
     pub max_partners: usize,
     /// Directions a match cannot see — eigenvalue of its normal matrix
-    /// (rotation scaled by the scan's radius) below this ratio of the
-    /// largest — are held where the start put them and reported (0: off).
-    #[arg(long, default_value_t = 1e-3)]
+    /// (about the scan's centroid, rotation scaled by its radius) below
+    /// this ratio of the largest — are held where the start put them and
+    /// reported (0: off).
+    #[arg(long, default_value_t = fusion::links::DEFAULT_DEGENERACY_RATIO)]
     pub degeneracy_ratio: f64,
     /// Drop points nearer than this to their scan's origin, metres.
     #[arg(long, default_value_t = 0.0)]

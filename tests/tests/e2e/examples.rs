@@ -438,14 +438,29 @@ fn sewer_example_fits_the_pipe_and_finds_the_brick() {
     let j = fuse_json(dir.path(), "icp");
     let links = j["links"].as_array().expect("links");
     assert_eq!(links.len(), 8, "{j}");
+    // Exactly the axis and the roll about it (issue 38: analysed about each
+    // match's centroid, the same in every frame).
     for l in links {
-        let along_axis =
-            l["degenerate_directions"].as_array().expect("directions").iter().any(|d| f(&d[3]).abs() > 0.95);
-        assert!(along_axis, "link {}: the axis is not among {}", l["source"], l["degenerate_directions"]);
+        let directions = l["degenerate_directions"].as_array().expect("directions");
+        let along_axis = directions.iter().any(|d| f(&d[3]).abs() > 0.95);
+        let roll = directions.iter().any(|d| f(&d[0]).abs() > 0.95);
+        assert!(
+            directions.len() == 2 && along_axis && roll,
+            "link {}: not the axis and the roll: {}",
+            l["source"],
+            l["degenerate_directions"]
+        );
     }
     assert!(f(&j["rms_error_xy_m"]) < 0.01, "{j}");
-    for s in j["scans"].as_array().expect("scans").iter().skip(1) {
+    let scans = j["scans"].as_array().expect("scans");
+    assert!(
+        scans[0]["degenerate_directions"].as_array().is_none_or(|d| d.is_empty()),
+        "the first scan holds the frame: {}",
+        scans[0]
+    );
+    for s in scans.iter().skip(1) {
         let directions = s["degenerate_directions"].as_array().expect("directions");
+        assert_eq!(directions.len(), 2, "scan {}: {}", s["station"], s["degenerate_directions"]);
         let axis = directions.iter().find(|d| f(&d[3]).abs() > 0.95);
         let axis = axis.unwrap_or_else(|| panic!("scan {}: {}", s["station"], s["degenerate_directions"]));
         // Its σ along the axis is the start's step, 0.1 m.

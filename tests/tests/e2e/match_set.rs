@@ -5,7 +5,7 @@
 use std::ffi::OsString;
 use std::path::Path;
 
-use nalgebra::{Isometry3, Matrix4};
+use nalgebra::{Isometry3, Matrix4, Point3};
 use serde_json::Value;
 use tests::{cps_survey, workspace};
 
@@ -420,6 +420,64 @@ fn a_scaled_copy_of_the_3dtk_set_registers_alike_with_the_auto_schedule() {
     for (i, e) in errors.iter().enumerate() {
         let same = errors[2 + i % 2];
         assert!((e.1 - same.1).abs() < 0.01 && (e.2 - same.2).abs() < 1e-3, "{e:?} against {errors:?}");
+    }
+}
+
+/// The 3DTK set with every scan's points 60 m from its scanner (and at
+/// 1:100, 0.6 m: an object scanned from afar): the blind-direction test
+/// runs about each match's centroid, so no scan is blind anywhere (about
+/// the scanner it flagged 2–5 directions on every scan, issue 38) and the
+/// set lands on the reference as from its own scanners.
+#[test]
+fn a_set_seen_from_afar_is_not_blind_and_lands_alike() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    for factor in [1.0f64, 0.01] {
+        let shift = nalgebra::Vector3::new(0.0, 60.0, 8.0) * factor;
+        let set = dir.path().join(format!("afar{factor}"));
+        std::fs::create_dir_all(&set).expect("set");
+        let mut entries = Vec::new();
+        let mut inputs = Vec::new();
+        for k in 0..3 {
+            let name = format!("scan{k:03}");
+            let mut cloud = scanner::io::read(Path::new(&data(&format!("3dtk_dat/{name}.3d")))).expect("scan");
+            let s = shift.cast::<f32>();
+            cloud.points.iter_mut().for_each(|p| *p = Point3::from(p.coords * factor as f32 + s));
+            let path = set.join(format!("{name}.ply"));
+            scanner::io::write(&path, &cloud, scanner::io::Format::Ply(scanner::io::PlyEncoding::BinaryLittleEndian))
+                .expect("PLY");
+            let mut pose =
+                scanner::io::read_3dtk_pose(Path::new(&data(&format!("3dtk_dat/{name}.pose")))).expect("pose");
+            pose.translation.vector *= factor;
+            let m = (pose * nalgebra::Translation3::from(-shift)).to_homogeneous();
+            let rows: Vec<Vec<f64>> = (0..4).map(|r| (0..4).map(|c| m[(r, c)]).collect()).collect();
+            entries.push(serde_json::json!({ "file": format!("{name}.ply"), "world_from_scan": rows }));
+            inputs.push(path.into_os_string());
+        }
+        let init = set.join("init.json");
+        std::fs::write(&init, serde_json::to_string(&entries).expect("JSON")).expect("init");
+        let mut args = inputs;
+        args.extend(["--init-poses".into(), init.into_os_string()]);
+        let (r, v) = run(&args, &set.join("out"));
+        assert_eq!(r.code, 0, "×{factor}: {}", r.stderr);
+        let v = v.expect("JSON");
+        for s in v["scans"].as_array().expect("scans") {
+            assert!(s["degenerate_directions"].as_array().expect("list").is_empty(), "×{factor}: {s}");
+        }
+        for l in v["links"].as_array().expect("links") {
+            assert!(l["degenerate_directions"].as_array().is_none_or(|d| d.is_empty()), "×{factor}: {l}");
+        }
+        let poses: Vec<Isometry3<f64>> =
+            v["scans"].as_array().expect("scans").iter().map(|s| pose(&s["world_from_scan"])).collect();
+        let moved = Isometry3::from(nalgebra::Translation3::from(shift));
+        for (a, b) in [(0, 1), (1, 2)] {
+            let mut reference =
+                scanner::io::from_3dtk_axes(&matrix_file(&format!("3dtk_dat/reference_T_scan{a:03}_scan{b:03}.txt")));
+            reference.translation.vector *= factor;
+            // Compared at the scanners (a turn's error times 60 m is not
+            // the match's).
+            let (deg, m) = error(&(moved.inverse() * poses[a].inverse() * poses[b] * moved), &reference);
+            assert!(deg < 0.35 && m / factor < 0.03, "×{factor} {a}←{b}: {deg}° {} (scaled) m off", m / factor);
+        }
     }
 }
 
