@@ -29,5 +29,6 @@ pub mod pipe;
 pub mod scale;
 pub mod scanset;
 pub mod se3;
+pub mod verify;
 
 pub use error::{FusionError, Result};

@@ -42,7 +42,7 @@ use crate::icp::correspondences::Partners;
 use crate::icp::degeneracy::{Observability, centroid, lever_arm};
 use crate::icp::solve::align_from;
 use crate::icp::{IcpConfig, IcpResult};
-use crate::multiview::{GATE_CHI2, MultiviewConfig, check, in_scan, prepare};
+use crate::multiview::{GATE_CHI2, MultiviewConfig, Prepared, check, in_scan, prepare};
 use crate::se3::{Prior, adjoint, left_difference};
 
 /// The link graph's settings (documented defaults).
@@ -160,9 +160,25 @@ pub fn adjust<S: AsRef<[Point3<f32>]> + Sync>(
     if config.max_partners == 0 {
         return Err(FusionError::OutOfRange { what: "partners per scan".into(), value: 0.0, expected: "≥ 1".into() });
     }
+    let prepared = prepare(scans, &config.multiview)?;
+    let links = pair_links(&prepared, poses, config, progress);
+    let shape: Vec<(Point3<f64>, f64)> = prepared.iter().map(|p| (centroid(&p.source), lever_arm(&p.source))).collect();
+    solve(poses, starts, links, &shape, config)
+}
+
+/// Every pair of `prepared` scans whose boxes meet at `poses` and that share
+/// more than `min_pairs` correspondences there (each scan with its
+/// `max_partners` best-overlapping earlier scans), matched from those poses:
+/// the links, in order of (source, target). `progress(done, total)` as in
+/// [`adjust`].
+pub(crate) fn pair_links(
+    prepared: &[Prepared],
+    poses: &[Isometry3<f64>],
+    config: &LinkConfig,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Vec<Link> {
     let mv = &config.multiview;
-    let prepared = prepare(scans, mv)?;
-    let n = scans.len();
+    let n = prepared.len();
     let overlap_m = mv.overlap_m.unwrap_or(mv.icp.max_correspondence_m);
     // Pairs whose world boxes (grown by the overlap distance) meet: the
     // correspondences are counted only for those.
@@ -237,8 +253,7 @@ pub fn adjust<S: AsRef<[Point3<f32>]> + Sync>(
         done += earlier.len();
         progress(done, total);
     }
-    let shape: Vec<(Point3<f64>, f64)> = prepared.iter().map(|p| (centroid(&p.source), lever_arm(&p.source))).collect();
-    solve(poses, starts, links, &shape, config)
+    links
 }
 
 /// Adjusts the accepted links, leaving out outliers one at a time.

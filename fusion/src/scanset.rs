@@ -23,6 +23,7 @@ use crate::icp::{IcpResult, Stage};
 use crate::links::{LinkConfig, LinkGraph};
 use crate::multiview::{MultiviewConfig, Strategy, in_world, register_views};
 use crate::se3::adjoint;
+use crate::verify::PairCheck;
 
 /// How the set is registered.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -106,6 +107,11 @@ pub struct SetResult {
     pub variance_factor: Option<f64>,
     /// Each stage of the schedule: its matches and time.
     pub stages: Vec<StageRun>,
+    /// Every pair overlapping at the final poses, matched once more from
+    /// them at the finest stage ([`crate::verify`]).
+    pub checks: Vec<PairCheck>,
+    /// The verification's wall-clock time, seconds.
+    pub check_seconds: f64,
 }
 
 /// What one stage of the schedule did.
@@ -155,8 +161,32 @@ pub fn register_set<S: AsRef<[Point3<f32>]> + Sync>(
     let local: Vec<Isometry3<f64>> = std::iter::once(Isometry3::identity())
         .chain(starts[1..].iter().map(|s| world_from_first.inverse() * s))
         .collect();
-    let r = register_in_first_frame(scans, &local, config, progress)?;
+    let mut r = register_in_first_frame(scans, &local, config, progress)?;
+    let started = std::time::Instant::now();
+    r.checks = verify_set(scans, &r.world_from_scan, config)?;
+    r.check_seconds = started.elapsed().as_secs_f64();
     Ok(into_world(r, &world_from_first, config.mode == Mode::Graph))
+}
+
+/// The set's final poses checked against its data at the finest stage,
+/// the tolerance its voxel ([`crate::verify::check_pairs`]).
+fn verify_set<S: AsRef<[Point3<f32>]> + Sync>(
+    scans: &[S],
+    poses: &[Isometry3<f64>],
+    config: &SetConfig,
+) -> Result<Vec<PairCheck>> {
+    let Some(finest) = config.stages.last() else { return Ok(Vec::new()) };
+    let multiview = &config.link.multiview;
+    let link = LinkConfig {
+        multiview: MultiviewConfig {
+            source_voxel_m: finest.voxel_m,
+            target_voxel_m: finest.voxel_m,
+            icp: crate::icp::IcpConfig { max_correspondence_m: finest.max_correspondence_m, ..multiview.icp },
+            ..*multiview
+        },
+        ..config.link
+    };
+    crate::verify::check_pairs(scans, poses, &link, finest.voxel_m)
 }
 
 /// A set's result moved from the first scan's frame into the world by
@@ -290,6 +320,8 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
         settled,
         variance_factor: None,
         stages: runs,
+        checks: Vec::new(),
+        check_seconds: 0.0,
     })
 }
 
@@ -314,6 +346,8 @@ fn from_graph(g: LinkGraph, matches: usize, settled: bool, stages: Vec<StageRun>
         settled,
         variance_factor: Some(g.variance_factor),
         stages,
+        checks: Vec::new(),
+        check_seconds: 0.0,
     }
 }
 

@@ -5,7 +5,7 @@
 use std::ffi::OsString;
 use std::path::Path;
 
-use nalgebra::{Isometry3, Matrix4, Point3};
+use nalgebra::{Isometry3, Matrix4, Point3, UnitQuaternion};
 use serde_json::Value;
 use tests::{cps_survey, workspace};
 
@@ -78,6 +78,10 @@ fn the_3dtk_set_lands_on_the_references_from_its_odometry() {
         assert!(s["degenerate_directions"].as_array().expect("list").is_empty(), "{s}");
         assert_eq!(s["covariance"].as_array().expect("6×6").len(), 6);
     }
+    // Verified: every pair matched again from the final poses agrees
+    // (within 2.3 % of the scans' radius; issue 38).
+    assert_eq!(v["untrusted"], serde_json::json!([]), "{}", v["checks"]);
+    assert_eq!(v["checks"].as_array().map(Vec::len), Some(3), "{}", v["checks"]);
     // Each stage as it ran: its runs add up to the matches.
     let stages = v["stages"].as_array().expect("stages");
     assert_eq!(stages.len(), 4, "{stages:?}");
@@ -750,4 +754,111 @@ fn match_writes_only_into_a_directory_of_its_own_and_leaves_nothing_stale() {
         .collect();
     frames.sort();
     assert_eq!(frames, ["room_scan1.frames", "room_scan2.frames"]);
+}
+
+/// Four 150° wedges of the PCL room scan, each overlapping the next by 60°
+/// (truth: one frame), written as PLY with starts `offset_m` and
+/// `offset_deg` off per wedge (deterministic directions); returns the
+/// inputs and the `--init-poses` file.
+fn room_wedges(dir: &Path, offset_m: f64, offset_deg: f64) -> Vec<OsString> {
+    let room = scanner::io::read(Path::new(&data("pcl_room_scans/room_scan1.pcd"))).expect("room");
+    std::fs::create_dir_all(dir).expect("dir");
+    let mut inputs = Vec::new();
+    let mut entries = Vec::new();
+    for k in 0..4 {
+        let from = k as f32 * 90f32.to_radians();
+        let wedge: Vec<Point3<f32>> = room
+            .points
+            .iter()
+            .filter(|p| (p.y.atan2(p.x) - from).rem_euclid(std::f32::consts::TAU) < 150f32.to_radians())
+            .copied()
+            .collect();
+        let cloud = scanner::io::PointCloud::from_points(wedge);
+        let name = format!("wedge{k}.ply");
+        let path = dir.join(&name);
+        scanner::io::write(&path, &cloud, scanner::io::Format::Ply(scanner::io::PlyEncoding::BinaryLittleEndian))
+            .expect("PLY");
+        inputs.push(path.into_os_string());
+        let a = 1.3 * k as f64 + 0.4;
+        let start = if k == 0 {
+            Isometry3::identity()
+        } else {
+            Isometry3::from_parts(
+                nalgebra::Translation3::new(a.cos() * offset_m, a.sin() * offset_m, 0.0),
+                UnitQuaternion::from_axis_angle(
+                    &nalgebra::Unit::new_normalize(nalgebra::Vector3::new(a.sin(), 0.3, 1.0)),
+                    offset_deg.to_radians() * if k % 2 == 0 { 1.0 } else { -1.0 },
+                ),
+            )
+        };
+        let m = start.to_homogeneous();
+        let rows: Vec<Vec<f64>> = (0..4).map(|r| (0..4).map(|c| m[(r, c)]).collect()).collect();
+        entries.push(serde_json::json!({ "file": name, "world_from_scan": rows }));
+    }
+    let init = dir.join("init.json");
+    std::fs::write(&init, serde_json::to_string(&entries).expect("JSON")).expect("init");
+    inputs.extend(["--init-poses".into(), init.into_os_string()]);
+    inputs
+}
+
+/// Issue 38, "no silent failure": four wedges of the room, overlapping
+/// 60° pairwise. From starts 0.5 m / 5° off every mode lands them within
+/// 0.1° and 5 mm, and the verification (each overlapping pair matched once
+/// more from the final poses) finds every pair consistent. From 1 m / 10°
+/// the coarse stages trap them in the room's other symmetric fit (90° off;
+/// every link was "used" and the exit 0): each mode now exits 1 and names
+/// scans of inconsistent pairs — only scans that are indeed off.
+#[test]
+fn wedges_from_rough_starts_land_or_are_named_with_exit_1() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let off = |v: &Value| -> Vec<(f64, f64)> {
+        v["scans"]
+            .as_array()
+            .expect("scans")
+            .iter()
+            .map(|s| error(&pose(&s["world_from_scan"]), &Isometry3::identity()))
+            .collect()
+    };
+    for (m, deg, lands) in [(0.5, 5.0, true), (1.0, 10.0, false)] {
+        let inputs = room_wedges(&dir.path().join(format!("w{m}")), m, deg);
+        for mode in ["graph", "pairwise", "incremental", "simultaneous"] {
+            let mut args = inputs.clone();
+            args.extend(["--mode".into(), mode.into()]);
+            let (r, v) = run(&args, &dir.path().join(format!("o{m}-{mode}")));
+            let v = v.expect("JSON");
+            let errors = off(&v);
+            let untrusted: Vec<usize> = v["untrusted"]
+                .as_array()
+                .expect("untrusted")
+                .iter()
+                .map(|i| i.as_u64().expect("index") as usize)
+                .collect();
+            if lands {
+                assert_eq!(r.code, 0, "{m} m {mode}: {}", r.stderr);
+                assert!(untrusted.is_empty(), "{m} m {mode}: {}", v["checks"]);
+                for (k, (d, e)) in errors.iter().enumerate() {
+                    assert!(*d < 0.1 && *e < 0.005, "{m} m {mode}: wedge {k} {d}° {e} m off");
+                }
+            } else {
+                assert_eq!(r.code, 1, "{m} m {mode}: {errors:?}");
+                assert!(errors.iter().any(|(d, _)| *d > 45.0), "the trap this test is about: {errors:?}");
+                assert!(!untrusted.is_empty(), "{m} m {mode}: {}", v["checks"]);
+                for &k in &untrusted {
+                    assert!(errors[k].0 > 1.0, "{m} m {mode}: wedge {k} named but right: {errors:?}");
+                }
+            }
+        }
+    }
+    // The text output names them.
+    let mut args = room_wedges(&dir.path().join("text"), 1.0, 10.0);
+    args.extend(["--mode".into(), "pairwise".into(), "--out".into(), dir.path().join("t").into_os_string()]);
+    let mut all: Vec<OsString> = vec!["match".into()];
+    all.extend(args);
+    let r = cps_survey(all);
+    assert_eq!(r.code, 1, "{}", r.stderr);
+    assert!(
+        r.stdout.contains("not trusted: wedge") && r.stdout.contains("matched again from the final poses"),
+        "{}",
+        r.stdout
+    );
 }
