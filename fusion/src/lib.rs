@@ -21,6 +21,7 @@
 
 pub mod direct;
 pub mod error;
+pub mod global;
 pub mod graph;
 pub mod icp;
 pub mod links;

@@ -54,16 +54,16 @@ pub struct PairCheck {
     pub chi2: Option<f64>,
     /// The motion as a fraction of the source points' RMS radius.
     pub relative_motion: Option<f64>,
-    /// Whether the pair agrees with the final poses: the match converged
-    /// and moved the points by at most the tolerance or by at most
-    /// [`MAX_RELATIVE_MOTION`] of their radius.
+    /// Whether the pair agrees with the final poses: the match moved the
+    /// points by at most the tolerance or by at most [`MAX_RELATIVE_MOTION`]
+    /// of their radius.
     pub consistent: bool,
 }
 
 /// Matches every pair of `scans` that overlaps at `poses` (their final
 /// `world_from_scan`) once more from those poses with `config` (the finest
-/// stage's), and judges each: consistent when its match converged and
-/// moved the points by at most `tolerance_m` (the finest voxel) or
+/// stage's), and judges each: consistent when its match moved the points
+/// by at most `tolerance_m` (the finest voxel) or
 /// [`MAX_RELATIVE_MOTION`] of their radius.
 pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
     scans: &[S],
@@ -90,7 +90,7 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
                 let chi2 = (e.transpose() * r.information * e)[(0, 0)];
                 let radius = lever_arm(source);
                 let moved = (delta * c - c).norm() + angle * radius;
-                (moved, angle, r.converged, chi2, moved / radius)
+                (moved, angle, chi2, moved / radius)
             });
             PairCheck {
                 target: l.target,
@@ -98,11 +98,12 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
                 overlap: l.overlap,
                 moved_m: motion.map(|m| m.0),
                 angle_rad: motion.map(|m| m.1),
-                chi2: motion.map(|m| m.3),
-                relative_motion: motion.map(|m| m.4),
-                consistent: motion.is_some_and(|(moved, _, converged, _, relative)| {
-                    converged && (moved <= tolerance_m || relative <= MAX_RELATIVE_MOTION)
-                }),
+                chi2: motion.map(|m| m.2),
+                relative_motion: motion.map(|m| m.3),
+                // (A match still creeping at its cap but a few millimetres
+                // from the poses agrees with them: the motion judges.)
+                consistent: motion
+                    .is_some_and(|(moved, _, _, relative)| moved <= tolerance_m || relative <= MAX_RELATIVE_MOTION),
             }
         })
         .collect())

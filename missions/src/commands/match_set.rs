@@ -31,6 +31,17 @@ pub enum ModeArg {
     Graph,
 }
 
+/// Where the scans start.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum InitArg {
+    /// Global registration on local features, no guess needed.
+    Global,
+}
+
+/// The cell of global registration's descriptors, as a fraction of the
+/// scans' radius.
+const GLOBAL_CELL_OF_RADIUS: f64 = 1.0 / 40.0;
+
 /// `match`'s arguments.
 #[derive(Debug, Clone, clap::Args)]
 pub struct MatchArgs {
@@ -46,6 +57,12 @@ pub struct MatchArgs {
     /// frame).
     #[arg(long, value_name = "FILE")]
     pub init_poses: Option<PathBuf>,
+    /// `global`: find each scan's start from the scans' shape alone (FPFH
+    /// descriptors and RANSAC against the earlier scans), for scans that
+    /// come with no guess — they may be turned any amount; the poses the
+    /// inputs carry (3DTK, E57) are then not used.
+    #[arg(long, value_enum)]
+    pub init: Option<InitArg>,
     /// Coarse-to-fine stages "VOXEL/MAXDIST,…" in metres, or "auto": the
     /// building recipe 0.5/2,0.25/1,0.1/0.5,0.05/0.2 scaled so that its
     /// first voxel is an eleventh of the scans' radius (measured on them).
@@ -173,7 +190,7 @@ struct CheckReport {
     chi2: Option<f64>,
     /// `moved_m` as a fraction of the source points' RMS radius.
     relative_motion: Option<f64>,
-    /// The match converged and moved the points by at most the finest
+    /// The match moved the points by at most the finest
     /// stage's voxel or 5 % of their RMS radius.
     consistent: bool,
 }
@@ -215,6 +232,34 @@ struct SettingsReport {
     /// ICP's convergence tolerance in translation, metres (0.002 × the
     /// last voxel).
     translation_tolerance_m: f64,
+    /// With `--init global`: how the starts were found.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    global: Option<GlobalReport>,
+}
+
+/// `--init global`'s starts.
+#[derive(Debug, Clone, Serialize, schemars::JsonSchema)]
+struct GlobalReport {
+    /// The descriptors' cell, metres (a fortieth of the radius).
+    voxel_m: f64,
+    /// Its wall-clock time, seconds (outside `seconds`).
+    seconds: f64,
+    /// Each later scan's match: against which earlier scan, with how many
+    /// feature correspondences and inliers.
+    matches: Vec<GlobalMatchReport>,
+}
+
+/// One scan's global match.
+#[derive(Debug, Clone, Serialize, schemars::JsonSchema)]
+struct GlobalMatchReport {
+    /// The scan placed (index into `scans`).
+    source: usize,
+    /// The earlier scan it was placed against.
+    target: usize,
+    /// Mutual nearest neighbours in feature space.
+    correspondences: usize,
+    /// Of them, within 1.5 cells after the transform.
+    inliers: usize,
 }
 
 /// One scan in a [`MatchReport`].
@@ -291,6 +336,9 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
             bail!("--formats {}: {f} is listed twice: expected each format once", args.formats.join(","));
         }
     }
+    if args.init.is_some() && args.init_poses.is_some() {
+        bail!("--init global and --init-poses: give the starts, or have them found, not both");
+    }
     if args.out.exists() && !args.out.is_dir() {
         bail!("--out {}: exists and is not a directory", args.out.display());
     }
@@ -323,8 +371,33 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
         bail!("{}: one scan: expected at least two to match", scans[0].file);
     }
     let points: Vec<&[nalgebra::Point3<f32>]> = scans.iter().map(|s| s.points.as_slice()).collect();
-    let settings = scale_settings(args, given, &scans, &points, &mut config)?;
-    let starts: Vec<Isometry3<f64>> = scans.iter().map(|s| s.start).collect();
+    let mut settings = scale_settings(args, given, &scans, &points, &mut config)?;
+    let starts: Vec<Isometry3<f64>> = match args.init {
+        None => scans.iter().map(|s| s.start).collect(),
+        Some(InitArg::Global) => {
+            let voxel_m = settings.radius_m * GLOBAL_CELL_OF_RADIUS;
+            let started = Instant::now();
+            let global = fusion::global::GlobalConfig::new(voxel_m);
+            let (starts, found) = fusion::global::starts(&points, &global).map_err(|e| named(e, &scans))?;
+            settings.global = Some(GlobalReport {
+                voxel_m,
+                seconds: started.elapsed().as_secs_f64(),
+                matches: found
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(i, f)| {
+                        f.as_ref().map(|(j, m)| GlobalMatchReport {
+                            source: i,
+                            target: *j,
+                            correspondences: m.correspondences,
+                            inliers: m.inliers,
+                        })
+                    })
+                    .collect(),
+            });
+            starts
+        }
+    };
     rayon::broadcast(|_| ());
     let started = Instant::now();
     let bar = progress_bar(args.json);
@@ -447,6 +520,7 @@ fn scale_settings(
         huber_m,
         step_sigma_m: scaled.step_sigma_m,
         translation_tolerance_m: scaled.translation_tolerance_m,
+        global: None,
     })
 }
 
