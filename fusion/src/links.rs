@@ -116,6 +116,22 @@ pub struct Link {
     pub result: Option<IcpResult>,
     /// Why the link is not used; `None` when it is.
     pub rejected: Option<String>,
+    /// For a link rejected as disagreeing with the others: the shortest
+    /// cycle of used links it closes (scans from its target round to its
+    /// source), with how far that path and the link disagree.
+    pub cycle: Option<Cycle>,
+}
+
+/// A cycle of used links that a rejected link contradicts.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Cycle {
+    /// The scans from the link's target to its source along used links.
+    pub scans: Vec<usize>,
+    /// The turn between the path's `target_from_source` and the link's,
+    /// radians.
+    pub angle_rad: f64,
+    /// Their translations' difference, metres.
+    pub translation_m: f64,
 }
 
 /// What [`adjust`] returns.
@@ -246,7 +262,7 @@ pub(crate) fn pair_links(
                     Ok(r) => (Some(r), None),
                     Err(e) => (None, Some(format!("the match failed: {e}"))),
                 };
-                Link { target: j, source: c, overlap, result, rejected }
+                Link { target: j, source: c, overlap, result, rejected, cycle: None }
             })
             .collect();
         links.extend(matched);
@@ -254,6 +270,50 @@ pub(crate) fn pair_links(
         progress(done, total);
     }
     links
+}
+
+/// The shortest path of `used` links other than `k` from link `k`'s target
+/// to its source (breadth first), and how its composed transform and the
+/// link's disagree; `None` when no such path exists.
+fn cycle(links: &[Link], used: &[usize], k: usize) -> Option<Cycle> {
+    let (from, to) = (links[k].target, links[k].source);
+    // Each scan reached: (the scan it was reached from, target_from_this).
+    let mut reached: std::collections::HashMap<usize, (usize, Isometry3<f64>)> = std::collections::HashMap::new();
+    reached.insert(from, (from, Isometry3::identity()));
+    let mut queue = std::collections::VecDeque::from([from]);
+    while let Some(a) = queue.pop_front() {
+        if a == to {
+            break;
+        }
+        let at = reached[&a].1;
+        for &u in used.iter().filter(|&&u| u != k) {
+            let (l, r) = (&links[u], links[u].result.as_ref()?);
+            let next = if l.target == a {
+                Some((l.source, at * r.target_from_source))
+            } else if l.source == a {
+                Some((l.target, at * r.target_from_source.inverse()))
+            } else {
+                None
+            };
+            if let Some((b, pose)) = next
+                && let std::collections::hash_map::Entry::Vacant(e) = reached.entry(b)
+            {
+                e.insert((a, pose));
+                queue.push_back(b);
+            }
+        }
+    }
+    let (_, path_pose) = *reached.get(&to)?;
+    let mut scans = vec![to];
+    while let Some(&last) = scans.last()
+        && last != from
+    {
+        scans.push(reached[&last].0);
+    }
+    scans.reverse();
+    let link = links[k].result.as_ref()?.target_from_source;
+    let d = path_pose.inverse() * link;
+    Some(Cycle { scans, angle_rad: d.rotation.angle(), translation_m: d.translation.vector.norm() })
 }
 
 /// Adjusts the accepted links, leaving out outliers one at a time.
@@ -316,6 +376,7 @@ fn solve(
         {
             let rest = ((g.chi2 - c) / (g.redundancy - 6) as f64).max(1.0);
             if c / rest > config.gate_chi2 {
+                links[k].cycle = cycle(&links, &used, k);
                 links[k].rejected = Some(format!(
                     "disagrees with the other links (χ² = {:.1} > {:.1} after the variance factor {rest:.3})",
                     c / rest,

@@ -142,6 +142,8 @@ pub struct SetLink {
     pub result: Option<IcpResult>,
     /// Why it is not used; `None` when it is.
     pub rejected: Option<String>,
+    /// The cycle of used links a rejected link contradicts (graph mode).
+    pub cycle: Option<crate::links::Cycle>,
 }
 
 /// Registers `scans` (each in its own frame) from `starts`, their guessed
@@ -304,6 +306,7 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
                 overlap: None,
                 result: Some(m.clone()),
                 rejected: None,
+                cycle: None,
             })
         })
         .collect();
@@ -340,6 +343,7 @@ fn from_graph(g: LinkGraph, matches: usize, settled: bool, stages: Vec<StageRun>
                 overlap: Some(l.overlap),
                 result: l.result,
                 rejected: l.rejected,
+                cycle: l.cycle,
             })
             .collect(),
         matches,

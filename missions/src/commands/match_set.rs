@@ -311,6 +311,22 @@ struct LinkReport {
     /// Directions this match cannot see (order of the covariance, the
     /// first target's frame).
     degenerate_directions: Vec<[f64; 6]>,
+    /// For a link rejected as disagreeing with the others (graph mode):
+    /// the shortest cycle of used links it contradicts.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    cycle: Option<CycleReport>,
+}
+
+/// A cycle of used links a rejected link contradicts.
+#[derive(Debug, Clone, Serialize, schemars::JsonSchema)]
+struct CycleReport {
+    /// The scans from the link's target round to its source along used
+    /// links (indices into `scans`); the link closes the cycle.
+    scans: Vec<usize>,
+    /// How far the path and the link disagree: the turn, degrees.
+    angle_deg: f64,
+    /// … and the translation, metres.
+    translation_m: f64,
 }
 
 impl crate::view::document::Document for MatchReport {
@@ -592,6 +608,11 @@ fn report(
                 accepted: l.rejected.is_none(),
                 reason: l.rejected.clone(),
                 degenerate_directions: l.result.as_ref().map_or_else(Vec::new, |m| directions(&m.unobservable)),
+                cycle: l.cycle.as_ref().map(|c| CycleReport {
+                    scans: c.scans.clone(),
+                    angle_deg: c.angle_rad.to_degrees(),
+                    translation_m: c.translation_m,
+                }),
             })
             .collect(),
         matches: r.matches,
@@ -852,9 +873,21 @@ fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &MatchReport) ->
     }
     for l in report.links.iter().filter(|l| !l.accepted) {
         let targets: Vec<&str> = l.targets.iter().map(|&t| scans[t].name.as_str()).collect();
+        let cycle = l.cycle.as_ref().map_or_else(String::new, |c| {
+            let names: Vec<&str> = c.scans.iter().map(|&i| scans[i].name.as_str()).collect();
+            format!(
+                "; it contradicts the cycle {} → {} (the used links from {} to {} and this one disagree by {:.3}°, {:.3} m)",
+                names.join(" → "),
+                names.first().copied().unwrap_or_default(),
+                names.first().copied().unwrap_or_default(),
+                names.last().copied().unwrap_or_default(),
+                c.angle_deg,
+                c.translation_m
+            )
+        });
         writeln!(
             out,
-            "  rejected {} → {}: {}",
+            "  rejected {} → {}: {}{cycle}",
             scans[l.source].name,
             targets.join(", "),
             l.reason.as_deref().unwrap_or("")

@@ -846,6 +846,25 @@ fn wedges_from_rough_starts_land_or_are_named_with_exit_1() {
                 for &k in &untrusted {
                     assert!(errors[k].0 > 1.0, "{m} m {mode}: wedge {k} named but right: {errors:?}");
                 }
+                // A link the graph rejects as disagreeing names the cycle of
+                // used links it contradicts, from its target round to its
+                // source, and by how much.
+                for l in v["links"].as_array().expect("links") {
+                    if l["reason"].as_str().is_some_and(|r| r.contains("disagrees with the other links")) {
+                        let cycle = &l["cycle"];
+                        let scans = cycle["scans"].as_array().expect("a cycle");
+                        assert!(scans.len() >= 3, "{l}");
+                        assert_eq!((scans.first(), scans.last()), (l["targets"].get(0), Some(&l["source"])), "{l}");
+                        assert!(cycle["angle_deg"].as_f64().expect("angle") > 1.0, "{l}");
+                    }
+                }
+                if mode == "graph" {
+                    assert!(
+                        v["links"].as_array().expect("links").iter().any(|l| !l["cycle"].is_null()),
+                        "{}",
+                        v["links"]
+                    );
+                }
             }
         }
     }
