@@ -91,6 +91,21 @@ pub enum CpsError {
         /// Condition estimate of the offending matrix.
         condition: f64,
     },
+    /// The unknowns are determined, but the normal equations lose nearly
+    /// every digit on one of them: its pivot is a vanishing fraction of its
+    /// diagonal (a 1,000 km open traverse at 5″: σ of kilometres against
+    /// readings of millimetres).
+    #[error(
+        "numerically singular normal equations: {what} has a pivot of {pivot:.1e} of its diagonal (condition estimate ≥ {condition:.1e}): the observations determine it, but its precision spans more orders of magnitude than double precision carries"
+    )]
+    NumericallySingular {
+        /// The unknown whose pivot vanished.
+        what: String,
+        /// Its pivot relative to its diagonal entry.
+        pivot: f64,
+        /// A lower bound of the normal matrix's condition number (1/pivot).
+        condition: f64,
+    },
     /// A covariance matrix that must be positive (semi-)definite is not.
     #[error("{what} is not a valid covariance (not symmetric positive definite)")]
     NotPositiveDefinite {

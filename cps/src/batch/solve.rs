@@ -116,6 +116,13 @@ pub fn solve(network: &Network, layout: &Layout, groups: &[Group], max_iteration
 /// The error for a singular factorisation, naming the unknown.
 fn undetermined(e: FactorError, layout: &Layout) -> CpsError {
     match e {
+        // Positive but vanishing: determined, beyond double precision (issue
+        // 35: a 1,000 km traverse was told "no observation determines").
+        FactorError::Singular { column, pivot } if pivot > 0.0 => CpsError::NumericallySingular {
+            what: layout.unknowns.get(column).map_or_else(|| format!("unknown {column}"), |u| format!("the {u}")),
+            pivot,
+            condition: 1.0 / pivot,
+        },
         FactorError::Singular { column, .. } => CpsError::DegenerateGeometry {
             what: match layout.unknowns.get(column) {
                 Some(u) => format!("no observation determines the {u}"),
