@@ -44,7 +44,11 @@ pub fn solve(network: &Network, layout: &Layout, groups: &[Group], max_iteration
     loop {
         let linearised: Vec<Linearised> =
             groups.iter().map(|g| network.linearise(g, layout, &stations, &points)).collect::<Result<_>>()?;
-        let mut normal = SymmetricBuilder::new(n);
+        // One entry per (column, row ≤ column) pair of each group, and the
+        // neighbouring stations' coupling.
+        let entries: usize = linearised.iter().map(|l| l.columns.len() * (l.columns.len() + 1) / 2).sum::<usize>()
+            + 16 * layout.stations.len();
+        let mut normal = SymmetricBuilder::with_capacity(n, entries);
         let mut rhs = vec![0.0; n];
         for lin in &linearised {
             let Some(chol) = lin.covariance.clone().cholesky() else {

@@ -19,8 +19,9 @@ use faer::{Par, Side};
 #[derive(Debug, Clone)]
 pub struct SymmetricBuilder {
     n: usize,
-    /// (column, row, value) with row ≥ column.
-    entries: Vec<(usize, usize, f64)>,
+    /// (column, row, value) with row ≥ column: 16 bytes an entry (a
+    /// 100,000-cycle route adds some 17 million).
+    entries: Vec<(u32, u32, f64)>,
 }
 
 /// Why a factorisation failed.
@@ -46,13 +47,19 @@ pub const PIVOT_TOLERANCE: f64 = 1e-11;
 impl SymmetricBuilder {
     /// An n × n matrix of zeros.
     pub fn new(n: usize) -> Self {
-        Self { n, entries: Vec::new() }
+        Self::with_capacity(n, 0)
+    }
+
+    /// An n × n matrix of zeros with room for `entries` additions.
+    pub fn with_capacity(n: usize, entries: usize) -> Self {
+        Self { n, entries: Vec::with_capacity(entries) }
     }
 
     /// Adds `v` at (i, j) and (j, i).
     pub fn add(&mut self, i: usize, j: usize, v: f64) {
         let (r, c) = if i >= j { (i, j) } else { (j, i) };
-        self.entries.push((c, r, v));
+        debug_assert!(r < self.n && self.n <= u32::MAX as usize);
+        self.entries.push((c as u32, r as u32, v));
     }
 
     /// Makes (i, j) part of the pattern (a structural zero), so that the
@@ -64,23 +71,44 @@ impl SymmetricBuilder {
     /// Factorises the matrix: AMD ordering, simplicial LLᵀ.
     pub fn factor(mut self) -> Result<Factor, FactorError> {
         let n = self.n;
-        self.entries.sort_unstable_by_key(|&(c, r, _)| (c, r));
-        let mut col_ptr = vec![0usize; n + 1];
-        let mut row_idx: Vec<usize> = Vec::with_capacity(self.entries.len());
-        let mut values: Vec<f64> = Vec::with_capacity(self.entries.len());
-        let mut last: Option<(usize, usize)> = None;
-        for &(c, r, v) in &self.entries {
-            if last == Some((c, r)) {
-                if let Some(x) = values.last_mut() {
-                    *x += v;
-                }
-                continue;
-            }
-            last = Some((c, r));
-            row_idx.push(r);
-            values.push(v);
-            col_ptr[c + 1] += 1;
+        // Bucketed by column (a counting sort), then each column's few
+        // entries by row: linear in the entries where a comparison sort of
+        // all of them took a tenth of a 10,000-cycle prediction.
+        let mut start = vec![0usize; n + 1];
+        for &(c, _, _) in &self.entries {
+            start[c as usize + 1] += 1;
         }
+        for c in 0..n {
+            start[c + 1] += start[c];
+        }
+        let mut bucketed: Vec<(u32, f64)> = vec![(0, 0.0); self.entries.len()];
+        let mut next = start.clone();
+        for &(c, r, v) in &self.entries {
+            bucketed[next[c as usize]] = (r, v);
+            next[c as usize] += 1;
+        }
+        drop(std::mem::take(&mut self.entries));
+        let mut col_ptr = vec![0usize; n + 1];
+        let mut row_idx: Vec<usize> = Vec::with_capacity(bucketed.len());
+        let mut values: Vec<f64> = Vec::with_capacity(bucketed.len());
+        for c in 0..n {
+            let column = &mut bucketed[start[c]..start[c + 1]];
+            column.sort_unstable_by_key(|&(r, _)| r);
+            let mut last = None;
+            for &(r, v) in column.iter() {
+                if last == Some(r) {
+                    if let Some(x) = values.last_mut() {
+                        *x += v;
+                    }
+                    continue;
+                }
+                last = Some(r);
+                row_idx.push(r as usize);
+                values.push(v);
+                col_ptr[c + 1] += 1;
+            }
+        }
+        drop(bucketed);
         for c in 0..n {
             col_ptr[c + 1] += col_ptr[c];
         }
