@@ -262,3 +262,43 @@ fn an_undetermined_point_is_named() {
     net.readings[3].reading.azimuth_rad = f64::NAN;
     assert!(adjust(&net, &AdjustOptions::default()).expect_err("NaN").to_string().contains("reading 3"));
 }
+
+/// `freed_points` (one adjustment and an update a point) against the
+/// network adjusted again without the point's prior, for a fixed control
+/// point, a weighted one, a partly fixed one (adjusted again either way),
+/// a free point, and with a scalar left out as snooping leaves it.
+#[test]
+fn freed_points_agree_with_an_adjustment_without_the_prior() {
+    use cps::batch::freed::freed_points;
+    for seed in [3, 4, 5] {
+        let (net, _, _) = network(seed);
+        let c0 = net.points.len() - 2;
+        let c1 = net.points.len() - 1;
+        let mut weighted = net.clone();
+        weighted.points[c0].prior = Some(Matrix3::from_diagonal(&Vector3::new(1e-6, 2e-6, 4e-6)));
+        weighted.points[c1].prior = Some(Matrix3::from_diagonal(&Vector3::new(4e-6, 4e-6, 9e-6)));
+        let left_out = [(Source::Reading(3), 1)];
+        for (what, n) in [("as given", &net), ("weighted", &weighted)] {
+            for left in [&[][..], &left_out[..]] {
+                let options = AdjustOptions { snooping: false, ..AdjustOptions::default() };
+                let freed = freed_points(n, &options, left, &[c0, c1, 0]).expect("freed");
+                for (k, &p) in [c0, c1, 0].iter().enumerate() {
+                    let mut without = n.clone();
+                    without.points[p].prior = None;
+                    let a = cps::batch::adjust_without(&without, &options, left).expect("adjusts");
+                    let f = freed[k].expect("the rest holds the network");
+                    let d = (f.position - a.points[p]).norm();
+                    // Second order in the point's move over its sight lines
+                    // (a centimetre over 10 m: 10 µm).
+                    assert!(d < 2e-5, "seed {seed} {what} point {p}: {d} m from the re-adjustment");
+                    let c = a.point_covariance(p);
+                    let e = (f.covariance - c).amax() / c.amax();
+                    // (The re-adjustment's covariance is at the point's new
+                    // place: first order in its move over its sight lines,
+                    // millimetres over metres.)
+                    assert!(e < 1e-3, "seed {seed} {what} point {p}: covariance off by {e} relative");
+                }
+            }
+        }
+    }
+}

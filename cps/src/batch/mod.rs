@@ -18,6 +18,7 @@
 //! Covariances and w use the a-priori variance factor (σ0 = 1): they are
 //! not scaled by the a-posteriori σ0².
 
+pub mod freed;
 pub mod model;
 pub mod solve;
 pub mod sparse;

@@ -642,19 +642,24 @@ fn coordinate_reports(
 /// accepted").
 fn misclosures(net: &DanceNetwork, name: &dyn Fn(usize) -> String, removed: &[(Source, usize)]) -> Vec<Misclosure> {
     let options = AdjustOptions { snooping: false, ..AdjustOptions::default() };
-    net.points
+    let control: Vec<usize> =
+        net.points.iter().enumerate().filter(|(_, id)| matches!(id, PointId::Control(_))).map(|(p, _)| p).collect();
+    // One adjustment and an update a point (`cps::batch::freed`; issue 35:
+    // an adjustment a point took 2.96 s for 41 control points). Without
+    // this point's coordinates the rest may not hold the network (a start
+    // resected on two points): no misclosure then.
+    let Ok(freed) = cps::batch::freed::freed_points(&net.network, &options, removed, &control) else {
+        return Vec::new();
+    };
+    control
         .iter()
-        .enumerate()
-        .filter(|(_, id)| matches!(id, PointId::Control(_)))
-        .filter_map(|(p, _)| {
-            let mut without = net.network.clone();
-            let given_cov = without.points[p].prior.take().unwrap_or_else(Matrix3::zeros);
-            // Without this point's coordinates the rest may not hold the
-            // network (a start resected on two points): no misclosure then.
-            let a = cps::batch::adjust_without(&without, &options, removed).ok()?;
+        .zip(freed)
+        .filter_map(|(&p, freed)| {
+            let freed = freed?;
+            let given_cov = net.network.points[p].prior.unwrap_or_else(Matrix3::zeros);
             let given = net.network.points[p].position;
-            let d: Point3<f64> = Point3::from(a.points[p] - given);
-            let cov: Matrix3<f64> = a.point_covariance(p) + given_cov;
+            let d: Point3<f64> = Point3::from(freed.position - given);
+            let cov: Matrix3<f64> = freed.covariance + given_cov;
             let xy = cov.fixed_view::<2, 2>(0, 0).into_owned();
             Some(Misclosure {
                 control: name(p),
