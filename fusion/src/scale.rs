@@ -34,6 +34,10 @@ const FIRST_VOXEL_OF_RADIUS: f64 = 1.0 / 11.0;
 /// (0.5 m): the start's step σ 0.1 m.
 const HUBER_OF_LAST_VOXEL: f64 = 0.4;
 const TOLERANCE_OF_LAST_VOXEL: f64 = 2e-3;
+/// The simultaneous queue's "moved" threshold over the last voxel (1 cm
+/// at 5 cm: fixed in metres, the queue chased the matches' noise at 100:1
+/// until its cap and the set failed its verification; issue 38).
+pub const MOVED_OF_LAST_VOXEL: f64 = 0.2;
 const STEP_SIGMA_OF_FIRST_VOXEL: f64 = 0.2;
 
 /// The length scales of a scan set (medians over its scans).
@@ -82,6 +86,9 @@ pub struct ScaledSettings {
     pub step_sigma_m: f64,
     /// ICP's translation convergence tolerance, metres.
     pub translation_tolerance_m: f64,
+    /// How far a simultaneous match must move its scan to re-queue its
+    /// neighbours, metres (the recipe's 1 cm: about twice a match's σ).
+    pub moved_translation_m: f64,
 }
 
 impl ScaledSettings {
@@ -92,6 +99,7 @@ impl ScaledSettings {
             huber_m: HUBER_OF_LAST_VOXEL * last,
             step_sigma_m: STEP_SIGMA_OF_FIRST_VOXEL * first,
             translation_tolerance_m: TOLERANCE_OF_LAST_VOXEL * last,
+            moved_translation_m: MOVED_OF_LAST_VOXEL * last,
         })
     }
 }

@@ -232,6 +232,9 @@ struct SettingsReport {
     /// ICP's convergence tolerance in translation, metres (0.002 × the
     /// last voxel).
     translation_tolerance_m: f64,
+    /// `simultaneous`: a match that moves its scan by more than this
+    /// (metres, 0.2 × the last voxel) or 0.05° re-queues its neighbours.
+    moved_translation_m: f64,
     /// With `--init global`: how the starts were found.
     #[serde(skip_serializing_if = "Option::is_none")]
     global: Option<GlobalReport>,
@@ -527,6 +530,7 @@ fn scale_settings(
     icp.kernel = if huber_m > 0.0 { Kernel::Huber { width_m: huber_m } } else { Kernel::None };
     icp.translation_tolerance_m = scaled.translation_tolerance_m;
     config.link.step_sigma_m = scaled.step_sigma_m;
+    config.link.multiview.moved_translation_m = scaled.moved_translation_m;
     config.stages = stages;
     Ok(SettingsReport {
         spacing_m: scale.spacing_m,
@@ -536,6 +540,7 @@ fn scale_settings(
         huber_m,
         step_sigma_m: scaled.step_sigma_m,
         translation_tolerance_m: scaled.translation_tolerance_m,
+        moved_translation_m: scaled.moved_translation_m,
         global: None,
     })
 }
