@@ -51,6 +51,10 @@ pub enum FusionError {
         against: String,
         /// That scan's index, when it was one scan (pairwise).
         partner: Option<usize>,
+        /// The stage of a schedule it happened in (1-based; `None` outside
+        /// one): from stage 2 on, the poses are the previous stage's, not
+        /// the starts.
+        stage: Option<usize>,
     },
     /// An error while matching one scan of a set.
     #[error("scan {scan}: {source}")]

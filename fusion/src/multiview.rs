@@ -500,7 +500,14 @@ impl Matcher<'_> {
     }
 
     fn no_overlap(&self, c: usize, pairs: usize, against: &str, partner: Option<usize>) -> FusionError {
-        FusionError::NoOverlap { scan: c, pairs, needed: self.config.min_pairs + 1, against: against.into(), partner }
+        FusionError::NoOverlap {
+            scan: c,
+            pairs,
+            needed: self.config.min_pairs + 1,
+            against: against.into(),
+            partner,
+            stage: None,
+        }
     }
 
     /// Registers scan `i` against the earlier scan with the most overlap.

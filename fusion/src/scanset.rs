@@ -256,6 +256,12 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
         let started = std::time::Instant::now();
         let r = register_views(scans, &poses, &stage_config(stage), &mut |done, total| {
             progress(k + 1, stages, done, total)
+        })
+        .map_err(|e| match e {
+            FusionError::NoOverlap { scan, pairs, needed, against, partner, .. } => {
+                FusionError::NoOverlap { scan, pairs, needed, against, partner, stage: Some(k + 1) }
+            }
+            e => e,
         })?;
         runs.push(StageRun {
             voxel_m: stage.voxel_m,

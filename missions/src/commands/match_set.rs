@@ -466,12 +466,19 @@ fn progress_bar(hidden: bool) -> indicatif::ProgressBar {
 fn named(e: fusion::FusionError, scans: &[InputScan]) -> anyhow::Error {
     let file = |i: usize| scans.get(i).map_or_else(|| format!("scan {i}"), |s| s.file.clone());
     match e {
-        fusion::FusionError::NoOverlap { scan, pairs, needed, against, partner } => {
+        fusion::FusionError::NoOverlap { scan, pairs, needed, against, partner, stage } => {
             let partner = partner.map_or(against, file);
-            anyhow::anyhow!(
-                "{} and {partner} do not overlap at their start poses: {pairs} correspondences, expected at least {needed} (are the start poses within the schedule's first distance, and do the scans overlap?)",
-                file(scan)
-            )
+            match stage {
+                Some(k) if k > 1 => anyhow::anyhow!(
+                    "{} and {partner} do not overlap at stage {k} of the schedule: {pairs} correspondences, expected at least {needed}; they did at the start, so a match of stage {} moved them apart (a symmetric fit from rough starts? try --init global, or starts nearer the truth)",
+                    file(scan),
+                    k - 1
+                ),
+                _ => anyhow::anyhow!(
+                    "{} and {partner} do not overlap at their start poses: {pairs} correspondences, expected at least {needed} (are the start poses within the schedule's first distance, and do the scans overlap? --init global finds starts from the scans alone)",
+                    file(scan)
+                ),
+            }
         }
         fusion::FusionError::InScan { scan, source } => anyhow::anyhow!("{}: {source}", file(scan)),
         e => anyhow::Error::new(e).context("matching the scans"),
@@ -976,4 +983,47 @@ fn remove_stale_outputs(dir: &Path, formats: &[String]) -> Result<()> {
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scan(file: &str) -> InputScan {
+        InputScan {
+            file: file.into(),
+            name: file.into(),
+            points: Vec::new(),
+            start: Isometry3::identity(),
+            intensity: None,
+            gps_time_s: None,
+            color: None,
+            time: None,
+        }
+    }
+
+    #[test]
+    fn no_overlap_blames_the_starts_only_at_the_first_stage() {
+        let scans = [scan("a.ply"), scan("b.ply")];
+        let error = |stage| fusion::FusionError::NoOverlap {
+            scan: 1,
+            pairs: 12,
+            needed: 251,
+            against: "the best earlier scan (0)".into(),
+            partner: Some(0),
+            stage,
+        };
+        let first = named(error(Some(1)), &scans).to_string();
+        assert!(
+            first.starts_with("b.ply and a.ply do not overlap at their start poses: 12 correspondences"),
+            "{first}"
+        );
+        let later = named(error(Some(3)), &scans).to_string();
+        assert!(
+            later.starts_with("b.ply and a.ply do not overlap at stage 3 of the schedule")
+                && later.contains("a match of stage 2 moved them apart")
+                && !later.contains("start poses:"),
+            "{later}"
+        );
+    }
 }
