@@ -43,12 +43,17 @@ pub fn versioned<T: Document>(document: &T) -> Versioned<'_, T> {
 
 /// Writes `document` with its header as one JSON line.
 pub fn write_line<T: Document>(out: &mut dyn Write, document: &T) -> std::io::Result<()> {
+    // Through a block buffer: stdout is line-buffered, and serde's many
+    // small writes each searched for a newline (a tenth of a 10,000-cycle
+    // `predict --json`, 60 MB on one line).
+    let mut buffered = std::io::BufWriter::with_capacity(1 << 16, &mut *out);
     if T::SELF_VERSIONED {
-        serde_json::to_writer(&mut *out, document)?;
+        serde_json::to_writer(&mut buffered, document)?;
     } else {
-        serde_json::to_writer(&mut *out, &versioned(document))?;
+        serde_json::to_writer(&mut buffered, &versioned(document))?;
     }
-    writeln!(out)
+    writeln!(buffered)?;
+    buffered.flush()
 }
 
 /// Writes `document` with its header as pretty JSON (with a final
