@@ -36,6 +36,12 @@ pub enum FusionError {
         /// Where.
         what: String,
     },
+    /// Global registration found no transform for a scan.
+    #[error("global registration: {why}")]
+    NoGlobalMatch {
+        /// Why, in words.
+        why: String,
+    },
     /// A scan does not overlap the scans it must be matched against.
     #[error(
         "multi-view: scan {scan} has {pairs} correspondences with {against}: expected at least {needed} (is its pose guess within the correspondence distance, and do the scans overlap?)"

@@ -262,8 +262,11 @@ pub fn register(source: &Features, target: &Features, config: &GlobalConfig) -> 
             needed = ((1.0 - config.confidence).ln() / (1.0 - p_good).ln()).ceil().max(1.0) as usize;
         }
     }
-    let (mut t, _) = best.ok_or_else(|| FusionError::Degenerate {
-        what: format!("global registration: no sample of {} correspondences passed the edge check", pairs.len()),
+    let (mut t, _) = best.ok_or_else(|| FusionError::NoGlobalMatch {
+        why: format!(
+            "no three of its {} feature correspondences form a triangle alike in both scans (featureless or self-similar surfaces?)",
+            pairs.len()
+        ),
     })?;
     // Refined on its inliers, a few times.
     for _ in 0..5 {
@@ -316,14 +319,25 @@ pub fn starts<S: AsRef<[Point3<f32>]> + Sync>(
     let mut starts = vec![Isometry3::identity(); scans.len()];
     let mut matches = vec![None; scans.len()];
     for i in 1..scans.len() {
-        let found: Vec<(usize, GlobalMatch)> = (0..i)
-            .into_par_iter()
-            .filter_map(|j| register(&features[i], &features[j], config).ok().map(|m| (j, m)))
-            .collect();
-        let (j, m) = found.into_iter().max_by_key(|(j, m)| (m.inliers, std::cmp::Reverse(*j))).ok_or_else(|| {
+        let found: Vec<(usize, Result<GlobalMatch>)> =
+            (0..i).into_par_iter().map(|j| (j, register(&features[i], &features[j], config))).collect();
+        // Of the earlier scans, the match with the most inliers; a scan no
+        // earlier one matches says why (the first scan's failure).
+        let mut best: Option<(usize, GlobalMatch)> = None;
+        let mut why = None;
+        for (j, r) in found {
+            match r {
+                Ok(m) if best.as_ref().is_none_or(|(_, b)| m.inliers > b.inliers) => best = Some((j, m)),
+                Ok(_) => {}
+                Err(e) => {
+                    why.get_or_insert(e);
+                }
+            }
+        }
+        let (j, m) = best.ok_or_else(|| {
             crate::multiview::in_scan(
                 i,
-                FusionError::Degenerate { what: "global registration found no match against an earlier scan".into() },
+                why.unwrap_or_else(|| FusionError::NoGlobalMatch { why: "no earlier scan to match".into() }),
             )
         })?;
         starts[i] = starts[j] * m.target_from_source;

@@ -990,6 +990,22 @@ fn init_global_registers_scans_that_come_with_no_guess() {
         let (deg, m) = error(&(p[0].inverse() * p[k]), &(truth[0].inverse() * truth[k]));
         assert!(deg < 0.1 && m < 0.01, "wedge {k} (turned {}°): {deg}° {m} m off", turns[k]);
     }
+    // Two featureless planes: no transform to find, said so, naming the
+    // scan (exit 2), never a guess.
+    let plane = |name: &str, dx: f64| -> OsString {
+        let text: String = (0..100)
+            .flat_map(|x| (0..100).map(move |y| format!("{} {} {dx}\n", x as f64 * 0.05 + dx, y as f64 * 0.05)))
+            .collect();
+        let path = dir.path().join(name);
+        std::fs::write(&path, text).expect("xyz");
+        path.into_os_string()
+    };
+    let (r, _) = run(
+        &[plane("plane1.xyz", 0.0), plane("plane2.xyz", 0.001), "--init".into(), "global".into()],
+        &dir.path().join("planes"),
+    );
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(r.stderr.contains("plane2.xyz: global registration: no three of its"), "{}", r.stderr);
     // Given starts and --init global: one or the other.
     let (r, _) = run(
         &[data("3dtk_dat"), "--init".into(), "global".into(), "--init-poses".into(), data("3dtk_dat/scan000.pose")],
