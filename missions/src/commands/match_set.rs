@@ -164,6 +164,10 @@ pub(crate) struct MatchReport {
     checks: Vec<CheckReport>,
     /// The verification's wall-clock time, seconds (within `seconds`).
     check_seconds: f64,
+    /// With `--init global`: scans blind in some direction (indices into
+    /// `scans`) — their start, found from the shape, says nothing along it,
+    /// so the exit is 1.
+    blind_without_start: Vec<usize>,
     /// Scans an inconsistent pair names (indices into `scans`; never the
     /// first, which holds the frame, when its partner is named): their
     /// poses are not where the data agree, and the exit is 1.
@@ -428,7 +432,13 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
     bar.finish_and_clear();
     let result = result.map_err(|e| named(e, &scans))?;
     let seconds = started.elapsed().as_secs_f64();
-    let report = report(args.mode, &crs, &scans, &result, seconds, settings);
+    let mut report = report(args.mode, &crs, &scans, &result, seconds, settings);
+    if args.init == Some(InitArg::Global) {
+        // A start found from the scans' shape says nothing along what no
+        // match sees: a scan blind there has no pose the data confirm.
+        report.blind_without_start =
+            (1..report.scans.len()).filter(|&i| !report.scans[i].degenerate_directions.is_empty()).collect();
+    }
     let written = write_outputs(args, &crs, &scans, &result, &report)?;
     if args.json {
         crate::view::document::write_line(out, &report)?;
@@ -439,7 +449,9 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
     // A scan the final matches do not hold, or that the verification
     // names, has a pose no data confirm: the outputs are written, and the
     // exit says it (1).
-    Ok(Outcome::passed(unlinked(&report).is_empty() && report.untrusted.is_empty()))
+    Ok(Outcome::passed(
+        unlinked(&report).is_empty() && report.untrusted.is_empty() && report.blind_without_start.is_empty(),
+    ))
 }
 
 fn mode(m: ModeArg) -> Mode {
@@ -658,6 +670,7 @@ fn report(
             .collect(),
         check_seconds: r.check_seconds,
         untrusted: fusion::verify::untrusted(scans.len(), &r.checks),
+        blind_without_start: Vec::new(),
     }
 }
 
@@ -862,6 +875,14 @@ fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &MatchReport) ->
             out,
             "  not trusted: {} has no accepted link at the last stage: it keeps the coarser stages' pose, blind in every direction",
             scans[i].name
+        )?;
+    }
+    for &i in &report.blind_without_start {
+        writeln!(
+            out,
+            "  not trusted: {}: blind in {} direction(s), and a start found by --init global says nothing along them",
+            scans[i].name,
+            report.scans[i].degenerate_directions.len()
         )?;
     }
     let tolerance = report.stages.last().map_or(0.0, |s| s.voxel_m);

@@ -992,20 +992,29 @@ fn init_global_registers_scans_that_come_with_no_guess() {
     }
     // Two featureless planes: no transform to find, said so, naming the
     // scan (exit 2), never a guess.
-    let plane = |name: &str, dx: f64| -> OsString {
+    let plane = |name: &str, dx: f64, dz: f64| -> OsString {
         let text: String = (0..100)
-            .flat_map(|x| (0..100).map(move |y| format!("{} {} {dx}\n", x as f64 * 0.05 + dx, y as f64 * 0.05)))
+            .flat_map(|x| (0..100).map(move |y| format!("{} {} {dz}\n", x as f64 * 0.05 + dx, y as f64 * 0.05)))
             .collect();
         let path = dir.path().join(name);
         std::fs::write(&path, text).expect("xyz");
         path.into_os_string()
     };
     let (r, _) = run(
-        &[plane("plane1.xyz", 0.0), plane("plane2.xyz", 0.001), "--init".into(), "global".into()],
+        &[plane("plane1.xyz", 0.0, 0.0), plane("plane2.xyz", 0.001, 0.001), "--init".into(), "global".into()],
         &dir.path().join("planes"),
     );
     assert_eq!(r.code, 2, "{}", r.stderr);
     assert!(r.stderr.contains("plane2.xyz: global registration: no three of its"), "{}", r.stderr);
+    // Two planes that do register: blind in the plane, where the start from
+    // their shape says nothing — named, exit 1.
+    let (r, v) = run(
+        &[plane("p1.xyz", 0.0, 0.0), plane("p2.xyz", 0.01, 0.0), "--init".into(), "global".into()],
+        &dir.path().join("blind"),
+    );
+    let v = v.expect("JSON");
+    assert_eq!(r.code, 1, "{}", r.stderr);
+    assert_eq!(v["blind_without_start"], serde_json::json!([1]), "{v}");
     // Given starts and --init global: one or the other.
     let (r, _) = run(
         &[data("3dtk_dat"), "--init".into(), "global".into(), "--init-poses".into(), data("3dtk_dat/scan000.pose")],
