@@ -304,13 +304,17 @@ fn rigid(pairs: impl Iterator<Item = (Vector3<f64>, Vector3<f64>)>) -> Option<Is
     Some(Isometry3::from_parts(Translation3::from(ct - rotation * cs), rotation))
 }
 
+/// Each scan's global match: the earlier scan it was placed against, and
+/// the match (none for scan 0).
+pub type Placements = Vec<Option<(usize, GlobalMatch)>>;
+
 /// Starts for a set with no guess: scan 0 at the identity, each later scan
 /// placed by its best global match (most inliers) against an earlier one.
-/// Returns the starts and each scan's match (none for scan 0).
+/// Returns the starts and each scan's match.
 pub fn starts<S: AsRef<[Point3<f32>]> + Sync>(
     scans: &[S],
     config: &GlobalConfig,
-) -> Result<(Vec<Isometry3<f64>>, Vec<Option<(usize, GlobalMatch)>>)> {
+) -> Result<(Vec<Isometry3<f64>>, Placements)> {
     let features: Vec<Features> = scans
         .par_iter()
         .enumerate()
