@@ -55,14 +55,7 @@ pub fn freed_points(
 ) -> Result<Vec<Option<Freed>>> {
     network.validate()?;
     let layout = Layout::new(network);
-    let mut groups = network.groups();
-    for (source, component) in left_out {
-        if let Some(g) = groups.iter_mut().find(|g| g.source == *source)
-            && let Some(pos) = g.components.iter().position(|c| c == component)
-        {
-            g.active[pos] = false;
-        }
-    }
+    let groups = network.groups_without(left_out);
     let solution = solve::solve(network, &layout, &groups, options.max_iterations)?;
     let n = layout.len();
     // The columns of N⁻¹ for the given right-hand sides (three solves).

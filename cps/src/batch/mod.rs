@@ -199,14 +199,7 @@ pub fn adjust_without(network: &Network, options: &AdjustOptions, left_out: &[(S
         }
     }
     let layout = Layout::new(network);
-    let mut groups = network.groups();
-    for (source, component) in left_out {
-        if let Some(g) = groups.iter_mut().find(|g| g.source == *source)
-            && let Some(pos) = g.components.iter().position(|c| c == component)
-        {
-            g.active[pos] = false;
-        }
-    }
+    let mut groups = network.groups_without(left_out);
     let lambda0 = noncentrality(options.alpha0, options.beta0);
     let w_critical = normal_quantile(1.0 - options.alpha0 / 2.0);
     let station_of = station_of(network);

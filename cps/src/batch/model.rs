@@ -227,6 +227,21 @@ impl Network {
         Ok(())
     }
 
+    /// [`Network::groups`] with the scalars `left_out` (source, component)
+    /// inactive — e.g. those data snooping removed; one that is not in the
+    /// network is ignored.
+    pub fn groups_without(&self, left_out: &[(Source, usize)]) -> Vec<Group> {
+        let mut groups = self.groups();
+        for (source, component) in left_out {
+            if let Some(g) = groups.iter_mut().find(|g| g.source == *source)
+                && let Some(pos) = g.components.iter().position(|c| c == component)
+            {
+                g.active[pos] = false;
+            }
+        }
+        groups
+    }
+
     /// Every observation group: the readings', then the weighted priors'.
     pub fn groups(&self) -> Vec<Group> {
         let mut out = Vec::with_capacity(self.readings.len() + 1);

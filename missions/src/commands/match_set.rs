@@ -1011,16 +1011,7 @@ mod tests {
     use super::*;
 
     fn scan(file: &str) -> InputScan {
-        InputScan {
-            file: file.into(),
-            name: file.into(),
-            points: Vec::new(),
-            start: Isometry3::identity(),
-            intensity: None,
-            gps_time_s: None,
-            color: None,
-            time: None,
-        }
+        InputScan::empty(file, file)
     }
 
     #[test]

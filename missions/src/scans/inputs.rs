@@ -33,6 +33,23 @@ pub struct InputScan {
     pub time: Option<(Vec<f64>, scanner::io::TimeBase)>,
 }
 
+impl InputScan {
+    /// A scan of no points at the identity (tests).
+    #[cfg(test)]
+    pub(crate) fn empty(file: &str, name: &str) -> Self {
+        Self {
+            file: file.into(),
+            name: name.into(),
+            points: Vec::new(),
+            start: Isometry3::identity(),
+            intensity: None,
+            gps_time_s: None,
+            color: None,
+            time: None,
+        }
+    }
+}
+
 /// One entry of an `--init-poses` file.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -251,19 +268,7 @@ mod tests {
     use super::*;
 
     fn named(names: &[&str]) -> Vec<InputScan> {
-        names
-            .iter()
-            .map(|n| InputScan {
-                file: format!("{n}.3d"),
-                name: (*n).to_string(),
-                points: Vec::new(),
-                start: Isometry3::identity(),
-                intensity: None,
-                gps_time_s: None,
-                color: None,
-                time: None,
-            })
-            .collect()
+        names.iter().map(|n| InputScan::empty(&format!("{n}.3d"), n)).collect()
     }
 
     /// Mutation fuzzing of `--init-poses` (issue 34): a valid file mutated

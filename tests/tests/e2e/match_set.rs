@@ -373,6 +373,35 @@ fn match_keeps_the_inputs_scan_numbers_names_and_intensities() {
     assert_eq!(las_intensities(&again.join("cloud.las")), want, "through E57 and back");
 }
 
+/// The 3DTK set as PLY in `set`, each scan's points scaled by `factor` and
+/// moved by `shift` in its own frame, with `--init-poses` from its
+/// odometry scaled and moved alike (the same world): the inputs and the
+/// flag.
+fn three_dtk_copy(set: &Path, factor: f64, shift: nalgebra::Vector3<f64>) -> Vec<OsString> {
+    std::fs::create_dir_all(set).expect("set");
+    let mut entries = Vec::new();
+    let mut inputs = Vec::new();
+    for k in 0..3 {
+        let name = format!("scan{k:03}");
+        let mut cloud = scanner::io::read(Path::new(&data(&format!("3dtk_dat/{name}.3d")))).expect("scan");
+        let s = shift.cast::<f32>();
+        cloud.points.iter_mut().for_each(|p| *p = Point3::from(p.coords * factor as f32 + s));
+        let path = set.join(format!("{name}.ply"));
+        scanner::io::write(&path, &cloud, scanner::io::Format::Ply(scanner::io::PlyEncoding::BinaryLittleEndian))
+            .expect("PLY");
+        let mut pose = scanner::io::read_3dtk_pose(Path::new(&data(&format!("3dtk_dat/{name}.pose")))).expect("pose");
+        pose.translation.vector *= factor;
+        let m = (pose * nalgebra::Translation3::from(-shift)).to_homogeneous();
+        let rows: Vec<Vec<f64>> = (0..4).map(|r| (0..4).map(|c| m[(r, c)]).collect()).collect();
+        entries.push(serde_json::json!({ "file": format!("{name}.ply"), "world_from_scan": rows }));
+        inputs.push(path.into_os_string());
+    }
+    let init = set.join("init.json");
+    std::fs::write(&init, serde_json::to_string(&entries).expect("JSON")).expect("init");
+    inputs.extend(["--init-poses".into(), init.into_os_string()]);
+    inputs
+}
+
 /// The 3DTK set at 1:100 and at 100:1 (scans as PLY, starts from the
 /// odometry scaled): `--schedule auto` scales the recipe with the scans, so
 /// each copy lands on the scaled reference to the same relative accuracy.
@@ -383,28 +412,8 @@ fn a_scaled_copy_of_the_3dtk_set_registers_alike_with_the_auto_schedule() {
     let mut matches: Vec<(&str, Vec<u64>)> = Vec::new();
     for factor in [0.01f64, 1.0, 100.0] {
         let set = dir.path().join(format!("x{factor}"));
-        std::fs::create_dir_all(&set).expect("set");
-        let mut entries = Vec::new();
-        let mut inputs = Vec::new();
-        for k in 0..3 {
-            let name = format!("scan{k:03}");
-            let mut cloud = scanner::io::read(Path::new(&data(&format!("3dtk_dat/{name}.3d")))).expect("scan");
-            cloud.points.iter_mut().for_each(|p| *p *= factor as f32);
-            let path = set.join(format!("{name}.ply"));
-            scanner::io::write(&path, &cloud, scanner::io::Format::Ply(scanner::io::PlyEncoding::BinaryLittleEndian))
-                .expect("PLY");
-            let mut pose =
-                scanner::io::read_3dtk_pose(Path::new(&data(&format!("3dtk_dat/{name}.pose")))).expect("pose");
-            pose.translation.vector *= factor;
-            let m = pose.to_homogeneous();
-            let rows: Vec<Vec<f64>> = (0..4).map(|r| (0..4).map(|c| m[(r, c)]).collect()).collect();
-            entries.push(serde_json::json!({ "file": format!("{name}.ply"), "world_from_scan": rows }));
-            inputs.push(path.into_os_string());
-        }
-        let init = set.join("init.json");
-        std::fs::write(&init, serde_json::to_string(&entries).expect("JSON")).expect("init");
-        let mut args = inputs;
-        args.extend(["--init-poses".into(), init.into_os_string(), "--schedule".into(), "auto".into()]);
+        let mut args = three_dtk_copy(&set, factor, nalgebra::Vector3::zeros());
+        args.extend(["--schedule".into(), "auto".into()]);
         // Every other mode too: the same number of matches at every scale
         // (simultaneous's queue re-queued on a fixed 1 cm, chasing noise at
         // 100:1 into a set its verification refused, exit 1).
@@ -461,29 +470,7 @@ fn a_set_seen_from_afar_is_not_blind_and_lands_alike() {
     for factor in [1.0f64, 0.01] {
         let shift = nalgebra::Vector3::new(0.0, 60.0, 8.0) * factor;
         let set = dir.path().join(format!("afar{factor}"));
-        std::fs::create_dir_all(&set).expect("set");
-        let mut entries = Vec::new();
-        let mut inputs = Vec::new();
-        for k in 0..3 {
-            let name = format!("scan{k:03}");
-            let mut cloud = scanner::io::read(Path::new(&data(&format!("3dtk_dat/{name}.3d")))).expect("scan");
-            let s = shift.cast::<f32>();
-            cloud.points.iter_mut().for_each(|p| *p = Point3::from(p.coords * factor as f32 + s));
-            let path = set.join(format!("{name}.ply"));
-            scanner::io::write(&path, &cloud, scanner::io::Format::Ply(scanner::io::PlyEncoding::BinaryLittleEndian))
-                .expect("PLY");
-            let mut pose =
-                scanner::io::read_3dtk_pose(Path::new(&data(&format!("3dtk_dat/{name}.pose")))).expect("pose");
-            pose.translation.vector *= factor;
-            let m = (pose * nalgebra::Translation3::from(-shift)).to_homogeneous();
-            let rows: Vec<Vec<f64>> = (0..4).map(|r| (0..4).map(|c| m[(r, c)]).collect()).collect();
-            entries.push(serde_json::json!({ "file": format!("{name}.ply"), "world_from_scan": rows }));
-            inputs.push(path.into_os_string());
-        }
-        let init = set.join("init.json");
-        std::fs::write(&init, serde_json::to_string(&entries).expect("JSON")).expect("init");
-        let mut args = inputs;
-        args.extend(["--init-poses".into(), init.into_os_string()]);
+        let args = three_dtk_copy(&set, factor, shift);
         let (r, v) = run(&args, &set.join("out"));
         assert_eq!(r.code, 0, "×{factor}: {}", r.stderr);
         let v = v.expect("JSON");
