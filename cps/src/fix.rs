@@ -97,6 +97,12 @@ impl Reliability {
             .filter_map(|(i, w)| w.map(|w| (i, w)))
             .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
     }
+
+    /// The w of sighted point `k` (its three observations: distance,
+    /// azimuth, elevation) with the largest |w|, if any of them is checked.
+    pub fn largest_w_of_point(&self, k: usize) -> Option<f64> {
+        self.w_statistics.get(3 * k..3 * k + 3)?.iter().flatten().copied().max_by(|a, b| a.abs().total_cmp(&b.abs()))
+    }
 }
 
 impl ParentFix {
@@ -482,6 +488,9 @@ mod tests {
             let rel = fix.reliability();
             let (idx, w) = rel.largest_w().expect("checked observations");
             assert_eq!(idx, 3 * blundered, "w = {:?}", rel.w_statistics);
+            // Per sighted point: the blundered one carries it.
+            assert_eq!(rel.largest_w_of_point(blundered), Some(w));
+            assert_eq!(rel.largest_w_of_point(children.len()), None);
             assert!(w.abs() > 3.29, "a 20 mm blunder against 3 mm noise is significant: w = {w}");
             let total: f64 = rel.redundancy_numbers.iter().sum();
             assert!((total - fix.redundancy as f64).abs() < 1e-9, "Σ r_i = {total}");

@@ -590,11 +590,7 @@ impl Run<'_> {
         let reliability = fix.reliability();
         let mut lines = Vec::with_capacity(sightings.len());
         for (k, Sighting { point: j, .. }) in sightings.iter().enumerate() {
-            let w = reliability.w_statistics[3 * k..3 * k + 3]
-                .iter()
-                .flatten()
-                .copied()
-                .max_by(|a, b| a.abs().total_cmp(&b.abs()));
+            let w = reliability.largest_w_of_point(k);
             if let Some(w) = w.filter(|w| w.abs() > cps::W_CRITICAL) {
                 self.steps.rec.warn(format!(
                     "cycle {}: the measurement of {} has |w| = {:.2} > {:.2}: a possible blunder",
