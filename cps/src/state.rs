@@ -234,10 +234,13 @@ impl TeamState {
         readings: &[(usize, Reading, &Instrument)],
         options: &FixOptions,
     ) -> Result<ParentFix> {
-        let (sighted, children_cov, c_rows) = self.sighted(readings)?;
-        let instruments: Vec<&Instrument> = readings.iter().map(|r| r.2).collect();
+        let fix = self.trial_fix(readings, options)?;
+        // cov(C, s) for every state s: the sighted points' rows.
         let n = self.covariance.ncols();
-        let fix = fix_parent_mixed(&sighted, &children_cov, &instruments, options)?;
+        let mut c_rows = DMatrix::zeros(3 * readings.len(), n);
+        for (k, &(j, _, _)) in readings.iter().enumerate() {
+            c_rows.rows_mut(3 * k, 3).copy_from(&self.covariance.rows(child_offset(j), 3));
+        }
         // cov(p, s) = F cov(C, s); the old parent's columns are replaced.
         let mut cross = &fix.f_map * &c_rows;
         cross.columns_mut(PARENT, 4).fill(0.0);
@@ -256,19 +259,9 @@ impl TeamState {
 
     /// The fix [`TeamState::fix_parent_mixed`] would make from `readings`,
     /// the state unchanged: what a field test tries before the team takes it
-    /// ([`crate::screen::field_test`]).
+    /// ([`crate::screen::field_test`]). It reads only the sighted points'
+    /// joint covariance (m × m), not their rows of the whole state.
     pub fn trial_fix(&self, readings: &[(usize, Reading, &Instrument)], options: &FixOptions) -> Result<ParentFix> {
-        let (sighted, children_cov, _) = self.sighted(readings)?;
-        let instruments: Vec<&Instrument> = readings.iter().map(|r| r.2).collect();
-        fix_parent_mixed(&sighted, &children_cov, &instruments, options)
-    }
-
-    /// The sighted points of `readings` with their positions, their joint
-    /// covariance and their rows of the state's covariance (cov(C, s)).
-    fn sighted(
-        &self,
-        readings: &[(usize, Reading, &Instrument)],
-    ) -> Result<(Vec<SightedChild>, DMatrix<f64>, DMatrix<f64>)> {
         let mut sighted = Vec::with_capacity(readings.len());
         for &(j, reading, _) in readings {
             if j >= self.children.len() {
@@ -277,15 +270,12 @@ impl TeamState {
             let position = self.child(j).ok_or(CpsError::ChildNotPlaced { child: j })?;
             sighted.push(SightedChild { child: j, position, reading });
         }
-        let m = 3 * sighted.len();
         let offsets: Vec<usize> = sighted.iter().map(|c| child_offset(c.child)).collect();
-        let n = self.covariance.ncols();
-        let mut c_rows = DMatrix::zeros(m, n);
-        for (k, &o) in offsets.iter().enumerate() {
-            c_rows.rows_mut(3 * k, 3).copy_from(&self.covariance.rows(o, 3));
-        }
-        let children_cov = DMatrix::from_fn(m, m, |a, b| c_rows[(a, offsets[b / 3] + b % 3)]);
-        Ok((sighted, children_cov, c_rows))
+        let m = 3 * sighted.len();
+        let children_cov =
+            DMatrix::from_fn(m, m, |a, b| self.covariance[(offsets[a / 3] + a % 3, offsets[b / 3] + b % 3)]);
+        let instruments: Vec<&Instrument> = readings.iter().map(|r| r.2).collect();
+        fix_parent_mixed(&sighted, &children_cov, &instruments, options)
     }
 }
 
