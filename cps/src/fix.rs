@@ -12,7 +12,7 @@ use nalgebra::{DMatrix, DVector, Matrix3, Matrix4, Point3, Vector2, Vector4};
 
 use crate::error::{CpsError, Result, ensure_finite};
 use crate::instrument::Instrument;
-use crate::observation::{ParentPose, Reading, observe_with_jacobians, wrap_angle};
+use crate::observation::{ParentPose, Reading, observe_with_jacobians};
 
 /// One child as the parent sees it during a fix.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -197,9 +197,7 @@ fn linearise(
     let mut blocks = Vec::with_capacity(n);
     for (k, c) in children.iter().enumerate() {
         let (computed, j) = observe_with_jacobians(pose, &c.position)?;
-        misclosure[3 * k] = c.reading.slope_m - computed.slope_m;
-        misclosure[3 * k + 1] = wrap_angle(c.reading.azimuth_rad - computed.azimuth_rad);
-        misclosure[3 * k + 2] = c.reading.elevation_rad - computed.elevation_rad;
+        misclosure.fixed_rows_mut::<3>(3 * k).copy_from_slice(&c.reading.minus(&computed));
         a.fixed_view_mut::<3, 4>(3 * k, 0).copy_from(&j.wrt_parent);
         h_c.fixed_view_mut::<3, 3>(3 * k, 3 * k).copy_from(&j.wrt_child);
         blocks.push(j.wrt_child);
@@ -397,7 +395,7 @@ fn statistics(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::observation::observe;
+    use crate::observation::{observe, wrap_angle};
 
     fn sighted(parent: &ParentPose, children: &[Point3<f64>]) -> Vec<SightedChild> {
         children

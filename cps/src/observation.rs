@@ -61,6 +61,16 @@ impl Reading {
         Vector3::new(self.slope_m, self.azimuth_rad, self.elevation_rad)
     }
 
+    /// Observed − computed, (r, φ, ψ), the azimuth wrapped to (−π, π]: the
+    /// misclosure of every fix, adjustment and field test.
+    pub fn minus(&self, computed: &Reading) -> [f64; 3] {
+        [
+            self.slope_m - computed.slope_m,
+            wrap_angle(self.azimuth_rad - computed.azimuth_rad),
+            self.elevation_rad - computed.elevation_rad,
+        ]
+    }
+
     /// Checks the reading is finite with a positive slope distance and an
     /// elevation strictly between −90° and 90° (`child` names it in errors).
     pub fn validate(&self, child: usize) -> Result<()> {

@@ -10,7 +10,7 @@
 
 use crate::fix::FixOptions;
 use crate::instrument::Instrument;
-use crate::observation::{Reading, observe, wrap_angle};
+use crate::observation::{Reading, observe};
 use crate::state::TeamState;
 use crate::{CpsError, ParentFix};
 
@@ -44,11 +44,8 @@ pub struct Misclosure {
 impl Misclosure {
     /// `got` − `expected`.
     pub fn between(got: &Reading, expected: &Reading) -> Self {
-        Self {
-            slope_m: got.slope_m - expected.slope_m,
-            azimuth_rad: wrap_angle(got.azimuth_rad - expected.azimuth_rad),
-            elevation_rad: got.elevation_rad - expected.elevation_rad,
-        }
+        let [slope_m, azimuth_rad, elevation_rad] = got.minus(expected);
+        Self { slope_m, azimuth_rad, elevation_rad }
     }
 
     /// The largest part in units of its gross bound: above 1 is gross

@@ -28,7 +28,7 @@ use nalgebra::{DMatrix, Matrix3, Point3, SymmetricEigen, Vector3};
 use super::model::{Layout, Network, Source};
 use super::{AdjustOptions, solve};
 use crate::error::Result;
-use crate::observation::{observe_with_jacobians, wrap_angle};
+use crate::observation::observe_with_jacobians;
 
 /// A point's position and covariance from the rest of the network.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -89,11 +89,7 @@ pub fn freed_points(
                         continue;
                     }
                     let (computed, jac) = observe_with_jacobians(&solution.stations[nr.station], &given)?;
-                    let full = [
-                        nr.reading.slope_m - computed.slope_m,
-                        wrap_angle(nr.reading.azimuth_rad - computed.azimuth_rad),
-                        nr.reading.elevation_rad - computed.elevation_rad,
-                    ];
+                    let full = nr.reading.minus(&computed);
                     let m = active.len();
                     let rows: Vec<usize> = active.iter().map(|&a| group.components[a]).collect();
                     let cov = DMatrix::from_fn(m, m, |i, j| group.covariance[(active[i], active[j])]);

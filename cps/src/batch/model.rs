@@ -297,11 +297,7 @@ impl Network {
             Source::Reading(k) => {
                 let nr = &self.readings[k];
                 let (computed, j) = observe_with_jacobians(&stations[nr.station], &points[nr.point])?;
-                let full = [
-                    nr.reading.slope_m - computed.slope_m,
-                    wrap_angle(nr.reading.azimuth_rad - computed.azimuth_rad),
-                    nr.reading.elevation_rad - computed.elevation_rad,
-                ];
+                let full = nr.reading.minus(&computed);
                 let mut cols: Vec<(usize, Vec<f64>)> = Vec::new();
                 for (c, col) in layout.stations[nr.station].iter().enumerate() {
                     if let Some(col) = col {

@@ -372,7 +372,7 @@ impl Run<'_> {
             self.steps.rec.warn(format!("{what}: measured again"))?;
             previous = Some(reading);
             key.attempt += 1;
-            self.note_remeasured(&key, what);
+            self.note_remeasured(key.child.unwrap_or_default(), &key, what);
             let (again, was_live) = self.measure(key.clone(), target, instrument)?;
             live += u32::from(was_live);
             reading = again;
@@ -445,20 +445,17 @@ impl Run<'_> {
     /// `live` when the device took it.
     fn remeasure(&mut self, sighting: &mut Sighting<'_>, live: &mut u32, why: &str) -> Result<()> {
         sighting.key.attempt += 1;
-        self.note_remeasured(&sighting.key, why.to_string());
+        self.note_remeasured(sighting.point, &sighting.key, why.to_string());
         let (reading, was_live) = self.measure(sighting.key.clone(), &sighting.target, sighting.instrument)?;
         sighting.reading = reading;
         *live += u32::from(was_live);
         Ok(())
     }
 
-    /// Notes the re-measurement `key` for the report.
-    fn note_remeasured(&mut self, key: &MeasureKey, why: String) {
-        let point = match (&key.control, key.child) {
-            (Some(name), _) => format!("control point \"{name}\""),
-            (None, Some(j)) => self.prism_name(j),
-            (None, None) => "?".into(),
-        };
+    /// Notes the re-measurement `key` of the team state's point `point` for
+    /// the report.
+    fn note_remeasured(&mut self, point: usize, key: &MeasureKey, why: String) {
+        let point = self.prism_name(point);
         self.remeasured.push(Remeasured { cycle: key.cycle, point, attempt: key.attempt, why });
     }
 
