@@ -60,19 +60,24 @@ pub fn freed_points(
     let n = layout.len();
     // The columns of N⁻¹ for the given right-hand sides (three solves).
     let solve3 = |columns: [Vec<f64>; 3]| columns.map(|b| solution.factor.solve(&b));
+    // The 3 × 3 block of N⁻¹ at columns `c`.
+    let q_block = |c: [usize; 3]| {
+        let q = solve3(c.map(|k| {
+            let mut e = vec![0.0; n];
+            e[k] = 1.0;
+            e
+        }));
+        Matrix3::from_fn(|i, j| q[j][c[i]])
+    };
     let mut out = Vec::with_capacity(points.len());
     for &p in points {
         let point = &network.points[p];
         let prior_group = groups.iter().find(|g| g.source == Source::PointPrior(p));
         let cols = layout.points[p];
-        let freed = match point.prior {
-            None => {
-                let Some(c) = all(&cols) else { return Err(undetermined_point(p)) };
-                let q = solve3(unit_columns(n, &c));
-                let covariance = Matrix3::from_fn(|i, j| q[j][c[i]]);
-                Some(Freed { position: solution.points[p], covariance })
-            }
-            Some(_) if cols.iter().all(Option::is_none) => {
+        let freed = match (point.prior, all(&cols)) {
+            (None, Some(c)) => Some(Freed { position: solution.points[p], covariance: q_block(c) }),
+            (None, None) => return Err(undetermined_point(p)),
+            (Some(_), _) if cols.iter().all(Option::is_none) => {
                 // Fixed: its sightings against the rest.
                 let given = point.position;
                 let mut n_pp = Matrix3::zeros();
@@ -123,11 +128,9 @@ pub fn freed_points(
                     _ => None,
                 }
             }
-            Some(prior) if all(&cols).is_some() && prior_group.is_some_and(|g| g.active.iter().all(|a| *a)) => {
+            (Some(prior), Some(c)) if prior_group.is_some_and(|g| g.active.iter().all(|a| *a)) => {
                 // Weighted: the rank-3 downdate.
-                let c = all(&cols).expect("checked");
-                let q = solve3(unit_columns(n, &c));
-                let q_pp = Matrix3::from_fn(|i, j| q[j][c[i]]);
+                let q_pp = q_block(c);
                 let q_pp = 0.5 * (q_pp + q_pp.transpose());
                 let m = prior - q_pp;
                 let m = 0.5 * (m + m.transpose());
@@ -143,7 +146,7 @@ pub fn freed_points(
                     _ => None,
                 }
             }
-            Some(_) => readjusted(network, options, left_out, p),
+            (Some(_), _) => readjusted(network, options, left_out, p),
         };
         out.push(freed);
     }
@@ -163,15 +166,6 @@ fn readjusted(network: &Network, options: &AdjustOptions, left_out: &[(Source, u
 /// The three columns when every coordinate is an unknown.
 fn all(cols: &[Option<usize>; 3]) -> Option<[usize; 3]> {
     Some([cols[0]?, cols[1]?, cols[2]?])
-}
-
-/// Unit vectors of length `n` at `c`.
-fn unit_columns(n: usize, c: &[usize; 3]) -> [Vec<f64>; 3] {
-    c.map(|k| {
-        let mut e = vec![0.0; n];
-        e[k] = 1.0;
-        e
-    })
 }
 
 /// A free point without columns cannot happen in a validated network.
