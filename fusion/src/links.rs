@@ -39,7 +39,7 @@ use rayon::prelude::*;
 use crate::error::{FusionError, Result};
 use crate::graph::Edge;
 use crate::icp::correspondences::Partners;
-use crate::icp::degeneracy::{Observability, centroid, lever_arm};
+use crate::icp::degeneracy::{Observability, centroid_and_lever_arm};
 use crate::icp::solve::align_from;
 use crate::icp::{IcpConfig, IcpResult};
 use crate::multiview::{GATE_CHI2, MultiviewConfig, Prepared, check, in_scan, prepare};
@@ -178,7 +178,7 @@ pub fn adjust<S: AsRef<[Point3<f32>]> + Sync>(
     }
     let prepared = prepare(scans, &config.multiview)?;
     let links = pair_links(&prepared, poses, config, progress);
-    let shape: Vec<(Point3<f64>, f64)> = prepared.iter().map(|p| (centroid(&p.source), lever_arm(&p.source))).collect();
+    let shape: Vec<(Point3<f64>, f64)> = prepared.iter().map(|p| centroid_and_lever_arm(&p.source)).collect();
     solve(poses, starts, links, &shape, config)
 }
 

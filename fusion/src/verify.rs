@@ -26,7 +26,7 @@
 use nalgebra::{Isometry3, Point3};
 
 use crate::error::Result;
-use crate::icp::degeneracy::{centroid, lever_arm};
+use crate::icp::degeneracy::centroid_and_lever_arm;
 use crate::links::{LinkConfig, pair_links};
 use crate::multiview::{check, prepare};
 
@@ -75,20 +75,19 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
     crate::FusionError::require_positive("verification tolerance (m)", tolerance_m)?;
     let prepared = prepare(scans, &config.multiview)?;
     let links = pair_links(&prepared, poses, config, &mut |_, _| ());
+    let shape: Vec<(Point3<f64>, f64)> = prepared.iter().map(|p| centroid_and_lever_arm(&p.source)).collect();
     Ok(links
         .into_iter()
         .map(|l| {
-            let source = &prepared[l.source].source;
+            let (c, radius) = shape[l.source];
             let at = poses[l.target].inverse() * poses[l.source];
             let motion = l.result.as_ref().map(|r| {
                 // δ: what the match did to the final relative pose, in the
                 // source's frame.
                 let delta = at.inverse() * r.target_from_source;
-                let c = centroid(source);
                 let angle = delta.rotation.angle();
                 let e = crate::se3::left_difference(&at, &r.target_from_source);
                 let chi2 = (e.transpose() * r.information * e)[(0, 0)];
-                let radius = lever_arm(source);
                 let moved = (delta * c - c).norm() + angle * radius;
                 (moved, angle, chi2, moved / radius)
             });
@@ -110,14 +109,13 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
 }
 
 /// The scans of a set of `n` that an inconsistent pair names: each scan of
-/// such a pair, except the frame's (scan 0) when its partner is named too.
+/// such a pair but scan 0, which holds the frame (the pose in doubt is its
+/// partner's). A pair whose match failed names none.
 pub fn untrusted(n: usize, checks: &[PairCheck]) -> Vec<usize> {
     let mut named = vec![false; n];
     for c in checks.iter().filter(|c| !c.consistent && c.moved_m.is_some()) {
         named[c.source] = true;
         named[c.target] = true;
     }
-    // Scan 0 holds the frame: the pose in doubt is its partner's.
-    named[0] = false;
-    (0..n).filter(|&i| named[i]).collect()
+    (1..n).filter(|&i| named[i]).collect()
 }

@@ -29,9 +29,16 @@ pub fn centroid(points: &[Point3<f32>]) -> Point3<f64> {
 /// The lever arm of a point set: its RMS distance from its centroid (at
 /// least 1 mm).
 pub fn lever_arm(points: &[Point3<f32>]) -> f64 {
+    centroid_and_lever_arm(points).1
+}
+
+/// A point set's [`centroid`] and [`lever_arm`], what an analysis about
+/// the centroid needs.
+pub fn centroid_and_lever_arm(points: &[Point3<f32>]) -> (Point3<f64>, f64) {
     let n = points.len().max(1) as f64;
-    let c = centroid(points).coords;
-    (points.iter().map(|p| (p.coords.cast::<f64>() - c).norm_squared()).sum::<f64>() / n).sqrt().max(1e-3)
+    let c = centroid(points);
+    let rms = (points.iter().map(|p| (p.coords.cast::<f64>() - c.coords).norm_squared()).sum::<f64>() / n).sqrt();
+    (c, rms.max(1e-3))
 }
 
 /// A blind direction's rotation or translation part (of its unit vector in

@@ -177,12 +177,12 @@ fn align_impl(
     // How the estimate moved since the last pass (none before the first).
     let mut moved = None;
     let mut unobservable = Vec::new();
-    // The lever arm that makes rotation comparable with translation: the
-    // source's RMS radius about its centroid (at least 1 mm).
-    let lever_arm_m = config.degeneracy_ratio.map_or(1.0, |_| super::degeneracy::lever_arm(source));
-    // The analysis runs about the source's centroid (where the estimate puts
-    // it in the target's frame): the same verdict in every frame.
-    let centre = super::degeneracy::centroid(source);
+    // Only with blind directions asked for: the analysis runs about the
+    // source's centroid (where the estimate puts it in the target's frame:
+    // the same verdict in every frame), rotation made comparable with
+    // translation by the source's RMS radius about it (at least 1 mm).
+    let (centre, lever_arm_m) =
+        config.degeneracy_ratio.map_or((Point3::origin(), 1.0), |_| super::degeneracy::centroid_and_lever_arm(source));
     while iterations < config.max_iterations {
         let sums = accumulate(source, target, &estimate, max_sq, config, &mut partners, moved);
         last = sums;
