@@ -83,20 +83,30 @@ pub fn features(points: &[Point3<f32>], voxel_m: f64) -> Result<Features> {
     let coords: Vec<[f32; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
     let tree = ImmutableKdTree::<f32, 3>::new_from_slice(&coords)
         .map_err(|e| FusionError::Degenerate { what: format!("k-d tree: {e:?}") })?;
-    let within = |i: usize, r: f64| -> Vec<(usize, f32)> {
-        tree.query(&coords[i])
-            .within::<SquaredEuclidean<f32>>((r * r) as f32)
-            .execute()
-            .into_iter()
-            .map(|n| (n.item as usize, n.distance.sqrt()))
-            .collect()
-    };
+    // Every point's neighbours within five cells (the descriptor's reach),
+    // with their squared distances; the normals take those within two.
+    let radius = 5.0 * voxel_m;
+    let neighbours: Vec<Vec<(usize, f32)>> = (0..points.len())
+        .into_par_iter()
+        .map(|i| {
+            tree.query(&coords[i])
+                .within::<SquaredEuclidean<f32>>((radius * radius) as f32)
+                .execute()
+                .into_iter()
+                .map(|n| (n.item as usize, n.distance))
+                .collect()
+        })
+        .collect();
     // Normals from the neighbours within two cells, towards the scanner.
+    let near = (4.0 * voxel_m * voxel_m) as f32;
     let normals: Vec<Vector3<f64>> = (0..points.len())
         .into_par_iter()
         .map(|i| {
-            let nb = within(i, 2.0 * voxel_m);
-            let p: Vec<Vector3<f64>> = nb.iter().map(|&(j, _)| points[j].coords.cast::<f64>()).collect();
+            let p: Vec<Vector3<f64>> = neighbours[i]
+                .iter()
+                .filter(|&&(_, d2)| d2 <= near)
+                .map(|&(j, _)| points[j].coords.cast::<f64>())
+                .collect();
             let mean = p.iter().sum::<Vector3<f64>>() / p.len().max(1) as f64;
             let cov = p.iter().fold(Matrix3::zeros(), |a, q| a + (q - mean) * (q - mean).transpose());
             let eig = cov.symmetric_eigen();
@@ -110,8 +120,6 @@ pub fn features(points: &[Point3<f32>], voxel_m: f64) -> Result<Features> {
             n
         })
         .collect();
-    let radius = 5.0 * voxel_m;
-    let neighbours: Vec<Vec<(usize, f32)>> = (0..points.len()).into_par_iter().map(|i| within(i, radius)).collect();
     let spfh: Vec<[f32; FPFH_LEN]> = (0..points.len())
         .into_par_iter()
         .map(|i| {
@@ -135,10 +143,11 @@ pub fn features(points: &[Point3<f32>], voxel_m: f64) -> Result<Features> {
         .into_par_iter()
         .map(|i| {
             let mut f = [0f32; FPFH_LEN];
-            for &(j, d) in &neighbours[i] {
-                if j == i || d <= 0.0 {
+            for &(j, d2) in &neighbours[i] {
+                if j == i || d2 <= 0.0 {
                     continue;
                 }
+                let d = d2.sqrt();
                 for (a, b) in f.iter_mut().zip(&spfh[j]) {
                     *a += b / d;
                 }
