@@ -24,6 +24,7 @@
 #![warn(missing_docs)]
 
 pub mod batch;
+pub mod chain;
 pub mod error;
 pub mod fix;
 pub mod geom;

@@ -11,7 +11,11 @@
 //! fixes carry every cross-term to it like to any other state, so the
 //! clones of the stations where the parent scanned hold the **joint**
 //! covariance of those stations — the correlation the leapfrog chain
-//! creates between them, which a fusion of their scans needs.
+//! creates between them, which a fusion of their scans needs. Their cost
+//! grows with the square of the scan stations; [`TeamState::set_anchor`]
+//! tracks instead how the state depends on the one at the last scan
+//! station, from which [`crate::chain`] rebuilds the same joint covariance
+//! in linear cost.
 
 use nalgebra::{DMatrix, Matrix3, Matrix4, Point3};
 
@@ -38,6 +42,9 @@ pub struct TeamState {
     /// How many of `children` are fixed points (at the end).
     fixed_points: usize,
     covariance: DMatrix<f64>,
+    /// ∂(parent and children)/∂(state at the anchor), (4 + 3N) × m_anchor,
+    /// once [`TeamState::set_anchor`] was called.
+    anchor: Option<DMatrix<f64>>,
 }
 
 impl TeamState {
@@ -52,7 +59,7 @@ impl TeamState {
         let n = child_offset(n_children);
         let mut covariance = DMatrix::zeros(n, n);
         covariance.fixed_view_mut::<4, 4>(PARENT, PARENT).copy_from(&parent_cov);
-        Ok(Self { parent, children: vec![None; n_children], fixed_points: 0, covariance })
+        Ok(Self { parent, children: vec![None; n_children], fixed_points: 0, covariance, anchor: None })
     }
 
     /// Adds a point that never moves — a control point's prism — at
@@ -133,6 +140,33 @@ impl TeamState {
         self.clones() - 1
     }
 
+    /// Takes the current state as the anchor: from here on the team tracks
+    /// ∂(parent and children)/∂(state now), updated by every placement and
+    /// fix like the covariance's rows ([`crate::chain`]). Clones are not
+    /// part of the anchored state.
+    pub fn set_anchor(&mut self) {
+        let t = child_offset(self.n_children());
+        let m = child_offset(self.children.len());
+        self.anchor = Some(DMatrix::identity(t, m));
+    }
+
+    /// ∂(parent and children)/∂(state at the anchor), (4 + 3N) × m_anchor;
+    /// `None` before [`TeamState::set_anchor`].
+    pub fn from_anchor(&self) -> Option<&DMatrix<f64>> {
+        self.anchor.as_ref()
+    }
+
+    /// Point `j`'s rows of ∂state/∂(state at the anchor): a child's tracked
+    /// rows; a fixed point's own coordinates if the anchored state held it,
+    /// else zero (added later, independent of it).
+    fn anchor_rows(anchor: &DMatrix<f64>, j: usize) -> DMatrix<f64> {
+        let o = child_offset(j);
+        if o < anchor.nrows() {
+            return anchor.rows(o, 3).into_owned();
+        }
+        DMatrix::from_fn(3, anchor.ncols(), |r, c| if c == o + r { 1.0 } else { 0.0 })
+    }
+
     /// Number of clones ([`TeamState::clone_parent`]).
     pub fn clones(&self) -> usize {
         (self.covariance.ncols() - child_offset(self.children.len())) / 4
@@ -208,6 +242,10 @@ impl TeamState {
         }
         let own = 0.5 * (own + own.transpose());
         self.covariance.fixed_view_mut::<3, 3>(o, o).copy_from(&own);
+        if let Some(anchor) = &mut self.anchor {
+            let rows = g_p * anchor.fixed_rows::<4>(PARENT);
+            anchor.fixed_rows_mut::<3>(o).copy_from(&rows);
+        }
         self.children[j] = Some(placed.position);
         Ok(placed)
     }
@@ -253,6 +291,13 @@ impl TeamState {
         // Every write above mirrors itself and Σ_0 is symmetric, so the joint
         // covariance stays exactly symmetric.
         self.covariance.fixed_view_mut::<4, 4>(PARENT, PARENT).copy_from(&fix.covariance);
+        if let Some(anchor) = &mut self.anchor {
+            let mut sighted = DMatrix::zeros(3 * readings.len(), anchor.ncols());
+            for (k, &(j, _, _)) in readings.iter().enumerate() {
+                sighted.rows_mut(3 * k, 3).copy_from(&Self::anchor_rows(anchor, j));
+            }
+            anchor.fixed_rows_mut::<4>(PARENT).copy_from(&(&fix.f_map * sighted));
+        }
         self.parent = fix.pose;
         Ok(fix)
     }
