@@ -74,11 +74,12 @@ pub fn for_each_cross_covariance(links: &[ChainLink], mut put: impl FnMut(usize,
         let mut columns = link.parent_columns.clone();
         for (b, later) in links.iter().enumerate().skip(a + 1) {
             let Some(s) = &later.from_previous else { break };
-            columns = propagate(s, &columns, later.parent_columns.nrows()).map_err(|expected| CpsError::OutOfRange {
-                what: format!("scan station {b}'s chain link: columns of ∂X/∂X_previous"),
-                value: s.ncols() as f64,
-                expected,
-            })?;
+            columns =
+                propagate(s, &columns, later.parent_columns.nrows()).map_err(|expected| CpsError::OutOfRange {
+                    what: format!("scan station {b}'s chain link: columns of ∂X/∂X_previous"),
+                    value: s.ncols() as f64,
+                    expected,
+                })?;
             put(b, a, &Matrix4::from_fn(|r, c| columns[(r, c)]));
         }
     }
@@ -88,7 +89,11 @@ pub fn for_each_cross_covariance(links: &[ChainLink], mut put: impl FnMut(usize,
 /// S·V for the team's rows, the fixed points' rows of V carried over
 /// unchanged (zero for a point the previous state did not hold); `rows`
 /// is the new state's dimension.
-fn propagate(team_rows: &DMatrix<f64>, columns: &DMatrix<f64>, rows: usize) -> std::result::Result<DMatrix<f64>, String> {
+fn propagate(
+    team_rows: &DMatrix<f64>,
+    columns: &DMatrix<f64>,
+    rows: usize,
+) -> std::result::Result<DMatrix<f64>, String> {
     let (t, m_previous) = team_rows.shape();
     if columns.nrows() > m_previous {
         return Err(format!("{} (the previous station's state dimension)", columns.nrows()));

@@ -219,15 +219,16 @@ pub fn adjust_without(network: &Network, options: &AdjustOptions, left_out: &[(S
         GlobalTest { statistic: vtpv, dof: redundancy, alpha: options.alpha, lower, upper, passed }
     };
     let mut detection = None;
+    let scalars: usize = groups.iter().map(|g| g.active.iter().filter(|a| **a).count()).sum();
+    if scalars < layout.len() {
+        return Err(CpsError::DegenerateGeometry {
+            what: format!("{scalars} observations for {} unknowns", layout.len()),
+            condition: f64::INFINITY,
+        });
+    }
+    let mut solution = solve::solve(network, &layout, &groups, options.max_iterations)?;
     loop {
         let scalars: usize = groups.iter().map(|g| g.active.iter().filter(|a| **a).count()).sum();
-        if scalars < layout.len() {
-            return Err(CpsError::DegenerateGeometry {
-                what: format!("{scalars} observations for {} unknowns", layout.len()),
-                condition: f64::INFINITY,
-            });
-        }
-        let solution = solve::solve(network, &layout, &groups, options.max_iterations)?;
         let inverse = solution.factor.selected_inverse();
         let (observations, vtpv) = testing::statistics(&groups, &layout, &station_of, &solution, &inverse, lambda0);
         let redundancy = scalars - layout.len();
@@ -248,11 +249,21 @@ pub fn adjust_without(network: &Network, options: &AdjustOptions, left_out: &[(S
             let pos = groups[g].components.iter().position(|c| *c == o.component).unwrap_or(0);
             let mut trial = groups.clone();
             trial[g].active[pos] = false;
-            // Removing it must leave every unknown determined.
-            if solve::solve(network, &layout, &trial, 1).is_ok() {
-                removed.push(Removal { source: o.source, component: o.component, w, residual: o.residual });
-                groups = trial;
-                continue;
+            // Removing it must leave every unknown determined; the
+            // adjustment without it starts from the one with it (linear in
+            // the network per removal, not a restart from the approximate
+            // values).
+            let (stations, points) = (solution.stations.clone(), solution.points.clone());
+            match solve::solve_from(network, &layout, &trial, options.max_iterations, stations, points) {
+                Ok(next) => {
+                    removed.push(Removal { source: o.source, component: o.component, w, residual: o.residual });
+                    drop(inverse);
+                    groups = trial;
+                    solution = next;
+                    continue;
+                }
+                Err(CpsError::DegenerateGeometry { .. } | CpsError::NumericallySingular { .. }) => {}
+                Err(e) => return Err(e),
             }
             snooping_stopped = Some(format!(
                 "{:?} component {} has |w| = {:.2} but removing it leaves an unknown undetermined",

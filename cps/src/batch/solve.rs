@@ -35,11 +35,25 @@ pub struct Solution {
 }
 
 /// Adjusts `network` with the observation `groups` (their active
-/// scalars) in at most `max_iterations` steps.
+/// scalars) in at most `max_iterations` steps, from the network's
+/// approximate values.
 pub fn solve(network: &Network, layout: &Layout, groups: &[Group], max_iterations: usize) -> Result<Solution> {
+    let stations: Vec<ParentPose> = network.stations.iter().map(|s| s.pose).collect();
+    let points: Vec<Point3<f64>> = network.points.iter().map(|p| p.position).collect();
+    solve_from(network, layout, groups, max_iterations, stations, points)
+}
+
+/// [`solve`] from the given values (an earlier solution's: data snooping
+/// re-adjusts from there in a step or two).
+pub fn solve_from(
+    network: &Network,
+    layout: &Layout,
+    groups: &[Group],
+    max_iterations: usize,
+    mut stations: Vec<ParentPose>,
+    mut points: Vec<Point3<f64>>,
+) -> Result<Solution> {
     let n = layout.len();
-    let mut stations: Vec<ParentPose> = network.stations.iter().map(|s| s.pose).collect();
-    let mut points: Vec<Point3<f64>> = network.points.iter().map(|p| p.position).collect();
     let mut iterations = 0;
     loop {
         let linearised: Vec<Linearised> =

@@ -39,10 +39,8 @@ pub struct ScanView {
     pub pose: ParentPose,
     /// Its 4×4 covariance (x, y, z, θ).
     pub covariance: Matrix4<f64>,
-    /// cov(this station, each earlier scan's station), 4×4 each, in scan
-    /// order, as the CPS chain correlates them (shorter or empty where
-    /// nothing is known: taken as zero).
-    pub cross_covariance: Vec<Matrix4<f64>>,
+    /// How the CPS chain correlates the station with the earlier scans'.
+    pub correlation: Correlation,
     /// The measured tilt.
     pub tilt: Tilt,
     /// Where the parent's drive believed it stood (odometry).
@@ -52,6 +50,17 @@ pub struct ScanView {
     /// When it was taken: GPS seconds (from the journal's UNIX time), if
     /// journaled.
     pub gps_time_s: Option<f64>,
+}
+
+/// How a scan station's pose is correlated with the earlier ones'.
+#[derive(Debug, Clone)]
+pub enum Correlation {
+    /// cov(this station, each earlier scan's station), 4×4 each, in scan
+    /// order, as a version 1 or 2 journal keeps them (shorter or empty
+    /// where nothing is known: taken as zero).
+    Earlier(Vec<Matrix4<f64>>),
+    /// The station's link in the chain (version 3, [`cps::chain`]).
+    Chain(cps::chain::ChainLink),
 }
 
 impl ScanView {
@@ -300,14 +309,29 @@ pub fn fuse(
 pub fn joint_prior(views: &[ScanView], base: &Vector3<f64>) -> Result<fusion::graph::JointPrior> {
     let n = views.len();
     let mut joint = faer::Mat::<f64>::zeros(4 * n, 4 * n);
-    for (i, v) in views.iter().enumerate() {
-        let blocks = v.cross_covariance.iter().take(i).enumerate().chain([(i, &v.covariance)]);
-        for (k, block) in blocks {
-            for r in 0..4 {
-                for c in 0..4 {
-                    joint[(4 * i + r, 4 * k + c)] = block[(r, c)];
-                    joint[(4 * k + c, 4 * i + r)] = block[(r, c)];
+    let mut put = |i: usize, k: usize, block: &Matrix4<f64>| {
+        for r in 0..4 {
+            for c in 0..4 {
+                joint[(4 * i + r, 4 * k + c)] = block[(r, c)];
+                joint[(4 * k + c, 4 * i + r)] = block[(r, c)];
+            }
+        }
+    };
+    let chain: Option<Vec<cps::chain::ChainLink>> = views
+        .iter()
+        .map(|v| match &v.correlation {
+            Correlation::Chain(link) => Some(link.clone()),
+            Correlation::Earlier(_) => None,
+        })
+        .collect();
+    match chain {
+        Some(links) => cps::chain::for_each_cross_covariance(&links, put).context("the scan stations' joint prior")?,
+        None => {
+            for (i, v) in views.iter().enumerate() {
+                if let Correlation::Earlier(cross) = &v.correlation {
+                    cross.iter().take(i).enumerate().for_each(|(k, block)| put(i, k, block));
                 }
+                put(i, i, &v.covariance);
             }
         }
     }

@@ -7,7 +7,10 @@
 //! and `end`) are replayed in order on `--resume`; the informational ones
 //! (`retry`, `stop`, `resume`) are skipped. Version 1 journals (written
 //! before this module was typed) read as version 2 ones: version 2 only
-//! adds fields and events.
+//! adds fields and events. Version 3 journals each fix's [`ChainRecord`]
+//! (O(1) numbers per station) where version 2 journaled the station's
+//! cross-covariance with every earlier scan station (O(n), so O(n²) bytes
+//! per run); a journal goes on in the version it was started with.
 
 use std::collections::VecDeque;
 use std::fs::{File, OpenOptions};
@@ -21,10 +24,10 @@ use serde::{Deserialize, Serialize};
 use super::directory::DirLock;
 
 /// The schema version this build writes.
-pub const VERSION: u32 = 2;
+pub const VERSION: u32 = 3;
 
 /// Versions this build reads.
-pub const READS: [u32; 2] = [1, 2];
+pub const READS: [u32; 3] = [1, 2, 3];
 
 /// One line of the journal: the version and the event.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -287,12 +290,58 @@ pub struct FixRecord {
     /// The fix's redundancy.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub redundancy: Option<usize>,
-    /// cov(this station, each earlier scan station), 4×4 each, in scan order.
+    /// cov(this station, each earlier scan station), 4×4 each, in scan
+    /// order (versions 1 and 2).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scan_cross_covariances: Option<Vec<Matrix4Record>>,
+    /// How the team state here depends on the last scan station's
+    /// (version 3), from which the scan stations' joint covariance is
+    /// rebuilt.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub chain: Option<ChainRecord>,
     /// `odometry` for a robot alone.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub source: Option<String>,
+}
+
+/// A fix's link in the chain of scan stations ([`cps::chain::ChainLink`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ChainRecord {
+    /// cov(X, p): each state's row (parent x, y, z, θ, then each child's
+    /// and each control point's x, y, z) against the parent's x, y, z, θ.
+    pub parent_columns: Vec<[f64; 4]>,
+    /// ∂(parent and children)/∂X at the last scan station, row by row;
+    /// absent before the first scan.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub from_last_scan: Option<Vec<Vec<f64>>>,
+}
+
+impl ChainRecord {
+    /// The team's link now ([`cps::TeamState::set_anchor`]).
+    pub fn of(team: &cps::TeamState) -> Self {
+        let c = team.covariance();
+        let m = c.nrows() - 4 * team.clones();
+        Self {
+            parent_columns: (0..m).map(|r| [c[(r, 0)], c[(r, 1)], c[(r, 2)], c[(r, 3)]]).collect(),
+            from_last_scan: team.from_anchor().map(|s| s.row_iter().map(|r| r.iter().copied().collect()).collect()),
+        }
+    }
+
+    /// The link, checked for its shape: `what` names it in errors.
+    pub fn link(&self, what: &str) -> Result<cps::chain::ChainLink> {
+        let parent_columns = nalgebra::DMatrix::from_fn(self.parent_columns.len(), 4, |r, c| self.parent_columns[r][c]);
+        let from_previous = match &self.from_last_scan {
+            None => None,
+            Some(rows) => {
+                let width = rows.first().map_or(0, Vec::len);
+                if let Some(r) = rows.iter().position(|r| r.len() != width) {
+                    bail!("{what}: chain.from_last_scan row {r} has {} values, row 0 {width}", rows[r].len());
+                }
+                Some(nalgebra::DMatrix::from_fn(rows.len(), width, |r, c| rows[r][c]))
+            }
+        };
+        Ok(cps::chain::ChainLink { parent_columns, from_previous })
+    }
 }
 
 /// The end of a run.
@@ -685,6 +734,11 @@ impl Journal {
     /// (a crash at a chosen point, for testing `--resume`).
     pub fn abort_after(&mut self, n: Option<usize>) {
         self.abort_after = n;
+    }
+
+    /// The version this journal is written in (its `start` line's).
+    pub fn version(&self) -> u32 {
+        self.version
     }
 
     /// True while recorded events remain to be replayed.

@@ -11,7 +11,7 @@ use nalgebra::Matrix4;
 use scanner::Tilt;
 
 use super::directory;
-use super::fuse::ScanView;
+use super::fuse::{Correlation, ScanView};
 use super::journal::{self, EndRecord, Event, Journal, Start, matrix_of};
 use crate::mission::Mission;
 use crate::planning::Planned;
@@ -158,8 +158,9 @@ fn mission_of(dir: &Path) -> Result<(Mission, Planned)> {
 /// Reads the run in `dir`: its mission, its plan, its journal and the
 /// scans the journal names with their poses — each `scan` event's file
 /// (body frame, 3DTK layout), the `tilt` event before it, the `fix` event
-/// of that station (the CPS pose, its covariance and its cross-covariances
-/// with the earlier scan stations), and the team's state (the truth and the
+/// of that station (the CPS pose, its covariance and its link in the chain
+/// of scan stations — a version 1 or 2 journal's cross-covariances with the
+/// earlier scan stations), and the team's state (the truth and the
 /// drive's believed pose).
 pub fn load(dir: &Path) -> Result<RunDir> {
     let (mission, planned) = mission_of(dir)?;
@@ -168,6 +169,8 @@ pub fn load(dir: &Path) -> Result<RunDir> {
     let dance = &planned.dance;
     let mut pose = (dance.station_pose(0), mission.plan.start_covariance);
     let mut cross: Vec<Matrix4<f64>> = Vec::new();
+    let mut chain: Option<journal::ChainRecord> = None;
+    let by_chain = journal.version() >= 3;
     let mut tilt = None;
     let mut views = Vec::new();
     for n in &journal.events {
@@ -177,6 +180,7 @@ pub fn load(dir: &Path) -> Result<RunDir> {
                 let d = &f.data;
                 pose = ((&d.pose).into(), matrix_of(&d.covariance));
                 cross = d.scan_cross_covariances.iter().flatten().map(matrix_of).collect();
+                chain = d.chain.clone();
             }
             Event::Tilt(t) => tilt = Some(Tilt { roll_rad: t.data.roll_rad, pitch_rad: t.data.pitch_rad }),
             Event::Scan(s) => {
@@ -202,13 +206,27 @@ pub fn load(dir: &Path) -> Result<RunDir> {
                     .as_ref()
                     .and_then(|c| c.parent_believed())
                     .map_or(nominal, |b| ParentPose::new(b.x_m, b.y_m, nominal.position.z, b.heading_rad));
+                let correlation = if by_chain {
+                    // A station without a chain link (a robot alone, or a
+                    // start without a resection) is independent of the
+                    // earlier ones.
+                    Correlation::Chain(match chain.take() {
+                        Some(record) => record.link(&at("the fix before this scan"))?,
+                        None => cps::chain::ChainLink {
+                            parent_columns: nalgebra::DMatrix::from_fn(4, 4, |r, c| pose.1[(r, c)]),
+                            from_previous: None,
+                        },
+                    })
+                } else {
+                    Correlation::Earlier(std::mem::take(&mut cross))
+                };
                 views.push(ScanView {
                     station,
                     file,
                     body: cloud.points,
                     pose: pose.0,
                     covariance: pose.1,
-                    cross_covariance: std::mem::take(&mut cross),
+                    correlation,
                     tilt,
                     odometry,
                     truth,

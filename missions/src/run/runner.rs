@@ -34,10 +34,10 @@ use scanner::{PlanarPose, Prism, Target, Tilt};
 
 use super::adjust::{AdjustmentOutcome, AdjustmentReport};
 use super::backend::{DeviceKind, Fault, Team};
-use super::fuse::{Fused, ScanView};
+use super::fuse::{Correlation, Fused, ScanView};
 use super::journal::{
-    Derived, DriveKey, Driven, EndKey, EndRecord, Event, FixKey, FixRecord, MeasureKey, Measured, Phase, Scanned,
-    StationKey, StepKey, Stop, Tilted, matrix_record,
+    ChainRecord, Derived, DriveKey, Driven, EndKey, EndRecord, Event, FixKey, FixRecord, MeasureKey, Measured, Phase,
+    Scanned, StationKey, StepKey, Stop, Tilted, matrix_record,
 };
 use super::outputs::{CloudFiles, Written};
 use super::report::{FusionReport, Remeasured, RunReport, StationRecord, Timings};
@@ -544,13 +544,26 @@ impl Run<'_> {
         Ok(())
     }
 
-    /// Journals a fix with the station's cross-covariances to the earlier
-    /// scan stations (the scans' joint prior).
+    /// Whether the journal keeps every scan station's cross-covariances
+    /// (versions 1 and 2: the team clones each scan station) rather than
+    /// the chain's links (version 3).
+    fn clones_scan_stations(&self) -> bool {
+        self.steps.journal.version() < 3
+    }
+
+    /// Journals a fix with what the scans' joint prior needs: its link in
+    /// the chain of scan stations, or (a version 1 or 2 journal) its
+    /// cross-covariances to every earlier scan station.
     fn journal_fix(&mut self, cycle: usize, station: usize, fix: &cps::ParentFix) -> Result<()> {
         let pose = self.team.parent();
-        let cross = (0..self.team.clones())
-            .map(|a| self.team.parent_clone_covariance(a).map(|c| matrix_record(&c)))
-            .collect::<cps::Result<Vec<_>>>()?;
+        let (cross, chain) = if self.clones_scan_stations() {
+            let cross = (0..self.team.clones())
+                .map(|a| self.team.parent_clone_covariance(a).map(|c| matrix_record(&c)))
+                .collect::<cps::Result<Vec<_>>>()?;
+            (Some(cross), None)
+        } else {
+            (None, Some(ChainRecord::of(&self.team)))
+        };
         self.steps.note(Event::Fix(Derived {
             key: FixKey { cycle, station },
             data: FixRecord {
@@ -558,7 +571,8 @@ impl Run<'_> {
                 covariance: matrix_record(&self.team.parent_covariance()),
                 sigma0_squared: Some(fix.sigma0_squared),
                 redundancy: Some(fix.redundancy),
-                scan_cross_covariances: Some(cross),
+                scan_cross_covariances: cross,
+                chain,
                 source: None,
             },
         }))
@@ -629,6 +643,7 @@ impl Run<'_> {
                 sigma0_squared: None,
                 redundancy: None,
                 scan_cross_covariances: None,
+                chain: None,
                 source: Some("odometry".into()),
             },
         }))?;
@@ -735,10 +750,17 @@ impl Run<'_> {
         let nominal_z = self.planned.dance.station_pose(index).position.z;
         // The station joins the scan stations whose joint covariance the
         // team carries (a robot alone, by odometry, carries none).
-        let cross_covariance = (0..self.team.clones().min(self.views.len()))
-            .map(|a| self.team.parent_clone_covariance(a))
-            .collect::<cps::Result<Vec<_>>>()?;
-        self.team.clone_parent();
+        let correlation = if self.clones_scan_stations() {
+            let cross = (0..self.team.clones().min(self.views.len()))
+                .map(|a| self.team.parent_clone_covariance(a))
+                .collect::<cps::Result<Vec<_>>>()?;
+            self.team.clone_parent();
+            Correlation::Earlier(cross)
+        } else {
+            let link = ChainRecord::of(&self.team).link(&format!("scan station {index}"))?;
+            self.team.set_anchor();
+            Correlation::Chain(link)
+        };
         let view = ScanView {
             station: index,
             file: scanned.file.clone(),
@@ -746,7 +768,7 @@ impl Run<'_> {
             body: if self.mission.fusion.mode == FusionMode::Direct { Vec::new() } else { cloud.points },
             pose: self.team.parent(),
             covariance: self.team.parent_covariance(),
-            cross_covariance,
+            correlation,
             tilt: Tilt { roll_rad: tilt.roll_rad, pitch_rad: tilt.pitch_rad },
             odometry: ParentPose::new(believed.x_m, believed.y_m, nominal_z, believed.heading_rad),
             truth: truth.map(|t| t.tilt.world_from_body(&t.parent)),

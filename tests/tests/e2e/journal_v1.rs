@@ -7,16 +7,25 @@ use serde_json::Value;
 use tests::cps_survey;
 
 fn fixture() -> std::path::PathBuf {
-    tests::workspace().join("tests/fixtures/journal-v1")
+    fixture_named("journal-v1")
 }
 
-/// A copy of the fixture in a temporary directory.
+/// The run fixture `name` in `tests/fixtures`.
+pub(crate) fn fixture_named(name: &str) -> std::path::PathBuf {
+    tests::workspace().join("tests/fixtures").join(name)
+}
+
 fn copy() -> (tempfile::TempDir, std::path::PathBuf) {
+    copy_of(&fixture())
+}
+
+/// A copy of the run fixture `fixture` in a temporary directory.
+pub(crate) fn copy_of(fixture: &std::path::Path) -> (tempfile::TempDir, std::path::PathBuf) {
     let dir = tempfile::tempdir().expect("tempdir");
     let run = dir.path().join("run");
     std::fs::create_dir_all(run.join("scans")).expect("dirs");
-    for entry in walk(&fixture()) {
-        let rel = entry.strip_prefix(fixture()).expect("inside");
+    for entry in walk(fixture) {
+        let rel = entry.strip_prefix(fixture).expect("inside");
         std::fs::copy(&entry, run.join(rel)).expect("copy");
     }
     (dir, run)
@@ -34,7 +43,7 @@ fn walk(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
 /// Whether `new` holds everything `old` does (later versions only add
 /// keys): every key of an object with a value that holds the old one,
 /// arrays element by element, anything else equal.
-fn holds(new: &Value, old: &Value) -> bool {
+pub(crate) fn holds(new: &Value, old: &Value) -> bool {
     match (new, old) {
         (Value::Object(n), Value::Object(o)) => o.iter().all(|(k, v)| n.get(k).is_some_and(|nv| holds(nv, v))),
         (Value::Array(n), Value::Array(o)) => n.len() == o.len() && n.iter().zip(o).all(|(a, b)| holds(a, b)),
@@ -42,7 +51,7 @@ fn holds(new: &Value, old: &Value) -> bool {
     }
 }
 
-fn json(path: &std::path::Path) -> Value {
+pub(crate) fn json(path: &std::path::Path) -> Value {
     serde_json::from_str(&std::fs::read_to_string(path).expect("file")).expect("JSON")
 }
 

@@ -8,6 +8,7 @@ mod examples;
 mod georeferenced;
 mod hostile;
 mod journal_v1;
+mod journal_v2;
 mod malformed;
 mod match_set;
 mod montecarlo;
