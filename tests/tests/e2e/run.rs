@@ -69,7 +69,7 @@ fn hall_runs_end_to_end() {
     // reading in order, each scan file written before it is referenced.
     let journal = std::fs::read_to_string(out.join("journal.jsonl")).expect("journal");
     let events: Vec<Value> = journal.lines().map(|l| serde_json::from_str(l).expect("a JSON line")).collect();
-    assert!(events.iter().all(|e| e["v"] == 2), "journal schema version 2");
+    assert!(events.iter().all(|e| e["v"] == 3), "journal schema version 3");
     assert_eq!(events[0]["event"], "start");
     assert_eq!(events.last().expect("end")["event"], "end");
     let count = |kind: &str| events.iter().filter(|e| e["event"] == kind).count();
