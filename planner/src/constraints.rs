@@ -255,7 +255,7 @@ pub fn check_steps(dance: &Dance, steps: &[Step], scene: Option<&Scene>, limits:
                 }
             }
             // Control is sighted only where it is visible and in range
-            // (`crate::control::sightings`): nothing to break.
+            // (`crate::sighting::sightings`): nothing to break.
             Action::Fix { .. } | Action::Sight { .. } => {}
             Action::Scan { station } => {
                 let (Some(max), p) = (limits.scanner_max_range_m, dance.stations[*station].position) else {

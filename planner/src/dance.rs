@@ -19,12 +19,6 @@ use crate::control::{ControlPoint, sighting_instrument};
 use crate::error::{Phase, PlanError};
 use crate::route::Station;
 
-/// How far inside the total station's range a planned sight line keeps,
-/// metres. A robot's drive errs by centimetres (the simulator's default:
-/// 0.5 % of the move plus 5 mm/√m), so a prism planned on a limit lands
-/// outside it about half of the time.
-pub const RANGE_MARGIN_M: f64 = 0.05;
-
 /// One dance cycle: children placed around station `from`, parent fixed at
 /// station `to`.
 #[derive(Debug, Clone, PartialEq)]
@@ -211,7 +205,7 @@ impl FormationKind {
 
 impl Dance {
     /// The dance with control points and the stations that sight them
-    /// (`sightings[station]`, see [`crate::control::sightings`]).
+    /// (`sightings[station]`, decided by the `sighting` module).
     pub fn with_control(mut self, control: Vec<ControlPoint>, sightings: Vec<Vec<usize>>) -> Self {
         self.control = control;
         self.sightings = sightings;
@@ -248,7 +242,7 @@ impl Dance {
     }
 
     /// Every sight line that leaves the instrument's range or comes within
-    /// [`RANGE_MARGIN_M`] of one of its limits, in schedule order.
+    /// [`crate::range::RANGE_MARGIN_M`] of one of its limits, in schedule order.
     pub fn range_violations(&self, instrument: &Instrument) -> Vec<PlanError> {
         let mut out = Vec::new();
         for c in &self.cycles {
@@ -258,7 +252,7 @@ impl Dance {
                         continue;
                     }
                     let range_m = (p - self.stations[station].position).norm();
-                    let inside = instrument.min_range_m + RANGE_MARGIN_M..=instrument.max_range_m - RANGE_MARGIN_M;
+                    let inside = crate::range::usable(instrument);
                     if instrument.check_range(child, range_m).is_err() || !inside.contains(&range_m) {
                         out.push(PlanError::ChildOutOfRange {
                             cycle: c.cycle,

@@ -90,12 +90,12 @@ pub enum PlanError {
         got: usize,
     },
     /// A sight line is outside the total station's range, or closer to a
-    /// limit than [`crate::dance::RANGE_MARGIN_M`].
+    /// limit than [`crate::range::RANGE_MARGIN_M`].
     #[error(
         "cycle {cycle}: child {child} is {range_m:.3} m from the parent {phase}; \
          expected between min_range_m = {min_m} m and max_range_m = {max_m} m, at least \
          {margin} m inside (a drive errs by centimetres: a prism planned on a limit lands outside it)",
-        margin = crate::dance::RANGE_MARGIN_M
+        margin = crate::range::RANGE_MARGIN_M
     )]
     ChildOutOfRange {
         /// Dance cycle (1-based).

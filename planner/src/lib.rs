@@ -1,10 +1,22 @@
-//! Route → dance → predicted accuracy.
+//! Route → dance → predicted accuracy, and the search for the plan.
 //!
-//! A route (a polyline of parent waypoints) becomes [`Station`]s every stride
-//! ([`stations`]); a formation turns them into a leapfrog [`Dance`]
-//! ([`leapfrog`]); [`predict`] runs the CPS equations on the dance's nominal
-//! readings and returns the covariance after every cycle ([`Prediction`]);
-//! [`montecarlo`] executes the dance with noisy readings to check it.
+//! - [`route`]: a route (a polyline of parent waypoints) becomes
+//!   [`Station`]s every stride ([`stations`]).
+//! - [`dance`]: a formation turns the stations into a leapfrog [`Dance`]
+//!   ([`leapfrog`], [`schedule`] for the other strategies, [`solo`] for a
+//!   robot alone), with its steps and their execution ([`run_dance`]).
+//! - [`control`]: control points and the stations asked to sight them;
+//!   [`sighting`]: which station sees which, within the instrument's usable
+//!   [`range`] and in line of sight.
+//! - [`predict`](mod@predict): the CPS equations on the dance's nominal readings, the
+//!   covariance after every cycle ([`Prediction`]); [`network`]: the whole
+//!   dance as one adjustment's pre-analysis (reliability, MDB);
+//!   [`analysis`]: per-cycle figures from them; [`montecarlo`]: the dance
+//!   executed with noisy readings to check the prediction.
+//! - [`constraints`]: the limits a plan must keep (ranges, distances,
+//!   speeds); [`search`](mod@search): formations and strides searched for the best
+//!   predicted accuracy within them.
+//! - [`error`]: what a plan can get wrong, naming the cycle and the robot.
 #![warn(missing_docs)]
 
 pub mod analysis;
@@ -15,8 +27,10 @@ pub mod error;
 pub mod montecarlo;
 pub mod network;
 pub mod predict;
+pub mod range;
 pub mod route;
 pub mod search;
+pub mod sighting;
 
 pub use constraints::{Check, Limits, Violation, check, check_steps};
 pub use control::ControlPoint;

@@ -1,6 +1,6 @@
 //! Monte Carlo of the real non-linear procedure: noisy readings → children
 //! placed from the *estimated* parent → Gauss–Newton fix, repeated over
-//! seeded trials and compared with [`crate::predict`].
+//! seeded trials and compared with [`crate::predict()`].
 
 use nalgebra::{Matrix4, SymmetricEigen, Vector4};
 use rand::{Rng, SeedableRng};

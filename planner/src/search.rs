@@ -22,11 +22,12 @@ use cps::Instrument;
 use cps::geom::Scene;
 
 use crate::constraints::{Limits, Violation, check};
-use crate::control::{ControlAt, ControlPoint, attach, setups};
+use crate::control::{ControlAt, ControlPoint};
 use crate::dance::{Dance, FormationKind, Strategy, schedule};
 use crate::error::PlanError;
 use crate::predict::predict;
 use crate::route::stations;
+use crate::sighting::{attach, setups};
 
 /// One plan the search considers.
 #[derive(Debug, Clone, Copy, PartialEq)]

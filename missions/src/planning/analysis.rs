@@ -8,8 +8,8 @@ use std::time::Instant;
 use anyhow::Result;
 use cps::Instrument;
 use planner::analysis::{FixReliability, Sensitivity, UNCHECKED_REDUNDANCY};
-use planner::control::attach;
 use planner::search::Evaluated;
+use planner::sighting::attach;
 use planner::{FormationKind, Objective, SearchSpace, Strategy, Violation};
 
 use super::Planned;

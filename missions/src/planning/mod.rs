@@ -21,7 +21,7 @@ use cps::geom::Scene;
 use planner::{Dance, PlanError, Prediction, StepEstimate};
 
 use planner::ControlPoint;
-use planner::control::Unseen;
+use planner::sighting::Unseen;
 
 use crate::mission::diagnostics::{Diagnostic, Diagnostics};
 use crate::mission::{Mission, MissionError};
@@ -202,7 +202,7 @@ fn with_control(mission: &Mission, dance: Dance) -> Result<Dance, Diagnostics> {
     let simulated = mission.backend.serial.is_none();
     let scene = (mission.backend.given || simulated).then(|| mission.scene().as_ref());
     let at = &mission.plan.control_at;
-    let unseen = match planner::control::attach(dance.clone(), &control, at, instrument, scene) {
+    let unseen = match planner::sighting::attach(dance.clone(), &control, at, instrument, scene) {
         Ok(dance) => return Ok(dance),
         Err(unseen) => unseen,
     };
@@ -216,19 +216,21 @@ fn with_control(mission: &Mission, dance: Dance) -> Result<Dance, Diagnostics> {
         });
         let why = match nearest {
             None => "no station sights control (control_at)".to_string(),
-            Some(k) => match planner::control::visibility(&dance.station_pose(k), &point.position, instrument, scene) {
-                Err(Unseen::OutOfRange(r)) => format!(
-                    "the nearest station that sights control, {k}, is {r:.1} m away, outside the instrument's range [{}, {}] m",
-                    instrument.min_range_m, instrument.max_range_m
-                ),
-                Err(Unseen::Blocked(object, at)) => {
-                    format!(
-                        "from the nearest station that sights control, {k}, \"{object}\" blocks the sight line {at:.1} m out"
-                    )
+            Some(k) => {
+                match planner::sighting::visibility(&dance.station_pose(k), &point.position, instrument, scene) {
+                    Err(Unseen::OutOfRange(r)) => format!(
+                        "the nearest station that sights control, {k}, is {r:.1} m away, outside the instrument's range [{}, {}] m",
+                        instrument.min_range_m, instrument.max_range_m
+                    ),
+                    Err(Unseen::Blocked(object, at)) => {
+                        format!(
+                            "from the nearest station that sights control, {k}, \"{object}\" blocks the sight line {at:.1} m out"
+                        )
+                    }
+                    Err(Unseen::Vertical) => format!("it stands straight above or below station {k}"),
+                    Err(Unseen::NotScheduled) | Ok(_) => format!("station {k} does not sight it"),
                 }
-                Err(Unseen::Vertical) => format!("it stands straight above or below station {k}"),
-                Err(Unseen::NotScheduled) | Ok(_) => format!("station {k} does not sight it"),
-            },
+            }
         };
         let span = mission.spans.control.get(c).cloned().unwrap_or(mission.spans.plan.clone());
         let message = format!("control point \"{}\" is seen from no station: {why}", point.name);

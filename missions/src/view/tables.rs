@@ -351,7 +351,7 @@ pub fn plan(out: &mut dyn Write, mission: &Mission, report: &PlanReport) -> std:
                 out,
                 "  control_at = {} ({} station(s) sight control)",
                 o.control_at,
-                planner::control::setups(&o.planned.dance)
+                planner::sighting::setups(&o.planned.dance)
             )?;
         }
         let s2 = o.best.sigma_xy2_m2;
