@@ -148,7 +148,7 @@ pub struct FixReliability {
 
 /// Redundancy numbers at or below this are "checked by nothing": a blunder
 /// in such an observation leaves no trace in the residuals.
-pub const UNCHECKED_REDUNDANCY: f64 = cps::batch::testing::WEAKLY_CHECKED;
+pub const UNCHECKED_REDUNDANCY: f64 = cps::batch::statistics::WEAKLY_CHECKED;
 
 /// The redundancy numbers of every parent fix of `dance`. (Each child's
 /// placement is a single pointing — redundancy 0: it is checked only

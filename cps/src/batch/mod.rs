@@ -22,12 +22,12 @@ pub mod freed;
 pub mod model;
 pub mod solve;
 pub mod sparse;
-pub mod testing;
+pub mod statistics;
 
 use nalgebra::{Matrix3, Matrix4, Point3};
 
 pub use model::{Layout, Network, NetworkReading, Point, Source, Station, Unknown};
-pub use testing::ScalarStats;
+pub use statistics::ScalarStats;
 
 use crate::error::{CpsError, Result};
 use crate::observation::ParentPose;
@@ -230,14 +230,14 @@ pub fn adjust_without(network: &Network, options: &AdjustOptions, left_out: &[(S
     loop {
         let scalars: usize = groups.iter().map(|g| g.active.iter().filter(|a| **a).count()).sum();
         let inverse = solution.factor.selected_inverse();
-        let (observations, vtpv) = testing::statistics(&groups, &layout, &station_of, &solution, &inverse, lambda0);
+        let (observations, vtpv) = statistics::statistics(&groups, &layout, &station_of, &solution, &inverse, lambda0);
         let redundancy = scalars - layout.len();
         // The model test of every observation, before snooping removes any.
         let detection = *detection.get_or_insert_with(|| test(vtpv, redundancy));
         // Snooping acts only on observations others check.
         let worst = observations
             .iter()
-            .filter(|o| o.redundancy >= testing::WEAKLY_CHECKED)
+            .filter(|o| o.redundancy >= statistics::WEAKLY_CHECKED)
             .filter_map(|o| o.w.map(|w| (o, w)))
             .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()));
         if options.snooping
@@ -272,10 +272,10 @@ pub fn adjust_without(network: &Network, options: &AdjustOptions, left_out: &[(S
                 w.abs()
             ));
         }
-        let station_covariances = layout.stations.iter().map(|s| testing::block::<4, 4>(&inverse, s, s)).collect();
-        let point_covariances = layout.points.iter().map(|p| testing::block::<3, 3>(&inverse, p, p)).collect();
+        let station_covariances = layout.stations.iter().map(|s| statistics::block::<4, 4>(&inverse, s, s)).collect();
+        let point_covariances = layout.points.iter().map(|p| statistics::block::<3, 3>(&inverse, p, p)).collect();
         let neighbour_covariances =
-            layout.stations.windows(2).map(|w| testing::block::<4, 4>(&inverse, &w[0], &w[1])).collect();
+            layout.stations.windows(2).map(|w| statistics::block::<4, 4>(&inverse, &w[0], &w[1])).collect();
         let factor_nnz = solution.factor.nnz();
         drop(inverse);
         return Ok(Adjustment {

@@ -469,7 +469,7 @@ pub fn adjust(
     let (coordinate_observations, removed_coordinates) = coordinate_reports(&a, net, &name);
     let worst_mdb = observations
         .iter()
-        .filter(|o: &&ObservationReport| o.redundancy >= cps::batch::testing::WEAKLY_CHECKED)
+        .filter(|o: &&ObservationReport| o.redundancy >= cps::batch::statistics::WEAKLY_CHECKED)
         .filter_map(|o| o.station_shift_m.map(|s| (o.index, o.station, s)))
         .max_by(|x, y| x.2.total_cmp(&y.2))
         .map(|(observation, station, shift_m)| WorstMdb { observation, station, shift_m });

@@ -161,7 +161,7 @@ fn under_pure_noise_the_tests_raise_false_alarms_at_their_nominal_rates() {
         let checked: Vec<_> = plain
             .observations
             .iter()
-            .filter(|o| o.w.is_some() && o.redundancy >= cps::batch::testing::WEAKLY_CHECKED)
+            .filter(|o| o.w.is_some() && o.redundancy >= cps::batch::statistics::WEAKLY_CHECKED)
             .collect();
         for o in &checked {
             sum_w2 += o.w.expect("w").powi(2);
