@@ -281,7 +281,7 @@ fn freed_points_agree_with_an_adjustment_without_the_prior() {
         for (what, n) in [("as given", &net), ("weighted", &weighted)] {
             for left in [&[][..], &left_out[..]] {
                 let options = AdjustOptions { snooping: false, ..AdjustOptions::default() };
-                let freed = freed_points(n, &options, left, &[c0, c1, 0]).expect("freed");
+                let freed = freed_points(n, &options, left, &[c0, c1, 0], None).expect("freed");
                 for (k, &p) in [c0, c1, 0].iter().enumerate() {
                     let mut without = n.clone();
                     without.points[p].prior = None;

@@ -46,17 +46,28 @@ const SINGULAR: f64 = 1e-9;
 /// For each of `points`, where the rest of `network` (the scalars
 /// `left_out` left out, as data snooping removed them) puts it without its
 /// given coordinates — `None` where the rest cannot hold the network
-/// without them. One adjustment and an update a point (module docs).
+/// without them. One adjustment and an update a point (module docs); the
+/// adjustment starts from `adjusted` when given (the same network's, with
+/// the same scalars left out: one step then confirms it).
 pub fn freed_points(
     network: &Network,
     options: &AdjustOptions,
     left_out: &[(Source, usize)],
     points: &[usize],
+    adjusted: Option<&super::Adjustment>,
 ) -> Result<Vec<Option<Freed>>> {
     network.validate()?;
+    if points.is_empty() {
+        return Ok(Vec::new());
+    }
     let layout = Layout::new(network);
     let groups = network.groups_without(left_out);
-    let solution = solve::solve(network, &layout, &groups, options.max_iterations)?;
+    let solution = match adjusted {
+        Some(a) if a.stations.len() == network.stations.len() && a.points.len() == network.points.len() => {
+            solve::solve_from(network, &layout, &groups, options.max_iterations, a.stations.clone(), a.points.clone())?
+        }
+        _ => solve::solve(network, &layout, &groups, options.max_iterations)?,
+    };
     let n = layout.len();
     // The columns of N⁻¹ for the given right-hand sides (three solves).
     let solve3 = |columns: [Vec<f64>; 3]| columns.map(|b| solution.factor.solve(&b));

@@ -499,7 +499,7 @@ pub fn adjust(
         removed_coordinates,
         removed,
         snooping_stopped: a.snooping_stopped.clone(),
-        misclosures: misclosures(net, &name, &a.removed.iter().map(|x| (x.source, x.component)).collect::<Vec<_>>()),
+        misclosures: misclosures(net, &name, &a),
         worst_mdb,
     })
 }
@@ -648,7 +648,8 @@ fn coordinate_reports(
 /// without what data snooping removed (`removed`; issue 34, S2: a 0.5 m
 /// blunder, removed, still gave 21–55 mm misclosures beside "model
 /// accepted").
-fn misclosures(net: &DanceNetwork, name: &dyn Fn(usize) -> String, removed: &[(Source, usize)]) -> Vec<Misclosure> {
+fn misclosures(net: &DanceNetwork, name: &dyn Fn(usize) -> String, a: &Adjustment) -> Vec<Misclosure> {
+    let removed: Vec<(Source, usize)> = a.removed.iter().map(|x| (x.source, x.component)).collect();
     let options = AdjustOptions { snooping: false, ..AdjustOptions::default() };
     let control: Vec<usize> =
         net.points.iter().enumerate().filter(|(_, id)| matches!(id, PointId::Control(_))).map(|(p, _)| p).collect();
@@ -656,7 +657,7 @@ fn misclosures(net: &DanceNetwork, name: &dyn Fn(usize) -> String, removed: &[(S
     // an adjustment a point took 2.96 s for 41 control points). Without
     // this point's coordinates the rest may not hold the network (a start
     // resected on two points): no misclosure then.
-    let Ok(freed) = cps::batch::freed::freed_points(&net.network, &options, removed, &control) else {
+    let Ok(freed) = cps::batch::freed::freed_points(&net.network, &options, &removed, &control, Some(a)) else {
         return Vec::new();
     };
     control
