@@ -53,6 +53,10 @@ pub enum Command {
     /// RUN_DIR/adjustment.txt (exit 1 when the model fails: the global test
     /// fails and data snooping does not find the cause).
     Adjust(commands::adjust::AdjustArgs),
+    /// Export a finished (or interrupted) run from its journal and scans:
+    /// --ros2-bag DIR writes it as a rosbag2 (MCAP) of standard ROS 2
+    /// messages (tf, poses with covariance, point clouds, paths, markers).
+    Export(commands::export::ExportArgs),
     /// Align one scan file to another with ICP.
     Register(commands::register::RegisterArgs),
     /// Register a set of your own scans into one frame (a 3DTK directory,
@@ -90,6 +94,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> anyhow::Result<Outcome> {
         Command::Montecarlo(args) => commands::montecarlo::run(args, out),
         Command::Fuse(args) => commands::fuse::run(args, out),
         Command::Adjust(args) => commands::adjust::run(args, out),
+        Command::Export(args) => commands::export::run(args, out),
         Command::Register(args) => commands::register::run(args, out),
         Command::Match(args) => commands::match_set::run(args, out),
         Command::Emulate(args) => commands::emulate::run(args, out),

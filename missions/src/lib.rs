@@ -24,6 +24,7 @@ pub mod cli;
 pub mod commands;
 pub mod mission;
 pub mod planning;
+pub mod ros2;
 pub mod run;
 pub mod scans;
 pub mod view;

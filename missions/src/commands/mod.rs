@@ -5,6 +5,7 @@
 
 pub mod adjust;
 pub mod emulate;
+pub mod export;
 pub mod fuse;
 pub mod match_set;
 pub mod montecarlo;

@@ -305,6 +305,9 @@ pub struct Output {
     pub formats: Vec<String>,
     /// Write `mission.rrd` for the Rerun viewer (`rerun`, default true).
     pub rerun: bool,
+    /// Write `rosbag2/`, the run as a rosbag2 of standard ROS 2 messages
+    /// (`ros2_bag`, default false; [`crate::ros2::export`]).
+    pub ros2_bag: bool,
 }
 
 /// Pipe inspection of the fused cloud (`[pipe]`, seed 000 §5): a tube is

@@ -478,8 +478,13 @@ fn read_output(r: &mut Reader<'_>, root: &mut Table<'_, '_>) -> Option<Output> {
         })
     });
     let rerun = o.optional(r, "rerun", |r, v, f| r.boolean(v, f));
+    let ros2_bag = o.optional(r, "ros2_bag", |r, v, f| r.boolean(v, f));
     o.finish(r);
-    Some(Output { formats: formats?.unwrap_or_else(|| vec!["ply".into()]), rerun: rerun?.unwrap_or(true) })
+    Some(Output {
+        formats: formats?.unwrap_or_else(|| vec!["ply".into()]),
+        rerun: rerun?.unwrap_or(true),
+        ros2_bag: ros2_bag?.unwrap_or(false),
+    })
 }
 
 /// `[site]`: the coordinate reference system of the mission's coordinates

@@ -17,6 +17,7 @@ mod odometry;
 mod plan;
 mod readme;
 mod register;
+mod ros2;
 mod rrd;
 mod run;
 mod schemas;

@@ -1,0 +1,129 @@
+//! `export --ros2-bag` and `[output] ros2_bag` (issue 37): a run as a
+//! rosbag2 directory of standard messages. CI reads the bags with rosbags
+//! and mcap-ros2-support (`.ci/check_ros2.py`); here the MCAP is read back
+//! with the `mcap` crate's reader and the CDR bytes checked by hand against
+//! the journal.
+
+use std::collections::BTreeMap;
+
+use serde_json::Value;
+use tests::cps_survey;
+
+use super::journal_v1::{copy_of, fixture_named};
+
+/// Per topic: (type, messages' bytes).
+fn read_bag(dir: &std::path::Path) -> BTreeMap<String, (String, Vec<Vec<u8>>)> {
+    let meta = std::fs::read_to_string(dir.join("metadata.yaml")).expect("metadata.yaml");
+    assert!(meta.contains("storage_identifier: mcap") && meta.contains("version: 8"), "{meta}");
+    let name = dir.file_name().expect("name").to_string_lossy().into_owned();
+    let bytes = std::fs::read(dir.join(format!("{name}.mcap"))).expect("the .mcap");
+    let mut out: BTreeMap<String, (String, Vec<Vec<u8>>)> = BTreeMap::new();
+    for m in mcap::MessageStream::new(&bytes).expect("an MCAP") {
+        let m = m.expect("a message");
+        let schema = m.channel.schema.as_ref().expect("a schema");
+        assert_eq!((schema.encoding.as_str(), m.channel.message_encoding.as_str()), ("ros2msg", "cdr"));
+        assert!(std::str::from_utf8(&schema.data).expect("text").contains("MSG: std_msgs/Header"));
+        let entry = out.entry(m.channel.topic.clone()).or_insert_with(|| (schema.name.clone(), Vec::new()));
+        entry.1.push(m.data.into_owned());
+    }
+    for (topic, (_, messages)) in &out {
+        assert!(meta.contains(&format!("name: \"{topic}\"")), "{topic} not in metadata.yaml");
+        assert!(meta.contains(&format!("message_count: {}", messages.len())), "{topic}");
+    }
+    out
+}
+
+fn f64_at(bytes: &[u8], at: usize) -> f64 {
+    f64::from_le_bytes(bytes[at..at + 8].try_into().expect("8 bytes"))
+}
+
+fn journal(run: &std::path::Path) -> Vec<Value> {
+    let text = std::fs::read_to_string(run.join("journal.jsonl")).expect("journal");
+    text.lines().map(|l| serde_json::from_str(l).expect("JSON")).collect()
+}
+
+#[test]
+fn a_run_exports_as_a_rosbag2_of_standard_messages() {
+    let (_tmp, run) = copy_of(&fixture_named("journal-v2"));
+    let bag = run.with_file_name("bag");
+    let done =
+        cps_survey(["export".into(), run.clone().into_os_string(), "--ros2-bag".into(), bag.clone().into_os_string()]);
+    assert_eq!(done.code, 0, "{}", done.stderr);
+    assert!(done.stdout.contains("/cps/scan"), "{}", done.stdout);
+    let topics = read_bag(&bag);
+    let kind = |t: &str| topics.get(t).map(|(k, _)| k.as_str());
+    assert_eq!(kind("/tf"), Some("tf2_msgs/msg/TFMessage"));
+    assert_eq!(kind("/tf_static"), Some("tf2_msgs/msg/TFMessage"));
+    assert_eq!(kind("/cps/parent/pose"), Some("geometry_msgs/msg/PoseWithCovarianceStamped"));
+    assert_eq!(kind("/cps/ahead/pose"), Some("geometry_msgs/msg/PoseWithCovarianceStamped"));
+    assert_eq!(kind("/cps/scan"), Some("sensor_msgs/msg/PointCloud2"));
+    assert_eq!(kind("/cps/route"), Some("nav_msgs/msg/Path"));
+    assert_eq!(kind("/cps/ellipses"), Some("visualization_msgs/msg/MarkerArray"));
+
+    let events = journal(&run);
+    let scans: Vec<&Value> = events.iter().filter(|e| e["event"] == "scan").collect();
+    assert_eq!(topics["/cps/scan"].1.len(), scans.len());
+    // PointCloud2: CDR header, stamp (8), frame "parent/base_link" (4 + 17),
+    // padding to 4, height and width.
+    for (cloud, scan) in topics["/cps/scan"].1.iter().zip(&scans) {
+        assert_eq!(&cloud[..4], &[0, 1, 0, 0]);
+        assert_eq!(u32::from_le_bytes(cloud[12..16].try_into().expect("4")), 17);
+        assert_eq!(&cloud[16..33], b"parent/base_link\0");
+        let at = 4 + (29usize).next_multiple_of(4);
+        let (height, width) = (
+            u32::from_le_bytes(cloud[at..at + 4].try_into().expect("4")),
+            u32::from_le_bytes(cloud[at + 4..at + 8].try_into().expect("4")),
+        );
+        assert_eq!((height as u64) * (width as u64), scan["data"]["points"].as_u64().expect("points"));
+    }
+    // The fixes' poses: frame "map" (4 + 4 bytes), then the position at 16.
+    let fixes: Vec<&Value> = events.iter().filter(|e| e["event"] == "fix").collect();
+    let poses = &topics["/cps/parent/pose"].1;
+    for fix in &fixes {
+        let x = fix["data"]["pose"]["x_m"].as_f64().expect("x");
+        let y = fix["data"]["pose"]["y_m"].as_f64().expect("y");
+        let cxx = fix["data"]["covariance"][0][0].as_f64().expect("cov");
+        let found = poses.iter().any(|p| {
+            &p[16..20] == b"map\0" && f64_at(p, 4 + 16) == x && f64_at(p, 4 + 24) == y && f64_at(p, 4 + 16 + 56) == cxx
+        });
+        assert!(found, "station {}: no /cps/parent/pose at ({x}, {y})", fix["station"]);
+    }
+
+    // An existing target is never overwritten.
+    let again =
+        cps_survey(["export".into(), run.clone().into_os_string(), "--ros2-bag".into(), bag.clone().into_os_string()]);
+    assert_eq!(again.code, 2);
+    assert!(again.stderr.contains("already exists"), "{}", again.stderr);
+}
+
+#[test]
+fn an_interrupted_run_exports_what_it_measured() {
+    let (_tmp, run) = copy_of(&fixture_named("journal-v2"));
+    let lines: Vec<String> =
+        std::fs::read_to_string(run.join("journal.jsonl")).expect("journal").lines().map(String::from).collect();
+    let second_scan =
+        lines.iter().enumerate().filter(|(_, l)| l.contains("\"event\":\"scan\"")).nth(1).expect("scan").0;
+    std::fs::write(run.join("journal.jsonl"), lines[..=second_scan].join("\n") + "\n").expect("cut");
+    let bag = run.with_file_name("bag");
+    let done =
+        cps_survey(["export".into(), run.clone().into_os_string(), "--ros2-bag".into(), bag.clone().into_os_string()]);
+    assert_eq!(done.code, 0, "{}", done.stderr);
+    let topics = read_bag(&bag);
+    assert_eq!(topics["/cps/scan"].1.len(), 2, "the two scans taken");
+}
+
+#[test]
+fn ros2_bag_in_the_mission_writes_rosbag2_in_the_run() {
+    let text = std::fs::read_to_string(fixture_named("journal-v2").join("mission.toml")).expect("mission");
+    let mission = tests::temp_mission(&text.replace("rerun = false", "rerun = false\nros2_bag = true"));
+    let run = mission.path.with_file_name("run");
+    let done = tests::run_mission(&mission.path, &run);
+    assert_eq!(done.code, 0, "{}", done.stderr);
+    assert!(done.stdout.contains("rosbag2/"), "{}", done.stdout);
+    let topics = read_bag(&run.join("rosbag2"));
+    assert_eq!(topics["/cps/scan"].1.len(), 4);
+    let bad = tests::temp_mission(&text.replace("rerun = false", "rerun = false\nros2_bag = \"yes\""));
+    let refused = tests::run_mission(&bad.path, &bad.path.with_file_name("run"));
+    assert_eq!(refused.code, 2);
+    assert!(refused.stderr.contains("output.ros2_bag"), "{}", refused.stderr);
+}
