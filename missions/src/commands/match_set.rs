@@ -101,11 +101,63 @@ pub struct MatchArgs {
     /// Print one JSON object instead of the tables.
     #[arg(long)]
     pub json: bool,
+    /// A rosbag2 input: the sensor_msgs/msg/PointCloud2 topic to read
+    /// (default: the bag's only one).
+    #[arg(long, value_name = "TOPIC")]
+    pub topic: Option<String>,
+    /// A rosbag2 input: one cloud every S seconds (default: every cloud).
+    #[arg(long, value_name = "S")]
+    pub every: Option<f64>,
+    /// A rosbag2 input: one cloud every M metres of travel.
+    #[arg(long, value_name = "M")]
+    pub every_distance: Option<f64>,
+    /// A rosbag2 input: the fixed frame of the start poses (default map,
+    /// else odom).
+    #[arg(long, value_name = "FRAME")]
+    pub frame: Option<String>,
+    /// A rosbag2 input: start poses from this nav_msgs/msg/Odometry topic
+    /// instead of /tf.
+    #[arg(long, value_name = "TOPIC")]
+    pub odom: Option<String>,
     /// The coordinate reference system of the start poses and so of every
     /// output: EPSG:NNNN, EPSG:H+V or WKT (in metres). Default: the one
     /// the E57 inputs name in their coordinateMetadata, else a local frame.
     #[arg(long, value_name = "CRS")]
     pub crs: Option<String>,
+}
+
+/// The rosbag2 options, checked: only with a bag among the inputs;
+/// `--every` and `--every-distance` positive and not both.
+fn bag_options(args: &MatchArgs) -> Result<crate::ros2::read::BagOptions> {
+    let given = [
+        ("--topic", args.topic.is_some()),
+        ("--every", args.every.is_some()),
+        ("--every-distance", args.every_distance.is_some()),
+        ("--frame", args.frame.is_some()),
+        ("--odom", args.odom.is_some()),
+    ];
+    if let Some((flag, _)) = given.iter().find(|(_, g)| *g)
+        && !args.inputs.iter().any(|i| crate::ros2::read::is_bag(i))
+    {
+        bail!("{flag}: for a rosbag2 input (a directory with metadata.yaml, or an .mcap file); none is given");
+    }
+    if args.every.is_some() && args.every_distance.is_some() {
+        bail!("--every and --every-distance: choose one");
+    }
+    for (flag, v) in [("--every", args.every), ("--every-distance", args.every_distance)] {
+        if let Some(v) = v
+            && !(v.is_finite() && v > 0.0)
+        {
+            bail!("{flag} {v}: expected a positive number");
+        }
+    }
+    Ok(crate::ros2::read::BagOptions {
+        topic: args.topic.clone(),
+        every_s: args.every,
+        every_distance_m: args.every_distance,
+        frame: args.frame.clone(),
+        odom: args.odom.clone(),
+    })
 }
 
 /// The CRS of `match`'s outputs: `--crs`, else the one E57 inputs name,
@@ -359,6 +411,7 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
             bail!("--formats {}: {f} is listed twice: expected each format once", args.formats.join(","));
         }
     }
+    let bag = bag_options(args)?;
     if args.init.is_some() && args.init_poses.is_some() {
         bail!("--init global and --init-poses: give the starts, or have them found, not both");
     }
@@ -389,6 +442,7 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
         args.init_poses.as_deref(),
         (args.min_range, args.max_range),
         min_points,
+        &bag,
     )?;
     if scans.len() < 2 {
         bail!("{}: one scan: expected at least two to match", scans[0].file);

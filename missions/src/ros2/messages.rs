@@ -4,7 +4,7 @@
 //! in order. Only the layouts are ours; CDR is `cdr-encoding`'s.
 
 use nalgebra::{Isometry3, Point3, UnitQuaternion};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// A message type: its name and its `ros2msg` definition with every
 /// dependency, as the bag's schema.
@@ -16,7 +16,7 @@ pub trait Message: Serialize {
 }
 
 /// `builtin_interfaces/msg/Time` (and `Duration`: the same layout).
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct Time {
     /// Seconds.
     pub sec: i32,
@@ -33,7 +33,7 @@ impl Time {
 }
 
 /// `std_msgs/msg/Header`.
-#[derive(Debug, Clone, PartialEq, Default, Serialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct Header {
     /// When.
     pub stamp: Time,
@@ -42,7 +42,7 @@ pub struct Header {
 }
 
 /// `geometry_msgs/msg/Point` and `Vector3`.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct Vector3 {
     /// x.
     pub x: f64,
@@ -59,7 +59,7 @@ impl From<Point3<f64>> for Vector3 {
 }
 
 /// `geometry_msgs/msg/Quaternion`.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Quaternion {
     /// x.
     pub x: f64,
@@ -85,7 +85,7 @@ impl From<UnitQuaternion<f64>> for Quaternion {
 
 /// `geometry_msgs/msg/Pose` (and `Transform`: translation then rotation,
 /// the same layout).
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct Pose {
     /// Position (translation).
     pub position: Vector3,
@@ -115,9 +115,29 @@ impl Serialize for Covariance6 {
     }
 }
 
+impl<'de> Deserialize<'de> for Covariance6 {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Visitor;
+        impl<'de> serde::de::Visitor<'de> for Visitor {
+            type Value = Covariance6;
+            fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str("36 float64")
+            }
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<Covariance6, A::Error> {
+                let mut out = [0.0; 36];
+                for (k, v) in out.iter_mut().enumerate() {
+                    *v = seq.next_element()?.ok_or_else(|| serde::de::Error::invalid_length(k, &self))?;
+                }
+                Ok(Covariance6(out))
+            }
+        }
+        d.deserialize_tuple(36, Visitor)
+    }
+}
+
 /// `geometry_msgs/msg/PoseWithCovariance`: the 6×6 covariance row-major
 /// over (x, y, z, rotation about X, about Y, about Z).
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct PoseWithCovariance {
     /// The pose.
     pub pose: Pose,
@@ -140,7 +160,7 @@ impl Message for PoseWithCovarianceStamped {
 }
 
 /// `geometry_msgs/msg/TransformStamped`.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TransformStamped {
     /// Stamp and the parent frame.
     pub header: Header,
@@ -151,7 +171,7 @@ pub struct TransformStamped {
 }
 
 /// `tf2_msgs/msg/TFMessage`.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TfMessage {
     /// The transforms.
     pub transforms: Vec<TransformStamped>,
@@ -160,6 +180,17 @@ pub struct TfMessage {
 impl Message for TfMessage {
     const TYPE: &'static str = "tf2_msgs/msg/TFMessage";
     const DEFINITION: &'static str = include_str!("msg/tf2_msgs.TFMessage.msg");
+}
+
+/// The head of `nav_msgs/msg/Odometry` (its twist is not read).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+pub struct OdometryHead {
+    /// Stamp and the fixed frame.
+    pub header: Header,
+    /// The robot's frame.
+    pub child_frame_id: String,
+    /// header.frame_id_from_child.
+    pub pose: PoseWithCovariance,
 }
 
 /// `uint8[]`, serialised as one block (CDR's sequence of octets).
@@ -172,8 +203,27 @@ impl Serialize for Bytes {
     }
 }
 
+impl<'de> Deserialize<'de> for Bytes {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Visitor;
+        impl<'de> serde::de::Visitor<'de> for Visitor {
+            type Value = Bytes;
+            fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str("a sequence of octets")
+            }
+            fn visit_bytes<E: serde::de::Error>(self, v: &[u8]) -> Result<Bytes, E> {
+                Ok(Bytes(v.to_vec()))
+            }
+            fn visit_byte_buf<E: serde::de::Error>(self, v: Vec<u8>) -> Result<Bytes, E> {
+                Ok(Bytes(v))
+            }
+        }
+        d.deserialize_byte_buf(Visitor)
+    }
+}
+
 /// `sensor_msgs/msg/PointField`.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct PointField {
     /// Field name (`x`, `intensity`, …).
     pub name: String,
@@ -189,7 +239,7 @@ pub struct PointField {
 pub const FLOAT32: u8 = 7;
 
 /// `sensor_msgs/msg/PointCloud2`.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct PointCloud2 {
     /// Stamp and frame.
     pub header: Header,

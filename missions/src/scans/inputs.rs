@@ -2,7 +2,7 @@
 //! (`scanNNN.3d` with its `scanNNN.pose` odometry, converted to our axes
 //! and metres at the boundary), a multi-scan E57 (each `data3D` in its own
 //! frame, its pose the start), or single scan files (identity, or the pose
-//! `--init-poses` gives).
+//! `--init-poses` gives), or a robot's rosbag2 ([`crate::ros2::read`]).
 
 use std::path::{Path, PathBuf};
 
@@ -65,10 +65,13 @@ pub fn read(
     init_poses: Option<&Path>,
     (min_m, max_m): (f64, f64),
     min_points: usize,
+    bag: &crate::ros2::read::BagOptions,
 ) -> Result<Vec<InputScan>> {
     let mut scans = Vec::new();
     for input in inputs {
-        if input.is_dir() {
+        if crate::ros2::read::is_bag(input) {
+            scans.extend(crate::ros2::read::read(input, bag)?);
+        } else if input.is_dir() {
             scans.extend(threedtk_directory(input)?);
         } else if scanner::io::Format::from_path(input).ok() == Some(scanner::io::Format::E57) {
             let found = scanner::io::read_e57_scans(input)?;

@@ -127,3 +127,76 @@ fn ros2_bag_in_the_mission_writes_rosbag2_in_the_run() {
     assert_eq!(refused.code, 2);
     assert!(refused.stderr.contains("output.ros2_bag"), "{}", refused.stderr);
 }
+
+/// `match`'s bag reader on a bag of ours: every scan with the points of
+/// its file and, from `/tf` at its stamp, the pose the run gave it.
+#[test]
+fn match_reads_the_scans_and_their_poses_back_from_a_bag() {
+    let (_tmp, run) = copy_of(&fixture_named("journal-v2"));
+    let bag = run.with_file_name("bag");
+    let done =
+        cps_survey(["export".into(), run.clone().into_os_string(), "--ros2-bag".into(), bag.clone().into_os_string()]);
+    assert_eq!(done.code, 0, "{}", done.stderr);
+    let views = missions::run::resume::load(&run).expect("the run").views;
+    let options = missions::ros2::read::BagOptions::default();
+    for input in [bag.clone(), bag.join("bag.mcap")] {
+        let scans = missions::ros2::read::read(&input, &options).expect("the bag reads");
+        assert_eq!(scans.len(), views.len());
+        for (s, v) in scans.iter().zip(&views) {
+            assert_eq!(s.points, v.body, "{}", s.file);
+            let d = s.start.inverse() * v.direct();
+            assert!(d.translation.vector.norm() < 1e-12 && d.rotation.angle() < 1e-12, "{}: {d}", s.file);
+            assert!(s.gps_time_s.is_some());
+        }
+    }
+    // One every 100 s of the mission clock: scans 0 and 2 of 0–3 (53 s apart).
+    let every = missions::ros2::read::BagOptions { every_s: Some(100.0), ..options.clone() };
+    assert_eq!(missions::ros2::read::read(&bag, &every).expect("reads").len(), 2);
+    let far = missions::ros2::read::BagOptions { every_distance_m: Some(5.0), ..options.clone() };
+    assert_eq!(missions::ros2::read::read(&bag, &far).expect("reads").len(), 2, "1.5, 8.7 m of 1.5, 5.1, 8.7, 12.3 m");
+    // What a user gets wrong is named.
+    let no_topic = missions::ros2::read::BagOptions { topic: Some("/points".into()), ..options.clone() };
+    let err = missions::ros2::read::read(&bag, &no_topic).expect_err("no such topic").to_string();
+    assert!(err.contains("/points") && err.contains("/cps/scan"), "{err}");
+    let no_frame = missions::ros2::read::BagOptions { frame: Some("world".into()), ..options.clone() };
+    let err = format!("{:#}", missions::ros2::read::read(&bag, &no_frame).expect_err("no such frame"));
+    assert!(err.contains("world") && err.contains("map"), "{err}");
+    let not_odom = missions::ros2::read::BagOptions { odom: Some("/cps/parent/pose".into()), ..options };
+    let err = format!("{:#}", missions::ros2::read::read(&bag, &not_odom).expect_err("not odometry"));
+    assert!(err.contains("no nav_msgs/msg/Odometry"), "{err}");
+    let flag =
+        cps_survey(["match".into(), run.join("scans/scan000.3d").into_os_string(), "--every".into(), "1".into()]);
+    assert_eq!(flag.code, 2);
+    assert!(flag.stderr.contains("--every: for a rosbag2 input"), "{}", flag.stderr);
+}
+
+/// A bag cut or damaged anywhere is an error naming it, never a panic.
+#[test]
+fn a_damaged_bag_is_refused_never_a_panic() {
+    let (_tmp, run) = copy_of(&fixture_named("journal-v2"));
+    let bag = run.with_file_name("bag");
+    let done =
+        cps_survey(["export".into(), run.clone().into_os_string(), "--ros2-bag".into(), bag.clone().into_os_string()]);
+    assert_eq!(done.code, 0, "{}", done.stderr);
+    let bytes = std::fs::read(bag.join("bag.mcap")).expect("mcap");
+    let damaged = run.with_file_name("damaged.mcap");
+    let options = missions::ros2::read::BagOptions::default();
+    let mut refused = 0;
+    for k in 0..97 {
+        let at = k * bytes.len() / 97;
+        let mut cut = bytes[..at].to_vec();
+        let mut flipped = bytes.clone();
+        flipped[at] ^= 0x5a;
+        for b in [std::mem::take(&mut cut), flipped] {
+            std::fs::write(&damaged, &b).expect("write");
+            match missions::ros2::read::read(&damaged, &options) {
+                Err(e) => {
+                    assert!(format!("{e:#}").contains("damaged.mcap"), "{e:#}");
+                    refused += 1;
+                }
+                Ok(scans) => assert!(scans.len() <= 4),
+            }
+        }
+    }
+    assert!(refused > 97, "{refused} of 194 damaged bags refused");
+}
