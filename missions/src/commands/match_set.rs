@@ -46,7 +46,9 @@ const GLOBAL_CELL_OF_RADIUS: f64 = 1.0 / 40.0;
 #[derive(Debug, Clone, clap::Args)]
 pub struct MatchArgs {
     /// Scans: a 3DTK directory (scanNNN.3d + scanNNN.pose), a multi-scan
-    /// E57 (its poses the start), or scan files of any supported format.
+    /// E57 (its poses the start), a rosbag2 (a directory with
+    /// metadata.yaml, or an .mcap: PointCloud2 with poses from /tf or
+    /// --odom), or scan files of any supported format.
     #[arg(required = true)]
     pub inputs: Vec<PathBuf>,
     /// How the set is registered.
