@@ -60,7 +60,7 @@ def main():
         fail(f"/cps/scan point counts {[c[2].width for c in clouds]}, journal {[s['data']['points'] for s in scans]}")
     for _, stamp, c in clouds:
         names = [f.name for f in c.fields]
-        if names[:3] != ["x", "y", "z"] or c.header.frame_id != "parent/base_link":
+        if names[:3] != ["x", "y", "z"] or c.header.frame_id != "parent/scanner":
             fail(f"/cps/scan fields {names}, frame {c.header.frame_id}")
         if stamp != c.header.stamp.sec * 10**9 + c.header.stamp.nanosec:
             fail("/cps/scan: log time differs from the header's stamp")

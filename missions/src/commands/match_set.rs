@@ -121,6 +121,10 @@ pub struct MatchArgs {
     /// instead of /tf.
     #[arg(long, value_name = "TOPIC")]
     pub odom: Option<String>,
+    /// Also write the registered scans and poses as a rosbag2 directory
+    /// (MCAP of standard ROS 2 messages) into DIR, which must not exist.
+    #[arg(long = "ros2-bag", value_name = "DIR")]
+    pub ros2_bag: Option<PathBuf>,
     /// The coordinate reference system of the start poses and so of every
     /// output: EPSG:NNNN, EPSG:H+V or WKT (in metres). Default: the one
     /// the E57 inputs name in their coordinateMetadata, else a local frame.
@@ -414,6 +418,11 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
         }
     }
     let bag = bag_options(args)?;
+    if let Some(dir) = &args.ros2_bag
+        && std::fs::symlink_metadata(dir).is_ok()
+    {
+        bail!("--ros2-bag {}: already exists; a bag is written into a new directory", dir.display());
+    }
     if args.init.is_some() && args.init_poses.is_some() {
         bail!("--init global and --init-poses: give the starts, or have them found, not both");
     }
@@ -787,6 +796,24 @@ fn write_outputs(
     }
     if recorded.with_context(|| format!("writing {}", rrd.display()))? {
         written.push("match.rrd".into());
+    }
+    if let Some(bag) = &args.ros2_bag {
+        let registered: Vec<crate::ros2::registered::Registered<'_>> = scans
+            .iter()
+            .zip(&report.scans)
+            .enumerate()
+            .map(|(i, (s, rs))| crate::ros2::registered::Registered {
+                name: &rs.name,
+                points: &s.points,
+                intensity: s.intensity.as_deref(),
+                world_from_scan: r.world_from_scan[i],
+                covariance: r.covariance[i],
+                gps_time_s: s.gps_time_s,
+            })
+            .collect();
+        let about = r.world_from_scan.first().map_or_else(nalgebra::Vector3::zeros, |t| t.translation.vector);
+        crate::ros2::registered::write(bag, &registered, &about, &format!("cps-survey match; crs {}", crs.name))?;
+        written.push(bag.display().to_string());
     }
     Ok(written)
 }

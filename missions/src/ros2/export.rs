@@ -9,7 +9,7 @@
 //! | `/tf` | `tf2_msgs/msg/TFMessage` | `map → parent/base_link` at each fix and scan, `map → <child>/base_link` at each placement |
 //! | `/cps/parent/pose` | `geometry_msgs/msg/PoseWithCovarianceStamped` | each fix: the CPS pose and its covariance |
 //! | `/cps/<child>/pose` | the same | each placement as the network adjustment puts it |
-//! | `/cps/scan` | `sensor_msgs/msg/PointCloud2` | each scan in `parent/base_link`, at its time |
+//! | `/cps/scan` | `sensor_msgs/msg/PointCloud2` | each scan in the scanner's frame `parent/scanner`, at its time |
 //! | `/cps/route`, `/cps/plan` | `nav_msgs/msg/Path` | the stations fixed, the stations planned |
 //! | `/cps/control`, `/cps/ellipses` | `visualization_msgs/msg/MarkerArray` | control points; 95 % ellipses of the adjusted stations |
 //!
@@ -32,9 +32,8 @@ use nalgebra::{Isometry3, Matrix4, Point3, Translation3, UnitQuaternion, Vector3
 
 use super::bag::BagWriter;
 use super::messages::{
-    Bytes, CYLINDER, Color, Covariance6, FLOAT32, Header, Marker, MarkerArray, Path as PathMsg, PointCloud2,
-    PointField, Pose, PoseStamped, PoseWithCovariance, PoseWithCovarianceStamped, SPHERE, TEXT_VIEW_FACING, TfMessage,
-    Time, TransformStamped,
+    CYLINDER, Color, Covariance6, Header, Marker, MarkerArray, Path as PathMsg, PointCloud2, Pose, PoseStamped,
+    PoseWithCovariance, PoseWithCovarianceStamped, SPHERE, TEXT_VIEW_FACING, TfMessage, Time, TransformStamped,
 };
 use crate::run::journal::{Event, Phase};
 use crate::run::resume::RunDir;
@@ -249,7 +248,7 @@ pub fn write(run: &RunDir, run_dir: &Path, dir: &Path) -> Result<Exported> {
                 },
             },
         )?;
-        bag.write("/cps/scan", stamp, &cloud(run_dir, view, stamp)?)?;
+        bag.write("/cps/scan", stamp, &cloud(run_dir, view, &mount, stamp)?)?;
     }
 
     // The children where the adjustment puts each placement, and the
@@ -318,41 +317,19 @@ fn adjustment(run: &RunDir) -> Option<crate::run::adjust::AdjustmentReport> {
     crate::run::adjust::adjust(&run.mission, &run.planned, &net, &cps::batch::AdjustOptions::default()).ok()
 }
 
-/// A scan as a `PointCloud2` in the body frame: x, y, z (and intensity
-/// when its file has one) as float32, read from its file.
-fn cloud(run_dir: &Path, view: &crate::run::fuse::ScanView, stamp: u64) -> Result<PointCloud2> {
+/// A scan as a `PointCloud2` in the scanner's frame (`body_from_scanner`
+/// = `mount`, no rotation: the rotating head's slices are assembled in
+/// it): x, y, z (and intensity when its file has one) as float32, read
+/// from its file (in the body frame).
+fn cloud(run_dir: &Path, view: &crate::run::fuse::ScanView, mount: &Isometry3<f64>, stamp: u64) -> Result<PointCloud2> {
     let scan = scanner::io::read(&run_dir.join(&view.file)).with_context(|| format!("reading {}", view.file))?;
     if scan.points != view.body {
         anyhow::bail!("{}: the file changed since the journal named it", view.file);
     }
-    let intensity = scan.intensity.filter(|i| i.len() == scan.points.len());
-    let fields: Vec<PointField> = ["x", "y", "z"]
-        .iter()
-        .chain(intensity.as_ref().map(|_| &"intensity"))
-        .enumerate()
-        .map(|(k, name)| PointField { name: (*name).into(), offset: 4 * k as u32, datatype: FLOAT32, count: 1 })
-        .collect();
-    let step = 4 * fields.len();
-    let mut data = Vec::with_capacity(step * view.body.len());
-    for (k, p) in view.body.iter().enumerate() {
-        for v in [p.x, p.y, p.z] {
-            data.extend_from_slice(&v.to_le_bytes());
-        }
-        if let Some(i) = &intensity {
-            data.extend_from_slice(&i[k].to_le_bytes());
-        }
+    if u32::try_from(scan.points.len()).is_err() {
+        anyhow::bail!("{}: too many points for one PointCloud2", view.file);
     }
-    let width = u32::try_from(view.body.len())
-        .with_context(|| format!("{}: too many points for one PointCloud2", view.file))?;
-    Ok(PointCloud2 {
-        header: header(stamp, "parent/base_link"),
-        height: 1,
-        width,
-        fields,
-        is_bigendian: false,
-        point_step: step as u32,
-        row_step: step as u32 * width,
-        data: Bytes(data),
-        is_dense: true,
-    })
+    let scanner_from_body = mount.inverse().cast::<f32>();
+    let points: Vec<Point3<f32>> = scan.points.iter().map(|p| scanner_from_body * p).collect();
+    Ok(PointCloud2::xyz(header(stamp, "parent/scanner"), &points, scan.intensity.as_deref()))
 }

@@ -261,6 +261,42 @@ pub struct PointCloud2 {
     pub is_dense: bool,
 }
 
+impl PointCloud2 {
+    /// An unorganised, dense cloud of `points` (with `intensity`, one per
+    /// point, when given) as little-endian float32 `x y z [intensity]`.
+    pub fn xyz(header: Header, points: &[Point3<f32>], intensity: Option<&[f32]>) -> Self {
+        let intensity = intensity.filter(|i| i.len() == points.len());
+        let names: &[&str] = if intensity.is_some() { &["x", "y", "z", "intensity"] } else { &["x", "y", "z"] };
+        let fields: Vec<PointField> = names
+            .iter()
+            .enumerate()
+            .map(|(k, name)| PointField { name: (*name).into(), offset: 4 * k as u32, datatype: FLOAT32, count: 1 })
+            .collect();
+        let step = 4 * fields.len();
+        let mut data = Vec::with_capacity(step * points.len());
+        for (k, p) in points.iter().enumerate() {
+            for v in [p.x, p.y, p.z] {
+                data.extend_from_slice(&v.to_le_bytes());
+            }
+            if let Some(i) = intensity {
+                data.extend_from_slice(&i[k].to_le_bytes());
+            }
+        }
+        let width = points.len() as u32;
+        Self {
+            header,
+            height: 1,
+            width,
+            fields,
+            is_bigendian: false,
+            point_step: step as u32,
+            row_step: step as u32 * width,
+            data: Bytes(data),
+            is_dense: true,
+        }
+    }
+}
+
 impl Message for PointCloud2 {
     const TYPE: &'static str = "sensor_msgs/msg/PointCloud2";
     const DEFINITION: &'static str = include_str!("msg/sensor_msgs.PointCloud2.msg");

@@ -8,3 +8,4 @@ pub mod bag;
 pub mod export;
 pub mod messages;
 pub mod read;
+pub mod registered;

@@ -63,13 +63,13 @@ fn a_run_exports_as_a_rosbag2_of_standard_messages() {
     let events = journal(&run);
     let scans: Vec<&Value> = events.iter().filter(|e| e["event"] == "scan").collect();
     assert_eq!(topics["/cps/scan"].1.len(), scans.len());
-    // PointCloud2: CDR header, stamp (8), frame "parent/base_link" (4 + 17),
+    // PointCloud2: CDR header, stamp (8), frame "parent/scanner" (4 + 15),
     // padding to 4, height and width.
     for (cloud, scan) in topics["/cps/scan"].1.iter().zip(&scans) {
         assert_eq!(&cloud[..4], &[0, 1, 0, 0]);
-        assert_eq!(u32::from_le_bytes(cloud[12..16].try_into().expect("4")), 17);
-        assert_eq!(&cloud[16..33], b"parent/base_link\0");
-        let at = 4 + (29usize).next_multiple_of(4);
+        assert_eq!(u32::from_le_bytes(cloud[12..16].try_into().expect("4")), 15);
+        assert_eq!(&cloud[16..31], b"parent/scanner\0");
+        let at = 4 + (27usize).next_multiple_of(4);
         let (height, width) = (
             u32::from_le_bytes(cloud[at..at + 4].try_into().expect("4")),
             u32::from_le_bytes(cloud[at + 4..at + 8].try_into().expect("4")),
@@ -129,7 +129,8 @@ fn ros2_bag_in_the_mission_writes_rosbag2_in_the_run() {
 }
 
 /// `match`'s bag reader on a bag of ours: every scan with the points of
-/// its file and, from `/tf` at its stamp, the pose the run gave it.
+/// its file, in the scanner's frame, and from `/tf` and `/tf_static` at
+/// its stamp the pose the run gave it: the same points in the world.
 #[test]
 fn match_reads_the_scans_and_their_poses_back_from_a_bag() {
     let (_tmp, run) = copy_of(&fixture_named("journal-v2"));
@@ -143,9 +144,11 @@ fn match_reads_the_scans_and_their_poses_back_from_a_bag() {
         let scans = missions::ros2::read::read(&input, &options).expect("the bag reads");
         assert_eq!(scans.len(), views.len());
         for (s, v) in scans.iter().zip(&views) {
-            assert_eq!(s.points, v.body, "{}", s.file);
-            let d = s.start.inverse() * v.direct();
-            assert!(d.translation.vector.norm() < 1e-12 && d.rotation.angle() < 1e-12, "{}: {d}", s.file);
+            assert_eq!(s.points.len(), v.body.len(), "{}", s.file);
+            for (p, b) in s.points.iter().zip(&v.body) {
+                let (a, b) = (s.start * p.cast::<f64>(), v.direct() * b.cast::<f64>());
+                assert!((a - b).norm() < 1e-6, "{}: {a} vs {b}", s.file);
+            }
             assert!(s.gps_time_s.is_some());
         }
     }
@@ -199,4 +202,55 @@ fn a_damaged_bag_is_refused_never_a_panic() {
         }
     }
     assert!(refused > 97, "{refused} of 194 damaged bags refused");
+}
+
+/// `match --ros2-bag`: the registered scans and poses as a bag, which
+/// `match` reads back and registers where it left them.
+#[test]
+fn match_writes_its_registration_as_a_bag_that_matches_again() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let data = tests::workspace().join("data/3dtk_dat");
+    let (out, bag) = (tmp.path().join("m"), tmp.path().join("bag"));
+    let args = |input: &std::path::Path, out: &std::path::Path, bag: Option<&std::path::Path>| {
+        let mut a: Vec<std::ffi::OsString> =
+            vec!["match".into(), input.into(), "--out".into(), out.into(), "--json".into()];
+        if let Some(b) = bag {
+            a.extend(["--ros2-bag".into(), b.into()]);
+        }
+        a
+    };
+    let done = cps_survey(args(&data, &out, Some(&bag)));
+    assert_eq!(done.code, 0, "{}", done.stderr);
+    let poses: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("poses.json")).expect("poses")).expect("JSON");
+    let topics = read_bag(&bag);
+    let scans = poses["scans"].as_array().expect("scans");
+    assert_eq!(topics["/cps/scan"].1.len(), scans.len());
+    assert_eq!(topics["/cps/pose"].1.len(), scans.len());
+    assert_eq!(topics["/tf"].1.len(), scans.len());
+    for (p, s) in topics["/cps/pose"].1.iter().zip(scans) {
+        let t = &s["world_from_scan"];
+        // Header: stamp 8, "map\0" 4 + 4; the position from byte 16.
+        for (k, row) in [0, 1, 2].iter().enumerate() {
+            assert_eq!(f64_at(p, 4 + 16 + 8 * k), t[*row][3].as_f64().expect("t"), "{}", s["name"]);
+        }
+    }
+    // Matched again from the bag: its poses are the start, and stay.
+    let again = cps_survey(args(&bag, &tmp.path().join("m2"), None));
+    assert_eq!(again.code, 0, "{}", again.stderr);
+    let second: Value =
+        serde_json::from_str(&std::fs::read_to_string(tmp.path().join("m2/poses.json")).expect("poses")).expect("JSON");
+    for (a, b) in scans.iter().zip(second["scans"].as_array().expect("scans")) {
+        let d: f64 = (0..3)
+            .map(|r| {
+                (a["world_from_scan"][r][3].as_f64().expect("t") - b["world_from_scan"][r][3].as_f64().expect("t"))
+                    .powi(2)
+            })
+            .sum::<f64>()
+            .sqrt();
+        assert!(d < 2e-3, "{}: {d} m apart", a["name"]);
+    }
+    let exists = cps_survey(args(&data, &tmp.path().join("m3"), Some(&bag)));
+    assert_eq!(exists.code, 2);
+    assert!(exists.stderr.contains("--ros2-bag") && exists.stderr.contains("already exists"), "{}", exists.stderr);
 }
