@@ -18,10 +18,12 @@
 //! σ² where a tilt was read, else [`UNKNOWN_VARIANCE`]; a child's rotation
 //! is unknown alike.
 //!
-//! Times: the run's mission clock (`mission.rrd`'s `sim_time`: drives at
-//! 0.3 m/s, 4 s a measurement, 1 s a tilt reading, the scanner's own slice
-//! rate), anchored so that the first scan lands at the UTC time the journal
-//! recorded for it (the epoch when no scan recorded one).
+//! Times: on real instruments each step's UTC time as journaled (the
+//! fixes at their last reading's). On the simulator the mission clock
+//! (`mission.rrd`'s `sim_time`: drives at 0.3 m/s, 4 s a measurement, 1 s
+//! a tilt reading, the scanner's own slice rate), anchored so that the
+//! first scan lands at the UTC time the journal recorded for it (the epoch
+//! when no scan recorded one).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -76,21 +78,31 @@ impl Timeline {
         let mut clock = 0.0;
         let mut anchor = None;
         for n in &run.journal.events {
+            // A step of real instruments carries its UTC time: the clock
+            // jumps to it (the first one anchors the clock).
+            if let Some(u) = real_time(&n.event) {
+                let offset = *anchor.get_or_insert(u - clock);
+                clock = u - offset;
+            }
             match &n.event {
-                Event::Drive(d) => clock += d.data.distance_m.max(0.0) / DRIVE_SPEED_M_PER_S,
+                Event::Drive(d) if d.unix_time_s.is_none() => clock += d.data.distance_m.max(0.0) / DRIVE_SPEED_M_PER_S,
                 Event::Measure(m) => {
-                    clock += MEASURE_S;
+                    if m.unix_time_s.is_none() {
+                        clock += MEASURE_S;
+                    }
                     if let (Phase::Placement, Some(child)) = (m.key.phase, m.key.child) {
                         t.placements.insert((m.key.cycle, child), clock);
                     }
                 }
-                Event::Tilt(_) => clock += TILT_S,
+                Event::Tilt(t) if t.unix_time_s.is_none() => clock += TILT_S,
                 Event::Scan(s) => {
                     t.scans.insert(s.key.station, clock);
                     if anchor.is_none() {
                         anchor = s.data.unix_time_s.map(|u| u - clock);
                     }
-                    clock += scan_s;
+                    if s.unix_time_s.is_none() {
+                        clock += scan_s;
+                    }
                 }
                 Event::Fix(f) => {
                     t.fixes.insert(f.key.station, clock);
@@ -105,6 +117,17 @@ impl Timeline {
 
     fn ns(&self, clock_s: f64) -> u64 {
         (self.epoch_ns + clock_s * 1e9).round().max(0.0) as u64
+    }
+}
+
+/// A step's journaled UTC time (real instruments').
+fn real_time(event: &Event) -> Option<f64> {
+    match event {
+        Event::Drive(r) => r.unix_time_s,
+        Event::Measure(r) => r.unix_time_s,
+        Event::Tilt(r) => r.unix_time_s,
+        Event::Scan(r) => r.unix_time_s,
+        _ => None,
     }
 }
 

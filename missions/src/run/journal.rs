@@ -91,6 +91,10 @@ pub struct Recorded<K, D> {
     /// The team's state after the step.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sim: Option<Checkpoint>,
+    /// When the step was done, UNIX seconds (UTC), on real instruments
+    /// (version 3; the simulator's steps take the mission clock).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unix_time_s: Option<f64>,
 }
 
 /// A result the run derives, as journaled.
@@ -559,6 +563,11 @@ impl Read {
     }
 }
 
+/// Now, UNIX seconds (UTC).
+pub fn unix_now() -> f64 {
+    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64())
+}
+
 /// A CRC-32 (IEEE) as journaled: 8 lower-case hex digits.
 pub fn crc32_hex(crc: u32) -> String {
     format!("{crc:08x}")
@@ -788,6 +797,7 @@ mod tests {
 
     fn tilt(station: usize) -> Event {
         Event::Tilt(Recorded {
+            unix_time_s: None,
             key: StationKey { station },
             data: Tilted { roll_rad: 0.1, pitch_rad: -0.2 },
             sim: None,
@@ -801,6 +811,7 @@ mod tests {
         let mut j = Journal::create(&path).expect("create");
         j.append(start()).expect("append");
         let drive = Event::Drive(Recorded {
+            unix_time_s: None,
             key: DriveKey { cycle: 1, robot: "c1".into(), target: [1.0, 2.0, 0.5] },
             data: Driven { distance_m: 1.5 },
             sim: None,

@@ -125,10 +125,6 @@ fn target_of(goal: &PlanarPose) -> [f64; 3] {
 }
 
 /// The time now: UNIX seconds, UTC.
-fn unix_now() -> f64 {
-    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64())
-}
-
 /// Adds the seconds `f` takes to `total`.
 fn timed<T>(total: &mut f64, f: impl FnOnce() -> T) -> T {
     let t = Instant::now();
@@ -712,7 +708,7 @@ impl Run<'_> {
                 let points = cloud.len();
                 taken = Some(cloud);
                 let crc32 = Some(crate::run::journal::crc32_hex(crc));
-                Ok(Scanned { file, points, crc32, unix_time_s: Some(unix_now()) })
+                Ok(Scanned { file, points, crc32, unix_time_s: Some(super::journal::unix_now()) })
             })?;
         self.progress.slices_done += slices as u64;
         self.progress.scans.set_position(self.progress.slices_done);

@@ -61,7 +61,10 @@ impl Steps {
             match command(&mut self.team) {
                 Ok(data) => {
                     let sim = Some(self.team.checkpoint());
-                    self.journal.append(T::event(Recorded { key, data: data.clone(), sim }))?;
+                    // Real instruments' steps carry their UTC time (the
+                    // rosbag2's stamps); the simulator's keep the mission clock.
+                    let unix_time_s = self.team.truth().is_none().then(super::journal::unix_now);
+                    self.journal.append(T::event(Recorded { key, data: data.clone(), sim, unix_time_s }))?;
                     return Ok(data);
                 }
                 // A file that cannot be written is not a device fault:

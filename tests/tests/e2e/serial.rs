@@ -82,6 +82,44 @@ fn a_mission_over_serial_ports_matches_the_simulator() {
     let scene = cps::geom::builtin("hall").expect("hall");
     let on = missions::run::runner::on_surface_fraction(&scene, &cloud.points, 0.05);
     assert!(cloud.len() > 20_000 && on > 0.99, "{} points, {:.2} % on surfaces", cloud.len(), 100.0 * on);
+
+    // Real instruments' steps carry their UTC time, and the run's rosbag2
+    // is stamped with it: each scan at its journaled time.
+    let events = lines(&dir.path().join("serial/journal.jsonl"));
+    let steps: Vec<&Value> = events
+        .iter()
+        .filter(|e| ["drive", "measure", "tilt", "scan"].contains(&e["event"].as_str().unwrap_or("")))
+        .collect();
+    assert!(
+        steps.iter().all(|e| e["unix_time_s"].as_f64().is_some_and(|t| t > 1.7e9)),
+        "every step of the serial run is timed"
+    );
+    let sim_events = lines(&dir.path().join("sim/journal.jsonl"));
+    assert!(sim_events.iter().all(|e| e.get("unix_time_s").is_none()), "the simulator's steps keep the mission clock");
+    let bag = dir.path().join("bag");
+    let exported = cps_survey([
+        "export".into(),
+        dir.path().join("serial").into_os_string(),
+        "--ros2-bag".into(),
+        bag.clone().into_os_string(),
+    ]);
+    assert_eq!(exported.code, 0, "{}", exported.stderr);
+    let bytes = std::fs::read(bag.join("bag.mcap")).expect("the bag");
+    let scan_times: Vec<u64> = events
+        .iter()
+        .filter(|e| e["event"] == "scan")
+        .map(|e| (e["unix_time_s"].as_f64().expect("time") * 1e9).round() as u64)
+        .collect();
+    let stamps: Vec<u64> = mcap::MessageStream::new(&bytes)
+        .expect("MCAP")
+        .map(|m| m.expect("message"))
+        .filter(|m| m.channel.topic == "/cps/scan")
+        .map(|m| m.log_time)
+        .collect();
+    assert_eq!(stamps.len(), scan_times.len());
+    for (a, b) in stamps.iter().zip(&scan_times) {
+        assert!(a.abs_diff(*b) < 1_000, "a scan stamped {a} ns, journaled at {b} ns");
+    }
 }
 
 #[test]
