@@ -120,6 +120,20 @@ impl Timeline {
     }
 }
 
+/// The parent at `world` with its ROS `covariance`: on `/tf` and
+/// `/cps/parent/pose`.
+fn parent_at(bag: &mut BagWriter, stamp: u64, world: &Isometry3<f64>, covariance: [f64; 36]) -> Result<()> {
+    bag.write("/tf", stamp, &TfMessage { transforms: vec![transform(stamp, MAP, "parent/base_link", world)] })?;
+    bag.write(
+        "/cps/parent/pose",
+        stamp,
+        &PoseWithCovarianceStamped {
+            header: header(stamp, MAP),
+            pose: PoseWithCovariance { pose: Pose::from(world), covariance: Covariance6(covariance) },
+        },
+    )
+}
+
 /// A step's journaled UTC time (real instruments').
 fn real_time(event: &Event) -> Option<f64> {
     match event {
@@ -241,36 +255,14 @@ pub fn write(run: &RunDir, run_dir: &Path, dir: &Path) -> Result<Exported> {
         let pose: ParentPose = (&f.data.pose).into();
         let covariance = crate::run::journal::matrix_of(&f.data.covariance);
         let world = planar(&pose);
-        bag.write("/tf", stamp, &TfMessage { transforms: vec![transform(stamp, MAP, "parent/base_link", &world)] })?;
-        bag.write(
-            "/cps/parent/pose",
-            stamp,
-            &PoseWithCovarianceStamped {
-                header: header(stamp, MAP),
-                pose: PoseWithCovariance {
-                    pose: Pose::from(&world),
-                    covariance: Covariance6(covariance6(&covariance, UNKNOWN_VARIANCE)),
-                },
-            },
-        )?;
+        parent_at(&mut bag, stamp, &world, covariance6(&covariance, UNKNOWN_VARIANCE))?;
         route.push(PoseStamped { header: header(stamp, MAP), pose: Pose::from(&world) });
     }
     for view in &run.views {
         let Some(&at) = time.scans.get(&view.station) else { continue };
         let stamp = time.ns(at);
         let world = view.direct();
-        bag.write("/tf", stamp, &TfMessage { transforms: vec![transform(stamp, MAP, "parent/base_link", &world)] })?;
-        bag.write(
-            "/cps/parent/pose",
-            stamp,
-            &PoseWithCovarianceStamped {
-                header: header(stamp, MAP),
-                pose: PoseWithCovariance {
-                    pose: Pose::from(&world),
-                    covariance: Covariance6(covariance6(&view.covariance, tilt_variance)),
-                },
-            },
-        )?;
+        parent_at(&mut bag, stamp, &world, covariance6(&view.covariance, tilt_variance))?;
         bag.write("/cps/scan", stamp, &cloud(run_dir, view, &mount, stamp)?)?;
     }
 

@@ -623,6 +623,43 @@ mod tests {
     }
 
     #[test]
+    fn an_unknown_compression_and_a_foreign_schema_are_named() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        // A chunk compressed with "bz2": magic, then opcode 6 and its record.
+        let mut chunk = Vec::new();
+        chunk.extend_from_slice(&[0u8; 16]);
+        chunk.extend_from_slice(&10u64.to_le_bytes());
+        chunk.extend_from_slice(&0u32.to_le_bytes());
+        chunk.extend_from_slice(&3u32.to_le_bytes());
+        chunk.extend_from_slice(b"bz2");
+        chunk.extend_from_slice(&4u64.to_le_bytes());
+        chunk.extend_from_slice(&[1, 2, 3, 4]);
+        let mut file = b"\x89MCAP0\r\n".to_vec();
+        file.push(0x06);
+        file.extend_from_slice(&(chunk.len() as u64).to_le_bytes());
+        file.extend_from_slice(&chunk);
+        let path = dir.path().join("bz2.mcap");
+        std::fs::write(&path, &file).expect("write");
+        let err = format!("{:#}", read(&path, &BagOptions::default()).expect_err("bz2"));
+        assert!(
+            err.contains("bz2.mcap") && err.contains("\"bz2\"") && err.contains("expected zstd, lz4 or none"),
+            "{err}"
+        );
+        // A PointCloud2 channel whose schema is ROS 1's.
+        let path = dir.path().join("ros1.mcap");
+        let mut w =
+            mcap::Writer::new(std::io::BufWriter::new(std::fs::File::create(&path).expect("create"))).expect("writer");
+        let schema = w.add_schema(POINT_CLOUD2, "ros1msg", b"Header header").expect("schema");
+        let channel = w.add_channel(schema, "/points", "ros1", &BTreeMap::new()).expect("channel");
+        let header = mcap::records::MessageHeader { channel_id: channel, sequence: 1, log_time: 1, publish_time: 1 };
+        w.write_to_known_channel(&header, &[0u8; 8]).expect("message");
+        w.finish().expect("finish");
+        drop(w);
+        let err = format!("{:#}", read(&path, &BagOptions::default()).expect_err("ros1"));
+        assert!(err.contains("/points") && err.contains("\"ros1msg\"") && err.contains("expected ROS 2's"), "{err}");
+    }
+
+    #[test]
     fn other_layouts_are_refused_naming_the_topic_and_field() {
         let mut c = cloud(false);
         c.fields[1] = field("y", 8, 5);

@@ -43,6 +43,27 @@ fn walk(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
 /// Whether `new` holds everything `old` does (later versions only add
 /// keys): every key of an object with a value that holds the old one,
 /// arrays element by element, anything else equal.
+/// Writes `journal` (a cut one) into the copy `run`, resumes the run and
+/// checks its report against `expected`.
+pub(crate) fn resumes_to(run: &std::path::Path, journal: &str, expected: &Value) {
+    std::fs::write(run.join("journal.jsonl"), journal).expect("cut journal");
+    std::fs::remove_file(run.join("report.json")).expect("remove");
+    let resumed = cps_survey([
+        "run".into(),
+        run.join("mission.toml").into_os_string(),
+        "--out".into(),
+        run.to_path_buf().into_os_string(),
+        "--resume".into(),
+        "--quiet".into(),
+    ]);
+    assert_eq!(resumed.code, 0, "{}", resumed.stderr);
+    assert!(resumed.stdout.contains("journal events replayed"), "{}", resumed.stdout);
+    let report = json(&run.join("report.json"));
+    for key in ["stations", "final", "fusion", "accepted"] {
+        assert!(holds(&report[key], &expected[key]), "{key}: {}\n{}", report[key], expected[key]);
+    }
+}
+
 pub(crate) fn holds(new: &Value, old: &Value) -> bool {
     match (new, old) {
         (Value::Object(n), Value::Object(o)) => o.iter().all(|(k, v)| n.get(k).is_some_and(|nv| holds(nv, v))),
@@ -83,22 +104,7 @@ fn a_version_1_run_resumes_to_the_same_report() {
         if torn {
             text += &lines[second_scan + 1][..40];
         }
-        std::fs::write(run.join("journal.jsonl"), text).expect("cut journal");
-        std::fs::remove_file(run.join("report.json")).expect("remove");
-        let resumed = cps_survey([
-            "run".into(),
-            run.join("mission.toml").into_os_string(),
-            "--out".into(),
-            run.clone().into_os_string(),
-            "--resume".into(),
-            "--quiet".into(),
-        ]);
-        assert_eq!(resumed.code, 0, "{}", resumed.stderr);
-        assert!(resumed.stdout.contains("journal events replayed"), "{}", resumed.stdout);
-        let report = json(&run.join("report.json"));
-        for key in ["stations", "final", "fusion", "accepted"] {
-            assert!(holds(&report[key], &expected[key]), "{key}: {}\n{}", report[key], expected[key]);
-        }
+        resumes_to(&run, &text, &expected);
         // The journal goes on in the version it was started with.
         let journal = std::fs::read_to_string(run.join("journal.jsonl")).expect("journal");
         let events: Vec<Value> = journal.lines().map(|l| serde_json::from_str(l).expect("a JSON line")).collect();

@@ -10,7 +10,7 @@
 use serde_json::Value;
 use tests::cps_survey;
 
-use super::journal_v1::{copy_of, fixture_named, holds, json};
+use super::journal_v1::{copy_of, fixture_named, json, resumes_to};
 
 fn fixture() -> std::path::PathBuf {
     fixture_named("journal-v2")
@@ -66,21 +66,7 @@ fn a_version_2_run_resumes_in_version_2() {
     let second_scan =
         lines.iter().enumerate().filter(|(_, l)| l.contains("\"event\":\"scan\"")).nth(1).expect("scan").0;
     let (_tmp, run) = copy_of(&fixture());
-    std::fs::write(run.join("journal.jsonl"), lines[..=second_scan].join("\n") + "\n").expect("cut journal");
-    std::fs::remove_file(run.join("report.json")).expect("remove");
-    let resumed = cps_survey([
-        "run".into(),
-        run.join("mission.toml").into_os_string(),
-        "--out".into(),
-        run.clone().into_os_string(),
-        "--resume".into(),
-        "--quiet".into(),
-    ]);
-    assert_eq!(resumed.code, 0, "{}", resumed.stderr);
-    let report = json(&run.join("report.json"));
-    for key in ["stations", "final", "fusion", "accepted"] {
-        assert!(holds(&report[key], &expected[key]), "{key}: {}\n{}", report[key], expected[key]);
-    }
+    resumes_to(&run, &(lines[..=second_scan].join("\n") + "\n"), &expected);
     let events = events(&run);
     assert!(events.iter().all(|e| e["v"] == 2), "the journal goes on in version 2");
     let fixes: Vec<&Value> = events.iter().filter(|e| e["event"] == "fix").collect();

@@ -11,6 +11,20 @@ use tests::cps_survey;
 
 use super::journal_v1::{copy_of, fixture_named};
 
+/// The v2 fixture's run copied and exported: (its temporary directory,
+/// the run, the bag, what `export` said), the export checked to succeed.
+fn exported_fixture() -> (tempfile::TempDir, std::path::PathBuf, std::path::PathBuf, tests::Run) {
+    let (tmp, run) = copy_of(&fixture_named("journal-v2"));
+    let bag = run.with_file_name("bag");
+    let done = export(&run, &bag);
+    assert_eq!(done.code, 0, "{}", done.stderr);
+    (tmp, run, bag, done)
+}
+
+fn export(run: &std::path::Path, bag: &std::path::Path) -> tests::Run {
+    cps_survey(["export".into(), run.as_os_str().to_owned(), "--ros2-bag".into(), bag.as_os_str().to_owned()])
+}
+
 /// Per topic: (type, messages' bytes).
 fn read_bag(dir: &std::path::Path) -> BTreeMap<String, (String, Vec<Vec<u8>>)> {
     let meta = std::fs::read_to_string(dir.join("metadata.yaml")).expect("metadata.yaml");
@@ -44,11 +58,7 @@ fn journal(run: &std::path::Path) -> Vec<Value> {
 
 #[test]
 fn a_run_exports_as_a_rosbag2_of_standard_messages() {
-    let (_tmp, run) = copy_of(&fixture_named("journal-v2"));
-    let bag = run.with_file_name("bag");
-    let done =
-        cps_survey(["export".into(), run.clone().into_os_string(), "--ros2-bag".into(), bag.clone().into_os_string()]);
-    assert_eq!(done.code, 0, "{}", done.stderr);
+    let (_tmp, run, bag, done) = exported_fixture();
     assert!(done.stdout.contains("/cps/scan"), "{}", done.stdout);
     let topics = read_bag(&bag);
     let kind = |t: &str| topics.get(t).map(|(k, _)| k.as_str());
@@ -90,8 +100,7 @@ fn a_run_exports_as_a_rosbag2_of_standard_messages() {
     }
 
     // An existing target is never overwritten.
-    let again =
-        cps_survey(["export".into(), run.clone().into_os_string(), "--ros2-bag".into(), bag.clone().into_os_string()]);
+    let again = export(&run, &bag);
     assert_eq!(again.code, 2);
     assert!(again.stderr.contains("already exists"), "{}", again.stderr);
 }
@@ -105,8 +114,7 @@ fn an_interrupted_run_exports_what_it_measured() {
         lines.iter().enumerate().filter(|(_, l)| l.contains("\"event\":\"scan\"")).nth(1).expect("scan").0;
     std::fs::write(run.join("journal.jsonl"), lines[..=second_scan].join("\n") + "\n").expect("cut");
     let bag = run.with_file_name("bag");
-    let done =
-        cps_survey(["export".into(), run.clone().into_os_string(), "--ros2-bag".into(), bag.clone().into_os_string()]);
+    let done = export(&run, &bag);
     assert_eq!(done.code, 0, "{}", done.stderr);
     let topics = read_bag(&bag);
     assert_eq!(topics["/cps/scan"].1.len(), 2, "the two scans taken");
@@ -133,11 +141,7 @@ fn ros2_bag_in_the_mission_writes_rosbag2_in_the_run() {
 /// its stamp the pose the run gave it: the same points in the world.
 #[test]
 fn match_reads_the_scans_and_their_poses_back_from_a_bag() {
-    let (_tmp, run) = copy_of(&fixture_named("journal-v2"));
-    let bag = run.with_file_name("bag");
-    let done =
-        cps_survey(["export".into(), run.clone().into_os_string(), "--ros2-bag".into(), bag.clone().into_os_string()]);
-    assert_eq!(done.code, 0, "{}", done.stderr);
+    let (_tmp, run, bag, _) = exported_fixture();
     let views = missions::run::resume::load(&run).expect("the run").views;
     let options = missions::ros2::read::BagOptions::default();
     for input in [bag.clone(), bag.join("bag.mcap")] {
@@ -176,11 +180,7 @@ fn match_reads_the_scans_and_their_poses_back_from_a_bag() {
 /// A bag cut or damaged anywhere is an error naming it, never a panic.
 #[test]
 fn a_damaged_bag_is_refused_never_a_panic() {
-    let (_tmp, run) = copy_of(&fixture_named("journal-v2"));
-    let bag = run.with_file_name("bag");
-    let done =
-        cps_survey(["export".into(), run.clone().into_os_string(), "--ros2-bag".into(), bag.clone().into_os_string()]);
-    assert_eq!(done.code, 0, "{}", done.stderr);
+    let (_tmp, run, bag, _) = exported_fixture();
     let bytes = std::fs::read(bag.join("bag.mcap")).expect("mcap");
     let damaged = run.with_file_name("damaged.mcap");
     let options = missions::ros2::read::BagOptions::default();
