@@ -187,6 +187,12 @@ pub fn fuse(
     trace: bool,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Fused> {
+    if mode != FusionMode::Direct {
+        let sparse: Vec<usize> = (0..views.len()).filter(|&i| !matchable(&views[i], plan)).collect();
+        if !sparse.is_empty() {
+            return fuse_without(views, &sparse, mode, plan, scanner_in_body, trace, progress);
+        }
+    }
     let started = Instant::now();
     let scans: Vec<&[Point3<f32>]> = views.iter().map(|v| v.body.as_slice()).collect();
     let mut traces = Vec::new();
@@ -302,11 +308,90 @@ pub fn fuse(
     Ok(Fused { mode, scans, matches, seconds: started.elapsed().as_secs_f64(), traces, links })
 }
 
-/// The scans' joint CPS prior: the 4N×4N covariance of their stations
-/// from each view's covariance and cross-covariances, mapped to the
-/// scanners' poses with the tilt ([`fusion::graph::JointPrior::cps`]), in
-/// a frame whose origin is the world's `base` (the world's axes).
-pub fn joint_prior(views: &[ScanView], base: &Vector3<f64>) -> Result<fusion::graph::JointPrior> {
+/// Whether a scan has points enough to be matched: more than
+/// `min_pairs` left by the voxel filter (an empty scan — nothing within
+/// the scanner's range — stopped the ICP modes, issue 35's scaling runs).
+fn matchable(v: &ScanView, plan: &FusionPlan) -> bool {
+    scanner::reduced_points(&v.body, plan.voxel_m).is_ok_and(|r| r.len() > plan.min_pairs)
+}
+
+/// [`fuse`] with the scans `sparse` (too few points, [`matchable`]) left
+/// out of matching: they keep their start — the CPS pose (`cps-icp`), the
+/// odometry's (`icp`) — without a covariance, and a link says why; the
+/// others fuse as ever, `cps-icp`'s prior their marginal of the joint one.
+fn fuse_without(
+    views: &[ScanView],
+    sparse: &[usize],
+    mode: FusionMode,
+    plan: &FusionPlan,
+    scanner_in_body: Point3<f64>,
+    trace: bool,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<Fused> {
+    let started = Instant::now();
+    let kept: Vec<usize> = (0..views.len()).filter(|i| !sparse.contains(i)).collect();
+    // The kept stations' cross-covariances, made explicit from the whole
+    // chain (a chain link refers to the previous scan station, kept or not).
+    let mut cross = vec![Vec::new(); views.len()];
+    let joint = joint_cps_covariance(views)?;
+    for (n, &i) in kept.iter().enumerate() {
+        cross[i] = kept[..n].iter().map(|&k| Matrix4::from_fn(|r, c| joint[(4 * i + r, 4 * k + c)])).collect();
+    }
+    let sub: Vec<ScanView> = kept
+        .iter()
+        .map(|&i| ScanView { correlation: Correlation::Earlier(std::mem::take(&mut cross[i])), ..views[i].clone() })
+        .collect();
+    let mut fused = if sub.is_empty() {
+        Fused { mode, scans: Vec::new(), matches: 0, seconds: 0.0, traces: Vec::new(), links: Vec::new() }
+    } else {
+        fuse(&sub, mode, plan, scanner_in_body, trace, progress)?
+    };
+    for t in &mut fused.traces {
+        t.scan = kept[t.scan];
+        t.partners.iter_mut().for_each(|p| *p = kept[*p]);
+    }
+    // icp: the odometry's starts, shifted as the fusion shifts them (the
+    // first kept scan at its CPS pose).
+    let shift = sub.first().map_or_else(Isometry3::identity, |v| v.direct() * v.odometry_guess().inverse());
+    let mut matched = std::mem::take(&mut fused.scans).into_iter();
+    for (i, v) in views.iter().enumerate() {
+        if sparse.contains(&i) {
+            let start =
+                if mode == FusionMode::Icp && !sub.is_empty() { shift * v.odometry_guess() } else { v.direct() };
+            fused.scans.push(FusedScan {
+                station: v.station,
+                world_from_body: start,
+                rmse_m: None,
+                covariance: None,
+                unobservable: Vec::new(),
+            });
+            fused.links.push(Link {
+                source: v.station,
+                targets: Vec::new(),
+                correspondences: None,
+                rmse_m: None,
+                converged: false,
+                rejected: Some(format!(
+                    "{} points, {} in {} m cells: too few to match (expected more than {}); the scan keeps its {} pose",
+                    v.body.len(),
+                    scanner::reduced_points(&v.body, plan.voxel_m).map_or(0, |r| r.len()),
+                    plan.voxel_m,
+                    plan.min_pairs,
+                    if mode == FusionMode::Icp { "odometry" } else { "CPS" }
+                )),
+                unobservable: Vec::new(),
+            });
+        } else {
+            fused.scans.push(matched.next().context("a fused scan for every kept one")?);
+        }
+    }
+    fused.seconds = started.elapsed().as_secs_f64();
+    Ok(fused)
+}
+
+/// The 4N×4N CPS covariance of the scan stations (x, y, z, θ each), from
+/// the chain's links or a version 1/2 journal's cross-covariances.
+fn joint_cps_covariance(views: &[ScanView]) -> Result<faer::Mat<f64>> {
     let n = views.len();
     let mut joint = faer::Mat::<f64>::zeros(4 * n, 4 * n);
     let mut put = |i: usize, k: usize, block: &Matrix4<f64>| {
@@ -335,6 +420,15 @@ pub fn joint_prior(views: &[ScanView], base: &Vector3<f64>) -> Result<fusion::gr
             }
         }
     }
+    Ok(joint)
+}
+
+/// The scans' joint CPS prior: the 4N×4N covariance of their stations
+/// from each view's covariance and cross-covariances, mapped to the
+/// scanners' poses with the tilt ([`fusion::graph::JointPrior::cps`]), in
+/// a frame whose origin is the world's `base` (the world's axes).
+pub fn joint_prior(views: &[ScanView], base: &Vector3<f64>) -> Result<fusion::graph::JointPrior> {
+    let joint = joint_cps_covariance(views)?;
     let to_local = Translation3::from(-base);
     let scanners: Vec<Isometry3<f64>> = views.iter().map(|v| to_local * v.direct()).collect();
     let poses: Vec<ParentPose> =

@@ -158,3 +158,40 @@ fn odometry_settings_drive_the_simulator() {
         assert!((x - (1.5 + 3.6 * k as f64 + 0.02 * 3.6)).abs() < 0.01, "station {k}: {x}");
     }
 }
+
+/// A scan with nothing in range (paper-1km's stations beyond the default
+/// scene) does not stop the CPS+ICP fusion (issue 35's scaling runs: exit
+/// 2, "target point count = 0"): it keeps its CPS pose, a link says why,
+/// and the others fuse.
+#[test]
+fn empty_scans_keep_their_cps_pose_in_cps_icp_fusion() {
+    let text = std::fs::read_to_string(example("paper-1km.toml"))
+        .expect("paper-1km")
+        .replace("[1000.0, 0.0, 0.0]", "[120.0, 0.0, 0.0]")
+        .replace("max_final_sigma_xy_m = 0.25", "max_final_sigma_xy_m = 1000000.0")
+        + "\n[scan]\nslices = 90\n\n[output]\nrerun = false\n";
+    let mission = tests::temp_mission(&text);
+    let run = mission.path.with_file_name("run");
+    let done = tests::run_mission(&mission.path, &run);
+    assert_eq!(done.code, 0, "{}", done.stderr);
+    let fused = tests::cps_survey(["fuse".into(), run.clone().into_os_string(), "--mode".into(), "cps-icp".into()]);
+    assert_eq!(fused.code, 0, "{}", fused.stderr);
+    let fusion: Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("fusion/cps-icp/fusion.json")).expect("fusion"))
+            .expect("JSON");
+    let report: Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("report.json")).expect("report")).expect("JSON");
+    let empty: Vec<u64> = fusion["links"]
+        .as_array()
+        .expect("links")
+        .iter()
+        .filter(|l| l["reason"].as_str().is_some_and(|r| r.contains("too few to match")))
+        .map(|l| l["source"].as_u64().expect("station"))
+        .collect();
+    assert!(empty.len() >= 3, "{}", fusion["links"]);
+    assert!(fusion["matches"].as_u64().expect("matches") > 0, "the others still match");
+    for station in empty {
+        let (a, b) = (&fusion["scans"][station as usize], &report["fusion"]["scans"][station as usize]);
+        assert_eq!(a["world_from_body"], b["world_from_body"], "station {station} keeps its CPS pose");
+    }
+}
