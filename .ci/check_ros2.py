@@ -4,7 +4,8 @@ bag's embedded definitions) and mcap + mcap-ros2-support (the format
 authors' reader and ROS 2 decoder). Both must see the same messages, and
 what they decode must agree with report.json, the journal and the scans.
 
-    python check_ros2.py RUN_DIR   (a run with [output] ros2_bag = true)
+    python check_ros2.py RUN_DIR [BAG]   (a run with [output] ros2_bag = true;
+                                           BAG: another bag of it, default RUN_DIR/rosbag2)
 """
 
 import json
@@ -24,7 +25,7 @@ def fail(msg):
 
 def main():
     run = Path(sys.argv[1])
-    bag = run / "rosbag2"
+    bag = Path(sys.argv[2]) if len(sys.argv) > 2 else run / "rosbag2"
     report = json.loads((run / "report.json").read_text())
     journal = [json.loads(l) for l in (run / "journal.jsonl").read_text().splitlines()]
     scans = [e for e in journal if e["event"] == "scan"]

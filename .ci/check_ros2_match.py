@@ -4,7 +4,8 @@ each scan a sensor_msgs/msg/PointCloud2 (x, y, z float32 and an
 intensity, in frame base_link), its .pose an odometry message
 (nav_msgs/msg/Odometry odom → base_link) and a /tf (map → odom, static) —
 and `match` must register the bag (poses from --odom, and from /tf) as it
-registers the 3DTK directory itself.
+registers the 3DTK directory itself; the bag `match --ros2-bag` writes is
+read back by rosbags and mcap-ros2-support against poses.json.
 
     python check_ros2_match.py CPS_SURVEY REPO WORKDIR
 """
@@ -17,6 +18,9 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
@@ -163,7 +167,24 @@ def main():
             da = math.degrees(math.acos(max(-1.0, min(1.0, (np.trace(d[:3, :3]) - 1) / 2))))
             if dt > 1e-3 or da > 0.01:
                 fail(f"scan {k} ({extra}): {dt * 1000:.3f} mm, {da:.4f}° from the 3DTK directory's registration")
-    print(f"check_ros2_match: {n} real scans in a rosbags-written bag register as from their 3DTK directory: ok")
+    # match --ros2-bag: read by rosbags and mcap-ros2-support.
+    out, written = work / "with_bag", work / "written_bag"
+    registered = match(cps_survey, [data], out, "--ros2-bag", str(written))
+    with AnyReader([written]) as reader:
+        got = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages() if c.topic == "/cps/pose"]
+        clouds = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages() if c.topic == "/cps/scan"]
+    if len(got) != n or len(clouds) != n:
+        fail(f"match --ros2-bag: {len(got)} poses and {len(clouds)} clouds, {n} scans")
+    for k, (m, t) in enumerate(zip(got, registered)):
+        p = m.pose.pose.position
+        if max(abs(p.x - t[0, 3]), abs(p.y - t[1, 3]), abs(p.z - t[2, 3])) > 1e-12:
+            fail(f"match --ros2-bag: scan {k} at ({p.x}, {p.y}, {p.z}), poses.json {t[:3, 3]}")
+    (mcap_file,) = written.glob("*.mcap")
+    with open(mcap_file, "rb") as f:
+        decoded = sum(1 for _ in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages())
+    if decoded != 3 * n + 1:
+        fail(f"match --ros2-bag: mcap-ros2-support decoded {decoded} messages, expected {3 * n + 1}")
+    print(f"check_ros2_match: {n} real scans in a rosbags-written bag register as from their 3DTK directory, and match's own bag reads back: ok")
 
 
 main()
