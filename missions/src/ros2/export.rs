@@ -268,7 +268,7 @@ pub fn write(run: &RunDir, run_dir: &Path, dir: &Path) -> Result<Exported> {
 
     // The children where the adjustment puts each placement, and the
     // stations' ellipses (when the journal's network adjusts).
-    let adjusted = adjustment(run);
+    let adjusted = adjustment(run, run_dir);
     let end = time.ns(time.end);
     if let Some(a) = &adjusted {
         for p in a.points.iter().filter(|p| !p.control) {
@@ -326,8 +326,8 @@ pub fn write(run: &RunDir, run_dir: &Path, dir: &Path) -> Result<Exported> {
 
 /// The network adjustment of the run's journal, if it adjusts (a robot
 /// alone, or a journal without readings, does not).
-fn adjustment(run: &RunDir) -> Option<crate::run::adjust::AdjustmentReport> {
-    let path = PathBuf::from("journal.jsonl");
+fn adjustment(run: &RunDir, run_dir: &Path) -> Option<crate::run::adjust::AdjustmentReport> {
+    let path = run_dir.join("journal.jsonl");
     let net = crate::run::adjust::network(&run.mission, &run.planned, &run.journal, &path).ok()?;
     crate::run::adjust::adjust(&run.mission, &run.planned, &net, &cps::batch::AdjustOptions::default()).ok()
 }

@@ -188,9 +188,9 @@ pub fn fuse(
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Fused> {
     if mode != FusionMode::Direct {
-        let sparse: Vec<usize> = (0..views.len()).filter(|&i| !matchable(&views[i], plan)).collect();
-        if !sparse.is_empty() {
-            return fuse_without(views, &sparse, mode, plan, scanner_in_body, trace, progress);
+        let cells: Vec<usize> = views.iter().map(|v| cells(v, plan)).collect();
+        if cells.iter().any(|&c| c <= plan.min_pairs) {
+            return fuse_without(views, &cells, mode, plan, scanner_in_body, trace, progress);
         }
     }
     let started = Instant::now();
@@ -308,20 +308,20 @@ pub fn fuse(
     Ok(Fused { mode, scans, matches, seconds: started.elapsed().as_secs_f64(), traces, links })
 }
 
-/// Whether a scan has points enough to be matched: more than
-/// `min_pairs` left by the voxel filter (an empty scan — nothing within
+/// The points a scan keeps through the voxel filter; a scan is matched
+/// only with more than `min_pairs` of them (an empty scan — nothing within
 /// the scanner's range — stopped the ICP modes, issue 35's scaling runs).
-fn matchable(v: &ScanView, plan: &FusionPlan) -> bool {
-    scanner::reduced_points(&v.body, plan.voxel_m).is_ok_and(|r| r.len() > plan.min_pairs)
+fn cells(v: &ScanView, plan: &FusionPlan) -> usize {
+    scanner::reduced_points(&v.body, plan.voxel_m).map_or(0, |r| r.len())
 }
 
-/// [`fuse`] with the scans `sparse` (too few points, [`matchable`]) left
-/// out of matching: they keep their start — the CPS pose (`cps-icp`), the
+/// [`fuse`] with the scans whose `cells` ([`cells`]) are too few left out
+/// of matching: they keep their start — the CPS pose (`cps-icp`), the
 /// odometry's (`icp`) — without a covariance, and a link says why; the
 /// others fuse as ever, `cps-icp`'s prior their marginal of the joint one.
 fn fuse_without(
     views: &[ScanView],
-    sparse: &[usize],
+    cells: &[usize],
     mode: FusionMode,
     plan: &FusionPlan,
     scanner_in_body: Point3<f64>,
@@ -329,13 +329,17 @@ fn fuse_without(
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Fused> {
     let started = Instant::now();
-    let kept: Vec<usize> = (0..views.len()).filter(|i| !sparse.contains(i)).collect();
-    // The kept stations' cross-covariances, made explicit from the whole
-    // chain (a chain link refers to the previous scan station, kept or not).
+    let sparse: Vec<bool> = cells.iter().map(|&c| c <= plan.min_pairs).collect();
+    let kept: Vec<usize> = (0..views.len()).filter(|&i| !sparse[i]).collect();
+    // cps-icp: the kept stations' cross-covariances, made explicit from the
+    // whole chain (a chain link refers to the previous scan station, kept
+    // or not). `icp` uses no prior.
     let mut cross = vec![Vec::new(); views.len()];
-    let joint = joint_cps_covariance(views)?;
-    for (n, &i) in kept.iter().enumerate() {
-        cross[i] = kept[..n].iter().map(|&k| Matrix4::from_fn(|r, c| joint[(4 * i + r, 4 * k + c)])).collect();
+    if mode == FusionMode::CpsIcp {
+        let joint = joint_cps_covariance(views)?;
+        for (n, &i) in kept.iter().enumerate() {
+            cross[i] = kept[..n].iter().map(|&k| Matrix4::from_fn(|r, c| joint[(4 * i + r, 4 * k + c)])).collect();
+        }
     }
     let sub: Vec<ScanView> = kept
         .iter()
@@ -355,7 +359,7 @@ fn fuse_without(
     let shift = sub.first().map_or_else(Isometry3::identity, |v| v.direct() * v.odometry_guess().inverse());
     let mut matched = std::mem::take(&mut fused.scans).into_iter();
     for (i, v) in views.iter().enumerate() {
-        if sparse.contains(&i) {
+        if sparse[i] {
             let start =
                 if mode == FusionMode::Icp && !sub.is_empty() { shift * v.odometry_guess() } else { v.direct() };
             fused.scans.push(FusedScan {
@@ -374,7 +378,7 @@ fn fuse_without(
                 rejected: Some(format!(
                     "{} points, {} in {} m cells: too few to match (expected more than {}); the scan keeps its {} pose",
                     v.body.len(),
-                    scanner::reduced_points(&v.body, plan.voxel_m).map_or(0, |r| r.len()),
+                    cells[i],
                     plan.voxel_m,
                     plan.min_pairs,
                     if mode == FusionMode::Icp { "odometry" } else { "CPS" }

@@ -124,7 +124,6 @@ fn target_of(goal: &PlanarPose) -> [f64; 3] {
     [goal.x_m, goal.y_m, goal.heading_rad]
 }
 
-/// The time now: UNIX seconds, UTC.
 /// Adds the seconds `f` takes to `total`.
 fn timed<T>(total: &mut f64, f: impl FnOnce() -> T) -> T {
     let t = Instant::now();
