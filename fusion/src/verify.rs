@@ -24,6 +24,7 @@
 //! radius.
 
 use nalgebra::{Isometry3, Point3};
+use rayon::prelude::*;
 
 use crate::error::Result;
 use crate::icp::degeneracy::centroid_and_lever_arm;
@@ -54,6 +55,11 @@ pub struct PairCheck {
     pub chi2: Option<f64>,
     /// The motion as a fraction of the source points' RMS radius.
     pub relative_motion: Option<f64>,
+    /// The match's point-to-plane RMS residual, metres.
+    pub rmse_m: Option<f64>,
+    /// What a right registration of these two scans leaves: the RMS of
+    /// their noise floors ([`noise_floor`]), metres.
+    pub noise_m: f64,
     /// Whether the pair agrees with the final poses: the match moved the
     /// points by at most the tolerance or by at most [`MAX_RELATIVE_MOTION`]
     /// of their radius.
@@ -76,6 +82,7 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
     let prepared = prepare(scans, &config.multiview)?;
     let links = pair_links(&prepared, poses, config, &mut |_, _| ());
     let shape: Vec<(Point3<f64>, f64)> = prepared.iter().map(|p| centroid_and_lever_arm(&p.source)).collect();
+    let floors: Vec<f64> = scans.par_iter().map(|s| noise_floor(s.as_ref(), config)).collect();
     Ok(links
         .into_iter()
         .map(|l| {
@@ -99,6 +106,8 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
                 angle_rad: motion.map(|m| m.1),
                 chi2: motion.map(|m| m.2),
                 relative_motion: motion.map(|m| m.3),
+                rmse_m: l.result.as_ref().map(|r| r.rmse_m),
+                noise_m: (0.5 * (floors[l.source].powi(2) + floors[l.target].powi(2))).sqrt(),
                 // (A match still creeping at its cap but a few millimetres
                 // from the poses agrees with them: the motion judges.)
                 consistent: motion
@@ -106,6 +115,34 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
             }
         })
         .collect())
+}
+
+/// The point-to-plane RMS residual between two random halves of `points`
+/// (each point drawn to one half by a hash of its index), reduced and
+/// matched as `config` matches scans, at the identity: what the data's
+/// noise and sampling leave of a registration that is exactly right.
+/// Zero when a half is too small to match.
+pub fn noise_floor(points: &[Point3<f32>], config: &LinkConfig) -> f64 {
+    let mv = &config.multiview;
+    let half = |k: u64| -> Vec<Point3<f32>> {
+        points
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| ((*i as u64 ^ (k << 40)).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 63) == k)
+            .map(|(_, p)| *p)
+            .collect()
+    };
+    let (a, b) = (half(0), half(1));
+    let floor = || -> Result<f64> {
+        let source = scanner::reduced_points(&a, mv.source_voxel_m)?;
+        let model = scanner::reduced_points(&b, mv.target_voxel_m)?;
+        let k = if mv.icp.method == crate::icp::Method::PointToPlane { mv.icp.normal_neighbours.max(3) } else { 0 };
+        let mut target = crate::icp::Target::new(&model, k)?;
+        target.orient_normals_towards(&mv.icp.source_viewpoint);
+        let one = crate::icp::IcpConfig { max_iterations: 1, degeneracy_ratio: None, ..mv.icp };
+        Ok(crate::icp::align(&source, &target, &Isometry3::identity(), &one)?.rmse_m)
+    };
+    floor().unwrap_or(0.0)
 }
 
 /// The scans of a set of `n` that an inconsistent pair names: each scan of

@@ -252,6 +252,12 @@ struct CheckReport {
     chi2: Option<f64>,
     /// `moved_m` as a fraction of the source points' RMS radius.
     relative_motion: Option<f64>,
+    /// The match's point-to-plane RMS residual, metres; null when it failed.
+    rmse_m: Option<f64>,
+    /// What a right registration of the two scans leaves: the RMS of their
+    /// noise floors (each scan's two random halves matched at the
+    /// identity), metres.
+    noise_m: f64,
     /// The match moved the points by at most the finest
     /// stage's voxel or 5 % of their RMS radius.
     consistent: bool,
@@ -730,6 +736,8 @@ fn report(
                 angle_deg: c.angle_rad.map(f64::to_degrees),
                 chi2: c.chi2,
                 relative_motion: c.relative_motion,
+                rmse_m: c.rmse_m,
+                noise_m: c.noise_m,
                 consistent: c.consistent,
             })
             .collect(),
