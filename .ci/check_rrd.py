@@ -1,5 +1,5 @@
 """Reads a mission.rrd with Rerun's Python reader (independent of our Rust
-code) and checks the entities the README promises, with their row counts
+code) and checks the entities docs/recording.md promises, with their row counts
 for the hall example (21 cycles, 2 children, 22 stations, a scan and a fix at each — the start is a resection on control)."""
 import sys
 from collections import defaultdict

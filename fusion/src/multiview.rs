@@ -89,7 +89,7 @@ pub struct MultiviewConfig {
     /// shifted it by more than this, metres. Default 0.01: about twice a
     /// match's own σ for LMS-class scans. Smaller thresholds keep the queue
     /// chasing the matches' noise, which walks the whole set away from the
-    /// master scan (measured on the corridor: see the README).
+    /// master scan (measured on the corridor: see BENCHMARKS.md).
     pub moved_translation_m: f64,
     /// … or turned it by more than this, radians. Default 0.05° (8.7e-4).
     pub moved_rotation_rad: f64,

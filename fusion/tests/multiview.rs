@@ -1,6 +1,6 @@
 //! Multi-view matching on simulated drives: the strategies' mechanics in the
 //! well-conditioned `hall`, the seed's Fig. 5 scenario in the `corridor`
-//! (numbers in the README), and bad input.
+//! (numbers in docs/fusion.md), and bad input.
 
 mod corridor;
 
@@ -85,7 +85,7 @@ fn traces_follow_every_icp_run() {
 /// strategy brings every scan within centimetres (about 20× better than
 /// dead reckoning on average) and keeps headings within 0.3°, and
 /// incremental matching's error grows along the corridor. Which strategy
-/// ends best varies with the seed at this level (see the README), so that
+/// ends best varies with the seed at this level (see docs/fusion.md), so that
 /// is reported, not asserted.
 #[test]
 fn corridor_twenty_scans() {

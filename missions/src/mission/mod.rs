@@ -1,8 +1,8 @@
 //! The mission file: raw TOML → validated, unit-converted [`Mission`].
 //!
 //! Keys carry their unit in their name; every problem in a file is reported
-//! at once, each with file:line:column (see the README's mission
-//! reference). This file holds the validated types; [`read`] reads a file
+//! at once, each with file:line:column (see docs/mission.md,
+//! the mission reference). This file holds the validated types; [`read`] reads a file
 //! into them, one function per table, through the span-keeping
 //! [`reader`]; [`diagnostics`] are the problems it finds.
 
@@ -275,8 +275,8 @@ pub struct FusionPlan {
     /// `icp`: a match leaves a direction where odometry put the scan when
     /// its eigenvalue of the normal matrix is below this ratio of the
     /// largest — a pipe's axis and the roll about it — and reports it in
-    /// the links (`degeneracy_ratio`, default 0: off; the sewer uses 1e-3,
-    /// see the README). `cps-icp` does not need it: the CPS prior holds
+    /// the links (`degeneracy_ratio`, default 0: off; the sewer uses 1e-2,
+    /// see docs/fusion.md). `cps-icp` does not need it: the CPS prior holds
     /// the scans and its gate leaves out a match that slid.
     pub degeneracy_ratio: f64,
 }

@@ -1,5 +1,5 @@
 //! The `--json` documents of `predict`, `plan` and `montecarlo`, typed
-//! and versioned (the README's command reference documents each key, and
+//! and versioned (docs/json.md and docs/commands.md document each key, and
 //! `docs/schemas/` their schemas).
 
 use std::io::Write;

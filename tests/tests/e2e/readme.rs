@@ -1,11 +1,11 @@
-//! The examples in README.md and docs/ are real: they parse and mean what
-//! they say.
+//! The examples in docs/ are real: they parse and mean what they say (the
+//! README's commands run in `missions/tests/readme.rs`).
 
 use cps::geom::{Ray, parse_scene_toml};
 use nalgebra::{Point3, Vector3};
 
-fn readme() -> String {
-    std::fs::read_to_string(tests::workspace().join("README.md")).expect("README.md")
+fn mission_doc() -> String {
+    std::fs::read_to_string(tests::workspace().join("docs/mission.md")).expect("docs/mission.md")
 }
 
 fn simulator_doc() -> String {
@@ -14,7 +14,7 @@ fn simulator_doc() -> String {
 
 /// The first ```toml block after `marker`.
 fn toml_block_after(text: &str, marker: &str) -> String {
-    let from = text.find(marker).unwrap_or_else(|| panic!("README lacks '{marker}'"));
+    let from = text.find(marker).unwrap_or_else(|| panic!("the page lacks '{marker}'"));
     let rest = &text[from..];
     let start = rest.find("```toml\n").expect("a toml block") + "```toml\n".len();
     let end = rest[start..].find("```").expect("end of block");
@@ -24,7 +24,7 @@ fn toml_block_after(text: &str, marker: &str) -> String {
 #[test]
 fn scene_file_example_parses() {
     let text = toml_block_after(&simulator_doc(), "A scene file (TOML)");
-    let scene = parse_scene_toml(&text).unwrap_or_else(|e| panic!("README scene example: {e}"));
+    let scene = parse_scene_toml(&text).unwrap_or_else(|e| panic!("docs/simulator.md scene example: {e}"));
     assert_eq!(scene.name(), "lab");
     // On top of the hall: the crate is there, and so is pillar 1.
     let down = scene.cast(&Ray::new(Point3::new(3.0, 4.0, 3.0), -Vector3::z()).expect("ray"), 10.0).expect("hit");
@@ -41,7 +41,7 @@ fn every_key_of_the_mission_reference_is_read() {
     // each other's settings (`hops` without parent hops, `[backend.serial]`
     // with the simulator): without those, the reader accepts every key and
     // only the plan (a 1 km route in the hall) breaks constraints.
-    let text = toml_block_after(&readme(), "## Mission file reference");
+    let text = toml_block_after(&mission_doc(), "# Mission file reference");
     let mut skipping = false;
     let kept: Vec<&str> = text
         .lines()
@@ -63,36 +63,6 @@ fn every_key_of_the_mission_reference_is_read() {
             p.contains(": plan: step ") || p.contains(": plan: … and "),
             "the reference has a key the reader refuses: {p}"
         );
-    }
-}
-
-/// The README's `match` example runs as written from the workspace root:
-/// its input ships with the repository (`data/3dtk_dat`).
-#[test]
-fn the_match_example_runs_on_the_shipped_scans() {
-    let line = readme()
-        .lines()
-        .find(|l| l.starts_with("cps-survey match data/"))
-        .expect("README: a `cps-survey match data/…` example")
-        .to_string();
-    let dir = tempfile::tempdir().expect("temp dir");
-    let out = dir.path().join("matched");
-    let mut args: Vec<std::ffi::OsString> = Vec::new();
-    let mut words = line.split_whitespace().skip(1).peekable();
-    while let Some(word) = words.next() {
-        match word {
-            "--out" => {
-                words.next();
-                args.extend(["--out".into(), out.clone().into_os_string()]);
-            }
-            w if w.starts_with("data/") => args.push(tests::workspace().join(w).into_os_string()),
-            w => args.push(w.into()),
-        }
-    }
-    let run = tests::cps_survey(args);
-    assert_eq!(run.code, 0, "{line}: {}", run.stderr);
-    for file in ["poses.json", "links.csv", "cloud.ply", "cloud.las"] {
-        assert!(out.join(file).is_file(), "{line}: no {file}");
     }
 }
 

@@ -1,5 +1,5 @@
 //! `mission.rrd` read back with Rerun's own decoder: every entity the
-//! README promises is there, with one row per event that logs it.
+//! docs/recording.md promises is there, with one row per event that logs it.
 
 use tests::{cps_survey, example, rrd_rows};
 
