@@ -8,6 +8,21 @@ use std::path::{Path, PathBuf};
 use clap::Parser;
 use missions::cli::{Cli, exit_code, run};
 
+/// An edit of an example's text that must find what it replaces: a test
+/// whose example changed under it fails naming the text, instead of
+/// running on the unedited example.
+pub trait Edit {
+    /// `self` with every `from` replaced by `to`; panics when there is none.
+    fn edit(&self, from: &str, to: &str) -> String;
+}
+
+impl Edit for str {
+    fn edit(&self, from: &str, to: &str) -> String {
+        assert!(self.contains(from), "the text to edit has no `{from}`");
+        self.replace(from, to)
+    }
+}
+
 /// The workspace root.
 pub fn workspace() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).parent().map(Path::to_path_buf).unwrap_or_default()
@@ -31,8 +46,8 @@ pub fn hall_first_leg(hall_text: &str) -> String {
     assert!(hall_text.contains(HALL_ROUTE), "hall.toml's route changed: update HALL_ROUTE");
     assert!(hall_text.contains(HALL_CONTROL_AT), "hall.toml's control_at changed: update HALL_CONTROL_AT");
     hall_text
-        .replace(HALL_ROUTE, "route_m = [[1.5, 4.2, 1.5], [26.7, 4.2, 1.5]]")
-        .replace(HALL_CONTROL_AT, "control_at = \"start-end\"")
+        .edit(HALL_ROUTE, "route_m = [[1.5, 4.2, 1.5], [26.7, 4.2, 1.5]]")
+        .edit(HALL_CONTROL_AT, "control_at = \"start-end\"")
 }
 
 /// A mission file in its own temporary directory, removed when dropped.

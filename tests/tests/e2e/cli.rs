@@ -1,6 +1,7 @@
 //! `cps-survey predict` and `validate` end to end.
 
 use serde_json::Value;
+use tests::Edit;
 use tests::{cps_survey, example, temp_mission};
 
 fn json(run: &tests::Run) -> Value {
@@ -100,7 +101,7 @@ fn the_table_has_one_row_per_cycle_and_a_summary() {
 #[test]
 fn failing_acceptance_exits_1() {
     let text = std::fs::read_to_string(example("paper-1km.toml")).expect("read");
-    let strict = temp_mission(&text.replace("max_final_sigma_xy_m = 0.25", "max_final_sigma_xy_m = 0.01"));
+    let strict = temp_mission(&text.edit("max_final_sigma_xy_m = 0.25", "max_final_sigma_xy_m = 0.01"));
     let run = cps_survey(["predict".into(), strict.path.clone().into_os_string()]);
     assert_eq!(run.code, 1);
     assert!(run.stdout.contains("FAIL"));

@@ -4,6 +4,7 @@
 //! scan-station lists, the pitching head and a scene file.
 
 use serde_json::Value;
+use tests::Edit;
 use tests::{cps_survey, example, temp_mission, workspace};
 
 fn json_file(path: &std::path::Path) -> Value {
@@ -36,7 +37,7 @@ fn on_scene(scene: &str, cloud: &std::path::Path, tolerance_m: f64) -> f64 {
 #[test]
 fn hall_fusion_modes_compare() {
     let text = std::fs::read_to_string(example("hall.toml")).expect("hall.toml");
-    let mission = temp_mission(&text.replace("[output]", "[fusion]\nmode = \"cps-icp\"\n\n[output]"));
+    let mission = temp_mission(&text.edit("[output]", "[fusion]\nmode = \"cps-icp\"\n\n[output]"));
     let dir = tempfile::tempdir().expect("tempdir");
     let run = tests::run_mission(&mission.path, dir.path());
     assert_eq!(run.code, 0, "{}\n{}", run.stdout, run.stderr);
@@ -141,7 +142,7 @@ fn hall_fusion_modes_compare() {
 #[test]
 fn corridor_icp_example() {
     let text = std::fs::read_to_string(example("corridor-icp.toml")).expect("corridor-icp.toml");
-    let mission = temp_mission(&text.replace("slices = 180", "slices = 120"));
+    let mission = temp_mission(&text.edit("slices = 180", "slices = 120"));
     let dir = tempfile::tempdir().expect("tempdir");
     let run = tests::run_mission(&mission.path, dir.path());
     assert_eq!(run.code, 0, "{}\n{}", run.stdout, run.stderr);
@@ -201,7 +202,7 @@ fn building_fusion_modes_compare() {
 #[test]
 fn building_example() {
     let text = std::fs::read_to_string(example("building.toml")).expect("building.toml");
-    let mission = temp_mission(&text.replace("slices = 180", "slices = 45"));
+    let mission = temp_mission(&text.edit("slices = 180", "slices = 45"));
     let dir = tempfile::tempdir().expect("tempdir");
     let run = tests::run_mission(&mission.path, dir.path());
     assert_eq!(run.code, 0, "{}\n{}", run.stdout, run.stderr);
@@ -231,9 +232,9 @@ fn scan_stations_pitching_head_and_scene_file() {
     .expect("scene file");
     let text = std::fs::read_to_string(example("hall.toml")).expect("hall.toml");
     let text = text
-        .replace("scene = \"hall\"", "scene_file = \"lab.toml\"")
-        .replace("every_n_stations = 1", "stations = [0, 3, 7]\nhead = \"pitching\"")
-        .replace("slices = 180", "slices = 32");
+        .edit("scene = \"hall\"", "scene_file = \"lab.toml\"")
+        .edit("every_n_stations = 1", "stations = [0, 3, 7]\nhead = \"pitching\"")
+        .edit("slices = 180", "slices = 32");
     let mission = dir.path().join("m.toml");
     std::fs::write(&mission, text).expect("mission");
     let out = dir.path().join("run");
@@ -287,7 +288,7 @@ fn a_broken_scene_file_names_both_files() {
     .expect("scene file");
     let text = std::fs::read_to_string(example("hall.toml")).expect("hall.toml");
     let mission = dir.path().join("m.toml");
-    std::fs::write(&mission, text.replace("scene = \"hall\"", "scene_file = \"bad.toml\"")).expect("mission");
+    std::fs::write(&mission, text.edit("scene = \"hall\"", "scene_file = \"bad.toml\"")).expect("mission");
     let run = cps_survey(["validate".into(), mission.clone().into_os_string()]);
     assert_eq!(run.code, 2);
     let line = text.lines().position(|l| l.starts_with("scene = ")).expect("scene line") + 1;
@@ -300,7 +301,7 @@ fn a_broken_scene_file_names_both_files() {
 #[test]
 fn a_robot_alone_refuses_what_needs_the_cps() {
     let text = std::fs::read_to_string(example("corridor-icp.toml")).expect("corridor-icp.toml");
-    let mission = temp_mission(&text.replace("mode = \"icp\"", "mode = \"cps-icp\""));
+    let mission = temp_mission(&text.edit("mode = \"icp\"", "mode = \"cps-icp\""));
     let run = cps_survey(["validate".into(), mission.path.clone().into_os_string()]);
     assert_eq!(run.code, 2);
     assert!(run.stderr.contains("fusion.mode: cps-icp needs CPS poses"), "{}", run.stderr);
@@ -480,9 +481,9 @@ fn sewer_example_fits_the_pipe_and_finds_the_brick() {
 fn a_pipe_that_cannot_be_fitted_fails_the_acceptance() {
     let text = std::fs::read_to_string(example("sewer.toml")).expect("sewer.toml");
     let text = text
-        .replace("axis_from_m = [0.0, 0.0, 0.5]", "axis_from_m = [0.0, 30.0, 0.5]")
-        .replace("axis_to_m = [20.0, 0.0, 0.5]", "axis_to_m = [20.0, 30.0, 0.5]")
-        .replace("slices = 180", "slices = 24");
+        .edit("axis_from_m = [0.0, 0.0, 0.5]", "axis_from_m = [0.0, 30.0, 0.5]")
+        .edit("axis_to_m = [20.0, 0.0, 0.5]", "axis_to_m = [20.0, 30.0, 0.5]")
+        .edit("slices = 180", "slices = 24");
     let mission = temp_mission(&text);
     let dir = tempfile::tempdir().expect("tempdir");
     let run = tests::run_mission(&mission.path, dir.path());

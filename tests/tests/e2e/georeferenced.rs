@@ -8,6 +8,7 @@
 //! point came from, when, and (E57) from where.
 
 use std::path::Path;
+use tests::Edit;
 
 use serde_json::Value;
 use tests::{example, run_mission};
@@ -56,7 +57,7 @@ fn mission(dir: &Path, o: [f64; 3], formats: &str, extra: &str) -> std::path::Pa
     let route = "[[1.5, 4.2, 1.5], [37.5, 4.2, 1.5], [37.5, 7.8, 1.5], [1.5, 7.8, 1.5]]";
     assert!(hall.contains(route) && hall.contains("scene = \"hall\""), "hall.toml changed: update this test");
     let text = hall
-        .replace(
+        .edit(
             route,
             &format!(
                 "[[{}, {}, {}], [{}, {}, {}]]",
@@ -68,10 +69,10 @@ fn mission(dir: &Path, o: [f64; 3], formats: &str, extra: &str) -> std::path::Pa
                 1.5 + o[2]
             ),
         )
-        .replace("control_at = [0, 10, 21]", "")
-        .replace("scene = \"hall\"", "scene_file = \"room.toml\"")
-        .replace("slices = 180", "slices = 12")
-        .replace("formats = [\"ply\"]", &format!("formats = {formats}"));
+        .edit("control_at = [0, 10, 21]", "")
+        .edit("scene = \"hall\"", "scene_file = \"room.toml\"")
+        .edit("slices = 180", "slices = 12")
+        .edit("formats = [\"ply\"]", &format!("formats = {formats}"));
     let text = text.split("[[control]]").next().expect("before the control");
     let path = dir.join("m.toml");
     std::fs::write(&path, format!("{text}\n{extra}")).expect("mission");

@@ -2,6 +2,7 @@
 //! a message naming the file, field or flag — no panic, no abort, no write
 //! outside the run directory. The files are made here.
 
+use tests::Edit;
 use tests::{cps_survey, example, temp_mission};
 
 #[test]
@@ -59,8 +60,8 @@ fn a_mission_name_is_a_name_not_a_path() {
 fn a_route_of_a_billion_stations_is_refused_at_once() {
     let text = std::fs::read_to_string(example("paper-1km.toml"))
         .expect("example")
-        .replace("[1000.0, 0.0, 0.0]]", "[1e7, 0.0, 0.0]]")
-        .replace("stride_m = 10.0", "stride_m = 0.01");
+        .edit("[1000.0, 0.0, 0.0]]", "[1e7, 0.0, 0.0]]")
+        .edit("stride_m = 10.0", "stride_m = 0.01");
     let mission = temp_mission(&text);
     let run = cps_survey(["validate", mission.path.to_str().expect("utf-8")]);
     assert_eq!(run.code, 2);
@@ -123,7 +124,7 @@ fn a_team_of_two_hundred_thousand_children_is_refused() {
     let names: Vec<String> = (0..200_000).map(|i| format!("\"c{i}\"")).collect();
     let text = std::fs::read_to_string(example("indoor-compact.toml"))
         .expect("example")
-        .replace("children = [\"left\", \"right\"]", &format!("children = [{}]", names.join(", ")));
+        .edit("children = [\"left\", \"right\"]", &format!("children = [{}]", names.join(", ")));
     assert!(text.contains("\"c199999\""));
     let mission = temp_mission(&text);
     let run = cps_survey(["validate", mission.path.to_str().expect("utf-8")]);
@@ -213,7 +214,7 @@ fn a_journal_torn_inside_a_multi_byte_character_resumes() {
     let dir = tempfile::tempdir().expect("tempdir");
     let text = std::fs::read_to_string(example("indoor-compact.toml"))
         .expect("example")
-        .replace("children = [\"left\", \"right\"]", "children = [\"gauche-é\", \"droite-ü\"]");
+        .edit("children = [\"left\", \"right\"]", "children = [\"gauche-é\", \"droite-ü\"]");
     assert!(text.contains("gauche-é"));
     let mission = temp_mission(&text);
     let out = dir.path().join("r");
@@ -417,7 +418,7 @@ fn snooping_removals_are_reported_and_left_out_of_the_misclosures() {
     let mission = off.join("mission.toml");
     let text = std::fs::read_to_string(&mission).expect("mission");
     assert!(text.contains("position_m = [39.9, 3.0, 1.2]"), "hall.toml's control point E1 moved");
-    std::fs::write(&mission, text.replace("position_m = [39.9, 3.0, 1.2]", "position_m = [39.88, 3.0, 1.2]"))
+    std::fs::write(&mission, text.edit("position_m = [39.9, 3.0, 1.2]", "position_m = [39.88, 3.0, 1.2]"))
         .expect("mission");
     let v = json(&off, &[]);
     let removed = v["removed_coordinates"].as_array().expect("removed_coordinates");

@@ -8,6 +8,7 @@
 //! the route.
 
 use serde_json::Value;
+use tests::Edit;
 use tests::cps_survey;
 
 use super::journal_v1::{copy_of, fixture_named, json, resumes_to};
@@ -94,8 +95,8 @@ fn a_new_run_fuses_from_the_chain_as_version_2_did_from_every_cross_covariance()
 /// Stretches paper-1km to `stations` stride lengths, with the scans small.
 fn stretched(stations: usize) -> String {
     let text = std::fs::read_to_string(tests::example("paper-1km.toml")).expect("paper-1km");
-    text.replace("[1000.0, 0.0, 0.0]", &format!("[{}.0, 0.0, 0.0]", 10 * stations))
-        .replace("max_final_sigma_xy_m = 0.25", "max_final_sigma_xy_m = 1000000.0")
+    text.edit("[1000.0, 0.0, 0.0]", &format!("[{}.0, 0.0, 0.0]", 10 * stations))
+        .edit("max_final_sigma_xy_m = 0.25", "max_final_sigma_xy_m = 1000000.0")
         + "\n[scan]\nslices = 2\n\n[output]\nrerun = false\n"
 }
 

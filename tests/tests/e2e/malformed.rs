@@ -1,6 +1,7 @@
 //! A corpus of malformed missions: each must exit 2 with a diagnostic at the
 //! right file:line:column naming the field.
 
+use tests::Edit;
 use tests::{cps_survey, temp_mission};
 
 const GOOD: &str = r#"[mission]
@@ -669,7 +670,7 @@ fn a_mistyped_table_is_one_problem_not_one_per_missing_key() {
 #[test]
 fn several_problems_are_reported_at_once() {
     let mission = temp_mission(
-        &GOOD.replace("stride_m = 10.0", "stride_m = 0").replace("sigma_hz_arcsec = 5.0", "sigma_hz_arcsec = -5"),
+        &GOOD.edit("stride_m = 10.0", "stride_m = 0").edit("sigma_hz_arcsec = 5.0", "sigma_hz_arcsec = -5"),
     );
     let run = cps_survey(["predict".into(), mission.path.clone().into_os_string()]);
     assert_eq!(run.code, 2);

@@ -9,6 +9,7 @@ use missions::planning::Planned;
 use planner::montecarlo::execute;
 use rand::SeedableRng;
 use serde_json::Value;
+use tests::Edit;
 use tests::{cps_survey, example, temp_mission};
 
 fn json(args: &[&str]) -> Value {
@@ -272,8 +273,7 @@ fn a_planted_blunder_in_a_simulated_run_is_found_and_removed() {
 #[test]
 fn plan_lists_the_sightings_and_optimizes_for_every_station() {
     let text = std::fs::read_to_string(example("hall.toml")).expect("hall.toml");
-    let text =
-        text.replace("max_final_sigma_xy_m = 0.05", "max_final_sigma_xy_m = 0.05\nmax_station_sigma_xy_m = 0.004");
+    let text = text.edit("max_final_sigma_xy_m = 0.05", "max_final_sigma_xy_m = 0.05\nmax_station_sigma_xy_m = 0.004");
     let mission = temp_mission(&text);
     let path = mission.path.to_str().expect("utf-8");
     let p = json(&["plan", "--json", path]);
@@ -443,8 +443,8 @@ fn a_plan_the_adjustment_cannot_take_keeps_its_prediction() {
     // tolerance on every station cannot pass unchecked.
     let text = std::fs::read_to_string(example("paper-1km.toml")).expect("paper-1km.toml");
     let text = text
-        .replace("[1000.0, 0.0, 0.0]]", "[500000.0, 0.0, 0.0]]")
-        .replace("max_final_sigma_xy_m = 0.25", "max_final_sigma_xy_m = 1000000.0\nmax_station_sigma_xy_m = 1000000.0");
+        .edit("[1000.0, 0.0, 0.0]]", "[500000.0, 0.0, 0.0]]")
+        .edit("max_final_sigma_xy_m = 0.25", "max_final_sigma_xy_m = 1000000.0\nmax_station_sigma_xy_m = 1000000.0");
     let mission = temp_mission(&text);
     let run = cps_survey(["predict", "--json", mission.path.to_str().expect("utf-8")]);
     assert_eq!(run.code, 1, "{}", run.stderr);

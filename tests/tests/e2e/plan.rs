@@ -3,6 +3,7 @@
 //! Monte Carlo, and the seed's 1 km example.
 
 use serde_json::Value;
+use tests::Edit;
 use tests::{cps_survey, example, temp_mission};
 
 fn plan_json(path: &std::path::Path, extra: &[&str]) -> (u8, Value) {
@@ -78,7 +79,7 @@ fn hall_plan_reports_the_crates_at_step_12_and_the_optimized_plan_holds() {
 #[test]
 fn building_as_written_with_the_inner_child_on_the_wall() {
     let text = std::fs::read_to_string(example("building.toml")).expect("example");
-    let text = text.replace("[[10.0, 4.0, -0.5], [10.0, -10.0, -0.5]]", "[[10.0, 5.0, -0.5], [10.0, -10.0, -0.5]]");
+    let text = text.edit("[[10.0, 4.0, -0.5], [10.0, -10.0, -0.5]]", "[[10.0, 5.0, -0.5], [10.0, -10.0, -0.5]]");
     let mission = temp_mission(&text);
     let (code, report) = plan_json(&mission.path, &[]);
     assert_eq!(code, 1);
@@ -171,10 +172,10 @@ fn plot_draws_the_curves_the_scene_the_ellipses_and_the_violation() {
 fn a_numerically_singular_prediction_is_told_as_such() {
     let text = std::fs::read_to_string(example("paper-1km.toml"))
         .expect("paper-1km.toml")
-        .replace("[1000.0, 0.0, 0.0]]", "[100000.0, 0.0, 0.0]]")
-        .replace("max_final_sigma_xy_m = 0.25", "max_final_sigma_xy_m = 1000000.0")
-        .replace("sigma_hz_arcsec = 5.0", "sigma_hz_arcsec = 50.0")
-        .replace("sigma_v_arcsec = 5.0", "sigma_v_arcsec = 50.0");
+        .edit("[1000.0, 0.0, 0.0]]", "[100000.0, 0.0, 0.0]]")
+        .edit("max_final_sigma_xy_m = 0.25", "max_final_sigma_xy_m = 1000000.0")
+        .edit("sigma_hz_arcsec = 5.0", "sigma_hz_arcsec = 50.0")
+        .edit("sigma_v_arcsec = 5.0", "sigma_v_arcsec = 50.0");
     let mission = temp_mission(&text);
     let run = cps_survey(["predict", mission.path.to_str().expect("utf-8")]);
     assert_eq!(run.code, 0, "{}", run.stderr);

@@ -5,6 +5,7 @@
 //! the journal.
 
 use std::collections::BTreeMap;
+use tests::Edit;
 
 use serde_json::Value;
 use tests::cps_survey;
@@ -123,14 +124,14 @@ fn an_interrupted_run_exports_what_it_measured() {
 #[test]
 fn ros2_bag_in_the_mission_writes_rosbag2_in_the_run() {
     let text = std::fs::read_to_string(fixture_named("journal-v2").join("mission.toml")).expect("mission");
-    let mission = tests::temp_mission(&text.replace("rerun = false", "rerun = false\nros2_bag = true"));
+    let mission = tests::temp_mission(&text.edit("rerun = false", "rerun = false\nros2_bag = true"));
     let run = mission.path.with_file_name("run");
     let done = tests::run_mission(&mission.path, &run);
     assert_eq!(done.code, 0, "{}", done.stderr);
     assert!(done.stdout.contains("rosbag2/"), "{}", done.stdout);
     let topics = read_bag(&run.join("rosbag2"));
     assert_eq!(topics["/cps/scan"].1.len(), 4);
-    let bad = tests::temp_mission(&text.replace("rerun = false", "rerun = false\nros2_bag = \"yes\""));
+    let bad = tests::temp_mission(&text.edit("rerun = false", "rerun = false\nros2_bag = \"yes\""));
     let refused = tests::run_mission(&bad.path, &bad.path.with_file_name("run"));
     assert_eq!(refused.code, 2);
     assert!(refused.stderr.contains("output.ros2_bag"), "{}", refused.stderr);

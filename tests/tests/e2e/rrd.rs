@@ -1,6 +1,7 @@
 //! `mission.rrd` read back with Rerun's own decoder: every entity the
 //! docs/recording.md promises is there, with one row per event that logs it.
 
+use tests::Edit;
 use tests::{cps_survey, example, rrd_rows};
 
 #[test]
@@ -98,7 +99,7 @@ fn plan_rrd_holds_the_plan_its_violation_and_the_optimized_plan() {
 #[test]
 fn rerun_false_writes_no_recording() {
     let text = std::fs::read_to_string(example("hall.toml")).expect("hall.toml");
-    let mission = tests::temp_mission(&text.replace("formats = [\"ply\"]", "formats = [\"ply\"]\nrerun = false"));
+    let mission = tests::temp_mission(&text.edit("formats = [\"ply\"]", "formats = [\"ply\"]\nrerun = false"));
     let dir = tempfile::tempdir().expect("tempdir");
     let run = tests::run_mission(&mission.path, dir.path());
     assert_eq!(run.code, 0, "{}", run.stderr);
@@ -109,7 +110,7 @@ fn rerun_false_writes_no_recording() {
 #[test]
 fn log_icp_iterations_puts_every_iteration_on_its_own_timeline() {
     let text = std::fs::read_to_string(example("hall.toml")).expect("hall.toml");
-    let text = text.replace("[output]", "[fusion]\nmode = \"icp\"\n\n[output]");
+    let text = text.edit("[output]", "[fusion]\nmode = \"icp\"\n\n[output]");
     let mission = tests::temp_mission(&text);
     let dir = tempfile::tempdir().expect("tempdir");
     let run = cps_survey([

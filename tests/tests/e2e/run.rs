@@ -4,6 +4,7 @@
 //! is never overwritten.
 
 use serde_json::Value;
+use tests::Edit;
 use tests::{example, temp_mission};
 
 #[test]
@@ -105,8 +106,8 @@ fn hall_runs_end_to_end() {
 fn acceptance_failure_exits_1_with_outputs_written() {
     let text = std::fs::read_to_string(example("hall.toml")).expect("hall.toml");
     let strict = text
-        .replace("max_final_sigma_xy_m = 0.05", "max_final_sigma_xy_m = 0.0001")
-        .replace("every_n_stations = 1", "every_n_stations = 0");
+        .edit("max_final_sigma_xy_m = 0.05", "max_final_sigma_xy_m = 0.0001")
+        .edit("every_n_stations = 1", "every_n_stations = 0");
     let mission = temp_mission(&strict);
     let dir = tempfile::tempdir().expect("tempdir");
     let run = tests::run_mission(&mission.path, dir.path());
@@ -130,8 +131,8 @@ fn odometry_settings_drive_the_simulator() {
     let truth_x = |extra: &str| -> Vec<f64> {
         let mission = temp_mission(
             &tests::hall_first_leg(&text)
-                .replace("every_n_stations = 1", "every_n_stations = 0")
-                .replace("seed = 1", &format!("seed = 1\n{extra}")),
+                .edit("every_n_stations = 1", "every_n_stations = 0")
+                .edit("seed = 1", &format!("seed = 1\n{extra}")),
         );
         let dir = tempfile::tempdir().expect("tempdir");
         let run = tests::run_mission(&mission.path, dir.path());
@@ -153,7 +154,7 @@ fn odometry_settings_drive_the_simulator() {
     for (k, x) in stations.iter().enumerate() {
         assert!((x - (1.5 + 3.6 * k as f64)).abs() < 0.01, "station {k}: {x}");
     }
-    let long = perfect.replace("odometry_scale_error_percent = 0", "odometry_scale_error_percent = 2");
+    let long = perfect.edit("odometry_scale_error_percent = 0", "odometry_scale_error_percent = 2");
     for (k, x) in truth_x(&long).iter().enumerate().skip(1) {
         assert!((x - (1.5 + 3.6 * k as f64 + 0.02 * 3.6)).abs() < 0.01, "station {k}: {x}");
     }
@@ -167,8 +168,8 @@ fn odometry_settings_drive_the_simulator() {
 fn empty_scans_keep_their_cps_pose_in_cps_icp_fusion() {
     let text = std::fs::read_to_string(example("paper-1km.toml"))
         .expect("paper-1km")
-        .replace("[1000.0, 0.0, 0.0]", "[120.0, 0.0, 0.0]")
-        .replace("max_final_sigma_xy_m = 0.25", "max_final_sigma_xy_m = 1000000.0")
+        .edit("[1000.0, 0.0, 0.0]", "[120.0, 0.0, 0.0]")
+        .edit("max_final_sigma_xy_m = 0.25", "max_final_sigma_xy_m = 1000000.0")
         + "\n[scan]\nslices = 90\n\n[output]\nrerun = false\n";
     let mission = tests::temp_mission(&text);
     let run = mission.path.with_file_name("run");

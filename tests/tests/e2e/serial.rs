@@ -4,6 +4,7 @@
 //! the same mission on the `sim` backend and with the emulator's truth.
 
 use std::path::Path;
+use tests::Edit;
 
 use missions::Mission;
 use missions::commands::emulate::{EmulatorFault, backend_toml, start};
@@ -14,9 +15,9 @@ use tests::{cps_survey, example, run_mission, temp_mission};
 /// The hall example with fewer slices per scan (the test's time), on `kind`.
 fn hall(kind: &str, extra_backend: &str) -> String {
     let text = std::fs::read_to_string(example("hall.toml")).expect("hall.toml");
-    text.replace("slices = 180", "slices = 24")
-        .replace("kind = \"sim\"", &format!("kind = \"{kind}\"\n{extra_backend}"))
-        .replace("[output]\nformats = [\"ply\"]", "[output]\nformats = [\"ply\"]\nrerun = false")
+    text.edit("slices = 180", "slices = 24")
+        .edit("kind = \"sim\"", &format!("kind = \"{kind}\"\n{extra_backend}"))
+        .edit("[output]\nformats = [\"ply\"]", "[output]\nformats = [\"ply\"]\nrerun = false")
 }
 
 fn report(dir: &Path) -> Value {
