@@ -302,3 +302,33 @@ fn freed_points_agree_with_an_adjustment_without_the_prior() {
         }
     }
 }
+
+/// The normal matrix's pattern is counted from `columns_into` before any
+/// group is linearised: it must give every group's columns exactly as the
+/// linearisation does (readings, station priors, point priors; a removed
+/// scalar left out).
+#[test]
+fn the_counted_columns_are_the_linearised_ones() {
+    use cps::batch::{Layout, Source};
+    for seed in [1, 2, 3] {
+        let (network, stations, points) = network(seed);
+        let layout = Layout::new(&network);
+        let mut groups = network.groups();
+        if let Some(g) = groups.iter_mut().find(|g| matches!(g.source, Source::PointPrior(_))) {
+            g.set_active(0, false);
+        }
+        let mut columns = Vec::new();
+        let mut kinds = [0usize; 3];
+        for g in &groups {
+            network.columns_into(g, &layout, &mut columns);
+            let lin = network.linearise(g, &layout, &stations, &points).expect("linearises");
+            assert_eq!(columns, lin.columns, "{:?}", g.source);
+            kinds[match g.source {
+                Source::Reading(_) => 0,
+                Source::StationPrior(_) => 1,
+                Source::PointPrior(_) => 2,
+            }] += 1;
+        }
+        assert!(kinds[0] > 0 && kinds[2] > 0, "seed {seed}: {kinds:?}");
+    }
+}

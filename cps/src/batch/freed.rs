@@ -100,15 +100,15 @@ pub fn freed_points(
                     if nr.point != p {
                         continue;
                     }
-                    let active: Vec<usize> = (0..group.components.len()).filter(|&i| group.active[i]).collect();
+                    let active: Vec<usize> = group.active_positions().collect();
                     if active.is_empty() {
                         continue;
                     }
                     let (computed, jac) = observe_with_jacobians(&solution.stations[nr.station], &given)?;
                     let full = nr.reading.minus(&computed);
                     let m = active.len();
-                    let rows: Vec<usize> = active.iter().map(|&a| group.components[a]).collect();
-                    let cov = DMatrix::from_fn(m, m, |i, j| group.covariance[(active[i], active[j])]);
+                    let rows: Vec<usize> = active.iter().map(|&a| group.component(a)).collect();
+                    let cov = DMatrix::from_fn(m, m, |i, j| group.covariance(network, active[i], active[j]));
                     let Some(w) = cov.try_inverse() else { continue };
                     let v = nalgebra::DVector::from_iterator(m, rows.iter().map(|&r| full[r]));
                     let jp = DMatrix::from_fn(m, 3, |i, c| jac.wrt_child[(rows[i], c)]);
@@ -139,7 +139,7 @@ pub fn freed_points(
                     _ => None,
                 }
             }
-            (Some(prior), Some(c)) if prior_group.is_some_and(|g| g.active.iter().all(|a| *a)) => {
+            (Some(prior), Some(c)) if prior_group.is_some_and(|g| g.active_positions().count() == g.len()) => {
                 // Weighted: the rank-3 downdate.
                 let q_pp = q_block(c);
                 let q_pp = 0.5 * (q_pp + q_pp.transpose());

@@ -219,18 +219,29 @@ pub fn adjust_without(network: &Network, options: &AdjustOptions, left_out: &[(S
         GlobalTest { statistic: vtpv, dof: redundancy, alpha: options.alpha, lower, upper, passed }
     };
     let mut detection = None;
-    let scalars: usize = groups.iter().map(|g| g.active.iter().filter(|a| **a).count()).sum();
+    let scalars: usize = groups.iter().map(|g| g.active_positions().count()).sum();
     if scalars < layout.len() {
         return Err(CpsError::DegenerateGeometry {
             what: format!("{scalars} observations for {} unknowns", layout.len()),
             condition: f64::INFINITY,
         });
     }
-    let mut solution = solve::solve(network, &layout, &groups, options.max_iterations)?;
+    // The ordering and factor pattern, shared by every re-adjustment.
+    let mut analysis = None;
+    let mut solution = solve::solve_with(
+        network,
+        &layout,
+        &groups,
+        options.max_iterations,
+        network.stations.iter().map(|s| s.pose).collect(),
+        network.points.iter().map(|p| p.position).collect(),
+        &mut analysis,
+    )?;
     loop {
-        let scalars: usize = groups.iter().map(|g| g.active.iter().filter(|a| **a).count()).sum();
+        let scalars: usize = groups.iter().map(|g| g.active_positions().count()).sum();
         let inverse = solution.factor.selected_inverse();
-        let (observations, vtpv) = statistics::statistics(&groups, &layout, &station_of, &solution, &inverse, lambda0);
+        let (observations, vtpv) =
+            statistics::statistics(network, &groups, &layout, &station_of, &solution, &inverse, lambda0)?;
         let redundancy = scalars - layout.len();
         // The model test of every observation, before snooping removes any.
         let detection = *detection.get_or_insert_with(|| test(vtpv, redundancy));
@@ -246,15 +257,15 @@ pub fn adjust_without(network: &Network, options: &AdjustOptions, left_out: &[(S
             && let Some((o, w)) = worst.filter(|(_, w)| w.abs() > w_critical)
         {
             let g = groups.iter().position(|g| g.source == o.source).unwrap_or(0);
-            let pos = groups[g].components.iter().position(|c| *c == o.component).unwrap_or(0);
+            let pos = groups[g].position(o.component).unwrap_or(0);
             let mut trial = groups.clone();
-            trial[g].active[pos] = false;
+            trial[g].set_active(pos, false);
             // Removing it must leave every unknown determined; the
             // adjustment without it starts from the one with it (linear in
             // the network per removal, not a restart from the approximate
             // values).
             let (stations, points) = (solution.stations.clone(), solution.points.clone());
-            match solve::solve_from(network, &layout, &trial, options.max_iterations, stations, points) {
+            match solve::solve_with(network, &layout, &trial, options.max_iterations, stations, points, &mut analysis) {
                 Ok(next) => {
                     removed.push(Removal { source: o.source, component: o.component, w, residual: o.residual });
                     drop(inverse);

@@ -7,21 +7,26 @@
 //! pairs observed together cost no dense inverse and memory stays linear in
 //! the network.
 
-use faer::dyn_stack::{MemBuffer, MemStack};
-use faer::sparse::linalg::SupernodalThreshold;
-use faer::sparse::linalg::cholesky::{
-    CholeskySymbolicParams, SymbolicCholeskyRaw, SymmetricOrdering, factorize_symbolic_cholesky,
-};
+use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
-use faer::{Par, Side};
 
-/// The lower triangle of a symmetric matrix, as summed entries.
+/// The lower triangle of a symmetric matrix, as summed entries, bucketed
+/// by column as they are added: with the column counts known up front
+/// ([`SymmetricBuilder::with_column_counts`]) each entry goes straight to
+/// its place, 12 bytes an entry (a 100,000-cycle route adds some 13
+/// million), and the matrix is compacted where it lies.
 #[derive(Debug, Clone)]
 pub struct SymmetricBuilder {
     n: usize,
-    /// (column, row, value) with row ≥ column: 16 bytes an entry (a
-    /// 100,000-cycle route adds some 17 million).
-    entries: Vec<(u32, u32, f64)>,
+    /// Column c's slots are `start[c]..start[c + 1]`; `next[c]` the first
+    /// free one.
+    start: Vec<usize>,
+    next: Vec<usize>,
+    rows: Vec<u32>,
+    values: Vec<f64>,
+    /// Entries beyond their column's count (none when the counts were
+    /// right): (column, row, value).
+    extra: Vec<(u32, u32, f64)>,
 }
 
 /// Why a factorisation failed.
@@ -36,7 +41,8 @@ pub enum FactorError {
         /// Its pivot relative to its diagonal entry (≤ the tolerance).
         pivot: f64,
     },
-    /// faer could not allocate or order the matrix.
+    /// faer could not allocate or order the matrix, or it is too large for
+    /// 32-bit indices.
     Internal,
 }
 
@@ -47,19 +53,35 @@ pub const PIVOT_TOLERANCE: f64 = 1e-11;
 impl SymmetricBuilder {
     /// An n × n matrix of zeros.
     pub fn new(n: usize) -> Self {
-        Self::with_capacity(n, 0)
+        Self::with_column_counts(&vec![0; n])
     }
 
-    /// An n × n matrix of zeros with room for `entries` additions.
-    pub fn with_capacity(n: usize, entries: usize) -> Self {
-        Self { n, entries: Vec::with_capacity(entries) }
+    /// An n × n matrix of zeros (n = `counts.len()`) with room for
+    /// `counts[c]` additions in column c of the lower triangle (the
+    /// smaller index of each pair added). More are taken too, at the cost
+    /// of a copy.
+    pub fn with_column_counts(counts: &[usize]) -> Self {
+        let n = counts.len();
+        let mut start = vec![0usize; n + 1];
+        for (c, k) in counts.iter().enumerate() {
+            start[c + 1] = start[c] + k;
+        }
+        let total = start[n];
+        Self { n, next: start[..n].to_vec(), start, rows: vec![0; total], values: vec![0.0; total], extra: Vec::new() }
     }
 
     /// Adds `v` at (i, j) and (j, i).
     pub fn add(&mut self, i: usize, j: usize, v: f64) {
         let (r, c) = if i >= j { (i, j) } else { (j, i) };
         debug_assert!(r < self.n && self.n <= u32::MAX as usize);
-        self.entries.push((c as u32, r as u32, v));
+        let slot = self.next[c];
+        if slot < self.start[c + 1] {
+            self.rows[slot] = r as u32;
+            self.values[slot] = v;
+            self.next[c] += 1;
+        } else {
+            self.extra.push((c as u32, r as u32, v));
+        }
     }
 
     /// Makes (i, j) part of the pattern (a structural zero), so that the
@@ -68,101 +90,215 @@ impl SymmetricBuilder {
         self.add(i, j, 0.0);
     }
 
-    /// Factorises the matrix: AMD ordering, simplicial LLᵀ.
-    pub fn factor(mut self) -> Result<Factor, FactorError> {
-        let n = self.n;
-        // Bucketed by column (a counting sort), then each column's few
-        // entries by row: linear in the entries where a comparison sort of
-        // all of them took a tenth of a 10,000-cycle prediction.
-        let mut start = vec![0usize; n + 1];
-        for &(c, _, _) in &self.entries {
-            start[c as usize + 1] += 1;
+    /// The entries beyond their counts put in their columns (a copy).
+    fn take_extra(&mut self) {
+        if self.extra.is_empty() {
+            return;
         }
-        for c in 0..n {
-            start[c + 1] += start[c];
+        let mut counts: Vec<usize> = (0..self.n).map(|c| self.next[c] - self.start[c]).collect();
+        for &(c, _, _) in &self.extra {
+            counts[c as usize] += 1;
         }
-        let mut bucketed: Vec<(u32, f64)> = vec![(0, 0.0); self.entries.len()];
-        let mut next = start.clone();
-        for &(c, r, v) in &self.entries {
-            bucketed[next[c as usize]] = (r, v);
-            next[c as usize] += 1;
-        }
-        drop(std::mem::take(&mut self.entries));
-        let mut col_ptr = vec![0usize; n + 1];
-        let mut row_idx: Vec<usize> = Vec::with_capacity(bucketed.len());
-        let mut values: Vec<f64> = Vec::with_capacity(bucketed.len());
-        for c in 0..n {
-            let column = &mut bucketed[start[c]..start[c + 1]];
-            column.sort_unstable_by_key(|&(r, _)| r);
-            let mut last = None;
-            for &(r, v) in column.iter() {
-                if last == Some(r) {
-                    if let Some(x) = values.last_mut() {
-                        *x += v;
-                    }
-                    continue;
-                }
-                last = Some(r);
-                row_idx.push(r as usize);
-                values.push(v);
-                col_ptr[c + 1] += 1;
+        let mut merged = Self::with_column_counts(&counts);
+        for c in 0..self.n {
+            for k in self.start[c]..self.next[c] {
+                merged.add(self.rows[k] as usize, c, self.values[k]);
             }
         }
-        drop(bucketed);
-        for c in 0..n {
-            col_ptr[c + 1] += col_ptr[c];
+        for &(c, r, v) in &std::mem::take(&mut self.extra) {
+            merged.add(r as usize, c as usize, v);
         }
+        *self = merged;
+    }
+
+    /// The matrix in compressed columns (32-bit indices), each column's
+    /// rows sorted and duplicates summed, compacted where it lies.
+    fn compressed(mut self) -> (Vec<u32>, Vec<u32>, Vec<f64>) {
+        self.take_extra();
+        let n = self.n;
+        let mut col_ptr = vec![0u32; n + 1];
+        let mut w = 0usize;
+        for c in 0..n {
+            let (from, to) = (self.start[c], self.next[c]);
+            // Insertion sort by row of the column's few entries, in both arrays.
+            for k in from + 1..to {
+                let (r, v) = (self.rows[k], self.values[k]);
+                let mut m = k;
+                while m > from && self.rows[m - 1] > r {
+                    self.rows[m] = self.rows[m - 1];
+                    self.values[m] = self.values[m - 1];
+                    m -= 1;
+                }
+                self.rows[m] = r;
+                self.values[m] = v;
+            }
+            let column_start = w;
+            for k in from..to {
+                if w > column_start && self.rows[w - 1] == self.rows[k] {
+                    self.values[w - 1] += self.values[k];
+                } else {
+                    self.rows[w] = self.rows[k];
+                    self.values[w] = self.values[k];
+                    w += 1;
+                }
+            }
+            col_ptr[c + 1] = w as u32;
+        }
+        self.rows.truncate(w);
+        self.values.truncate(w);
+        self.rows.shrink_to_fit();
+        self.values.shrink_to_fit();
+        (col_ptr, self.rows, self.values)
+    }
+
+    /// Factorises the matrix: AMD ordering, simplicial LLᵀ, with 32-bit
+    /// indices throughout. The permuted matrix is built here (its upper
+    /// triangle, which faer's simplicial factorisation reads) and the
+    /// original let go before the factor is allocated: faer's one-call
+    /// path keeps both and a permuted copy in its scratch (issue 35: a
+    /// 100,000-cycle network's peak).
+    pub fn factor(self) -> Result<Factor, FactorError> {
+        self.factor_with(&mut None)
+    }
+
+    /// [`factor`](Self::factor), reusing `analysis` — the ordering and the
+    /// factor's pattern of an earlier matrix — when this one has the same
+    /// pattern (the Gauss–Newton iterations of one network, and data
+    /// snooping's re-adjustments: the ordering and the symbolic
+    /// factorisation were a third of each), and leaving this one's there.
+    pub fn factor_with(self, analysis: &mut Option<Analysis>) -> Result<Factor, FactorError> {
+        use faer::sparse::linalg::amd;
+        use faer::sparse::linalg::cholesky::simplicial;
+        let n = self.n;
+        if n > u32::MAX as usize / 2 || self.rows.len() + self.extra.len() > u32::MAX as usize {
+            return Err(FactorError::Internal);
+        }
+        let (col_ptr, row_idx, values) = self.compressed();
+        let key = {
+            use std::hash::{Hash, Hasher};
+            let mut h = std::collections::hash_map::DefaultHasher::new();
+            col_ptr.hash(&mut h);
+            row_idx.hash(&mut h);
+            (n, row_idx.len(), h.finish())
+        };
+        let reused = analysis.take().filter(|a| a.key == key);
+        // The approximate minimum degree ordering.
+        let (perm_fwd, perm_inv): (std::sync::Arc<[u32]>, std::sync::Arc<[u32]>) = match &reused {
+            Some(a) => (a.perm_fwd.clone(), a.perm_inv.clone()),
+            None => {
+                let mut perm_fwd = vec![0u32; n];
+                let mut perm_inv = vec![0u32; n];
+                let a = SymbolicSparseColMatRef::new_checked(n, n, &col_ptr, None, &row_idx);
+                // (Its rows sorted and distinct: no copy to sort them.)
+                let mut buffer = MemBuffer::try_new(amd::order_scratch::<u32>(n, row_idx.len()))
+                    .map_err(|_| FactorError::Internal)?;
+                amd::order(&mut perm_fwd, &mut perm_inv, a, amd::Control::default(), MemStack::new(&mut buffer))
+                    .map_err(|_| FactorError::Internal)?;
+                (perm_fwd.into(), perm_inv.into())
+            }
+        };
+        // P A Pᵀ's upper triangle, each column's rows sorted.
+        let (p_col_ptr, p_row_idx, p_values) = {
+            let mut counts = vec![0usize; n];
+            for c in 0..n {
+                for &r in &row_idx[col_ptr[c] as usize..col_ptr[c + 1] as usize] {
+                    let (pr, pc) = (perm_inv[r as usize], perm_inv[c]);
+                    counts[pr.max(pc) as usize] += 1;
+                }
+            }
+            let mut next = Vec::with_capacity(n + 1);
+            let mut total = 0u32;
+            next.push(0u32);
+            for k in &counts {
+                total += *k as u32;
+                next.push(total);
+            }
+            drop(counts);
+            let p_col_ptr = next.clone();
+            let mut p_row_idx = vec![0u32; row_idx.len()];
+            let mut p_values = vec![0.0f64; row_idx.len()];
+            for c in 0..n {
+                for k in col_ptr[c] as usize..col_ptr[c + 1] as usize {
+                    let (pr, pc) = (perm_inv[row_idx[k] as usize], perm_inv[c]);
+                    let (row, col) = (pr.min(pc), pr.max(pc) as usize);
+                    let slot = next[col] as usize;
+                    p_row_idx[slot] = row;
+                    p_values[slot] = values[k];
+                    next[col] += 1;
+                }
+            }
+            for c in 0..n {
+                let (from, to) = (p_col_ptr[c] as usize, p_col_ptr[c + 1] as usize);
+                for k in from + 1..to {
+                    let (r, v) = (p_row_idx[k], p_values[k]);
+                    let mut m = k;
+                    while m > from && p_row_idx[m - 1] > r {
+                        p_row_idx[m] = p_row_idx[m - 1];
+                        p_values[m] = p_values[m - 1];
+                        m -= 1;
+                    }
+                    p_row_idx[m] = r;
+                    p_values[m] = v;
+                }
+            }
+            (p_col_ptr, p_row_idx, p_values)
+        };
+        drop((values, row_idx, col_ptr));
+        let upper = SymbolicSparseColMatRef::new_checked(n, n, &p_col_ptr, None, &p_row_idx);
+        let symbolic = match reused {
+            Some(a) => a.symbolic,
+            None => std::sync::Arc::new({
+                let mut etree = vec![0i32; n];
+                let mut col_counts = vec![0u32; n];
+                let mut buffer = MemBuffer::try_new(StackReq::any_of(&[
+                    simplicial::prefactorize_symbolic_cholesky_scratch::<u32>(n, p_row_idx.len()),
+                    simplicial::factorize_simplicial_symbolic_cholesky_scratch::<u32>(n),
+                ]))
+                .map_err(|_| FactorError::Internal)?;
+                let stack = MemStack::new(&mut buffer);
+                let etree =
+                    simplicial::prefactorize_symbolic_cholesky::<u32>(&mut etree, &mut col_counts, upper, stack);
+                simplicial::factorize_simplicial_symbolic_cholesky(upper, etree, &col_counts, stack)
+                    .map_err(|_| FactorError::Internal)?
+            }),
+        };
+        if symbolic.len_val() > u32::MAX as usize {
+            return Err(FactorError::Internal);
+        }
+        let mut l_values = vec![0.0f64; symbolic.len_val()];
+        let result = {
+            let mut buffer = MemBuffer::try_new(simplicial::factorize_simplicial_numeric_llt_scratch::<u32, f64>(n))
+                .map_err(|_| FactorError::Internal)?;
+            simplicial::factorize_simplicial_numeric_llt(
+                &mut l_values,
+                SparseColMatRef::new(upper, &p_values),
+                Default::default(),
+                &symbolic,
+                MemStack::new(&mut buffer),
+            )
+        };
+        // P A Pᵀ's diagonal: each upper column's last entry, when on it.
         let diagonal: Vec<f64> = (0..n)
-            .map(|c| {
-                let range = col_ptr[c]..col_ptr[c + 1];
-                range.clone().find(|&k| row_idx[k] == c).map_or(0.0, |k| values[k])
+            .map(|j| {
+                let (from, to) = (p_col_ptr[j] as usize, p_col_ptr[j + 1] as usize);
+                if to > from && p_row_idx[to - 1] as usize == j { p_values[to - 1] } else { 0.0 }
             })
             .collect();
-        let symbolic_a = SymbolicSparseColMatRef::new_checked(n, n, &col_ptr, None, &row_idx);
-        let params = CholeskySymbolicParams {
-            supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SIMPLICIAL,
-            ..Default::default()
-        };
-        let symbolic = factorize_symbolic_cholesky(symbolic_a, Side::Lower, SymmetricOrdering::Amd, params)
-            .map_err(|_| FactorError::Internal)?;
-        let SymbolicCholeskyRaw::Simplicial(simplicial) = symbolic.raw() else {
-            return Err(FactorError::Internal);
-        };
-        let (perm_fwd, perm_inv) = match symbolic.perm() {
-            Some(p) => {
-                let (fwd, inv) = p.arrays();
-                (fwd.to_vec(), inv.to_vec())
-            }
-            None => ((0..n).collect(), (0..n).collect()),
-        };
-        let mut l_values = vec![0.0f64; symbolic.len_val()];
-        let a = SparseColMatRef::new(symbolic_a, &values);
-        let scratch = symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default());
-        let mut buffer = MemBuffer::try_new(scratch).map_err(|_| FactorError::Internal)?;
-        let result = symbolic.factorize_numeric_llt(
-            &mut l_values,
-            a,
-            Side::Lower,
-            Default::default(),
-            Par::Seq,
-            MemStack::new(&mut buffer),
-            Default::default(),
-        );
-        let l_col_ptr = simplicial.col_ptr().to_vec();
-        let l_row_idx = simplicial.row_idx().to_vec();
+        drop((p_values, p_row_idx, p_col_ptr));
         if let Err(e) = result {
             // The permuted column that failed, back to the caller's order.
             // faer counts the failed pivot from 1.
             let faer::linalg::solvers::LltError::NonPositivePivot { index } = e;
-            let column = perm_fwd.get(index.saturating_sub(1)).copied().unwrap_or(0);
+            let column = perm_fwd.get(index.saturating_sub(1)).map_or(0, |&c| c as usize);
             return Err(FactorError::Singular { column, pivot: 0.0 });
         }
-        let factor = Factor { n, perm_fwd, perm_inv, col_ptr: l_col_ptr, row_idx: l_row_idx, values: l_values };
+        *analysis =
+            Some(Analysis { key, perm_fwd: perm_fwd.clone(), perm_inv: perm_inv.clone(), symbolic: symbolic.clone() });
+        let factor = Factor { n, perm_fwd, perm_inv, symbolic, values: l_values };
         // A positive but vanishing pivot: the unknown is as good as undetermined.
-        for j in 0..n {
-            let original = factor.perm_fwd[j];
-            let d = diagonal[original];
-            let pivot = factor.values[factor.col_ptr[j]].powi(2);
+        for (j, &d) in diagonal.iter().enumerate() {
+            let original = factor.perm_fwd[j] as usize;
+            let pivot = factor.values[factor.col_ptr()[j] as usize].powi(2);
             if d.is_nan() || d <= 0.0 || pivot < PIVOT_TOLERANCE * d {
                 return Err(FactorError::Singular { column: original, pivot: if d > 0.0 { pivot / d } else { 0.0 } });
             }
@@ -177,15 +313,34 @@ impl SymmetricBuilder {
 pub struct Factor {
     n: usize,
     /// Permuted position → original index.
-    perm_fwd: Vec<usize>,
+    perm_fwd: std::sync::Arc<[u32]>,
     /// Original index → permuted position.
-    perm_inv: Vec<usize>,
-    col_ptr: Vec<usize>,
-    row_idx: Vec<usize>,
+    perm_inv: std::sync::Arc<[u32]>,
+    /// L's pattern (shared with the [`Analysis`] that made it).
+    symbolic: std::sync::Arc<faer::sparse::linalg::cholesky::simplicial::SymbolicSimplicialCholesky<u32>>,
     values: Vec<f64>,
 }
 
+/// The ordering and the factor's pattern of a matrix, for the next matrix
+/// of the same pattern ([`SymmetricBuilder::factor_with`]).
+#[derive(Debug, Clone)]
+pub struct Analysis {
+    /// (dimension, entries, hash of the lower triangle's pattern).
+    key: (usize, usize, u64),
+    perm_fwd: std::sync::Arc<[u32]>,
+    perm_inv: std::sync::Arc<[u32]>,
+    symbolic: std::sync::Arc<faer::sparse::linalg::cholesky::simplicial::SymbolicSimplicialCholesky<u32>>,
+}
+
 impl Factor {
+    fn col_ptr(&self) -> &[u32] {
+        self.symbolic.col_ptr()
+    }
+
+    fn row_idx(&self) -> &[u32] {
+        self.symbolic.row_idx()
+    }
+
     /// The dimension.
     pub fn dim(&self) -> usize {
         self.n
@@ -198,36 +353,36 @@ impl Factor {
 
     /// Solves A x = b (both in the original order).
     pub fn solve(&self, b: &[f64]) -> Vec<f64> {
-        let mut x: Vec<f64> = (0..self.n).map(|j| b[self.perm_fwd[j]]).collect();
+        let mut x: Vec<f64> = (0..self.n).map(|j| b[self.perm_fwd[j] as usize]).collect();
         // L y = P b.
         for j in 0..self.n {
-            let (start, end) = (self.col_ptr[j], self.col_ptr[j + 1]);
+            let (start, end) = (self.col_ptr()[j] as usize, self.col_ptr()[j + 1] as usize);
             x[j] /= self.values[start];
             let xj = x[j];
             for k in start + 1..end {
-                x[self.row_idx[k]] -= self.values[k] * xj;
+                x[self.row_idx()[k] as usize] -= self.values[k] * xj;
             }
         }
         // Lᵀ z = y.
         for j in (0..self.n).rev() {
-            let (start, end) = (self.col_ptr[j], self.col_ptr[j + 1]);
+            let (start, end) = (self.col_ptr()[j] as usize, self.col_ptr()[j + 1] as usize);
             let mut s = x[j];
             for k in start + 1..end {
-                s -= self.values[k] * x[self.row_idx[k]];
+                s -= self.values[k] * x[self.row_idx()[k] as usize];
             }
             x[j] = s / self.values[start];
         }
         let mut out = vec![0.0; self.n];
         for (j, v) in x.into_iter().enumerate() {
-            out[self.perm_fwd[j]] = v;
+            out[self.perm_fwd[j] as usize] = v;
         }
         out
     }
 
     /// Position of L's entry (row, col) in `values`, if in the pattern.
-    fn find(&self, row: usize, col: usize) -> Option<usize> {
-        let (start, end) = (self.col_ptr[col], self.col_ptr[col + 1]);
-        self.row_idx[start..end].binary_search(&row).ok().map(|k| start + k)
+    fn find(&self, row: u32, col: u32) -> Option<usize> {
+        let (start, end) = (self.col_ptr()[col as usize] as usize, self.col_ptr()[col as usize + 1] as usize);
+        self.row_idx()[start..end].binary_search(&row).ok().map(|k| start + k)
     }
 
     /// Every entry of A⁻¹ on L's pattern (Takahashi, Erisman and Tinney):
@@ -238,32 +393,42 @@ impl Factor {
     /// the filled graph, so every Z_ik needed lies on the pattern.
     pub fn selected_inverse(&self) -> SelectedInverse<'_> {
         let mut z = vec![0.0f64; self.values.len()];
-        let mut rows: Vec<usize> = Vec::new();
-        let mut zcol: Vec<f64> = Vec::new();
+        // s_i = Σ_{k∈S_j} L_kj Z_ik for each i of S_j, by position in S_j.
+        let mut sums: Vec<f64> = Vec::new();
         for j in (0..self.n).rev() {
-            let (start, end) = (self.col_ptr[j], self.col_ptr[j + 1]);
+            let (start, end) = (self.col_ptr()[j] as usize, self.col_ptr()[j + 1] as usize);
             let ljj = self.values[start];
-            rows.clear();
-            rows.extend_from_slice(&self.row_idx[start + 1..end]);
-            zcol.clear();
-            for &i in &rows {
-                let mut s = 0.0;
-                for (kk, &k) in rows.iter().enumerate() {
-                    let lkj = self.values[start + 1 + kk];
-                    // Z_ik = Z_(max, min) on the lower pattern.
-                    let (r, c) = if i >= k { (i, k) } else { (k, i) };
-                    if let Some(p) = self.find(r, c) {
-                        s += lkj * z[p];
+            let rows = &self.row_idx()[start + 1..end];
+            let l = &self.values[start + 1..end];
+            sums.clear();
+            sums.resize(rows.len(), 0.0);
+            // Each pair (r ≥ c) of S_j once, from column c's pattern (which
+            // holds every r of S_j below c: S_j is a clique), walked beside
+            // S_j: Z_rc adds L_cj Z_rc to s_r and, off the diagonal,
+            // L_rj Z_rc to s_c.
+            for (a, &c) in rows.iter().enumerate() {
+                let (cs, ce) = (self.col_ptr()[c as usize] as usize, self.col_ptr()[c as usize + 1] as usize);
+                sums[a] += l[a] * z[cs];
+                let mut p = cs + 1;
+                for b in a + 1..rows.len() {
+                    let r = rows[b];
+                    while p < ce && self.row_idx()[p] < r {
+                        p += 1;
+                    }
+                    if p < ce && self.row_idx()[p] == r {
+                        let zrc = z[p];
+                        sums[b] += l[a] * zrc;
+                        sums[a] += l[b] * zrc;
                     }
                 }
-                zcol.push(-s / ljj);
             }
             let mut diag = 1.0 / (ljj * ljj);
-            for (kk, zij) in zcol.iter().enumerate() {
-                diag -= self.values[start + 1 + kk] * zij / ljj;
+            for (a, s) in sums.iter().enumerate() {
+                let zij = -s / ljj;
+                diag -= l[a] * zij / ljj;
+                z[start + 1 + a] = zij;
             }
             z[start] = diag;
-            z[start + 1..end].copy_from_slice(&zcol);
         }
         SelectedInverse { factor: self, z }
     }

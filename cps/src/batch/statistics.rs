@@ -16,9 +16,10 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::model::{Group, Layout, Source};
+use super::model::{Group, Layout, Network, Source};
 use super::solve::Solution;
 use super::sparse::SelectedInverse;
+use crate::error::Result;
 
 /// Below this redundancy number nothing checks an observation: its w and
 /// MDB are not defined (a blunder there leaves no trace).
@@ -55,18 +56,21 @@ pub struct ScalarStats {
 }
 
 /// The statistics of every active scalar and vᵀPv, with `lambda0` the
-/// non-centrality of the tests.
+/// non-centrality of the tests; each group linearised again at the
+/// solution's last point as it is needed.
 pub fn statistics(
+    network: &Network,
     groups: &[Group],
     layout: &Layout,
     station_of: &dyn Fn(&Source) -> Option<usize>,
     solution: &Solution,
     inverse: &SelectedInverse<'_>,
     lambda0: f64,
-) -> (Vec<ScalarStats>, f64) {
+) -> Result<(Vec<ScalarStats>, f64)> {
     let mut out = Vec::new();
     let mut vtpv = 0.0;
-    for (group, lin) in groups.iter().zip(&solution.linearised) {
+    for group in groups {
+        let lin = solution.linearised(network, layout, group)?;
         let k = lin.active.len();
         if k == 0 {
             continue;
@@ -111,8 +115,8 @@ pub fn statistics(
             });
             out.push(ScalarStats {
                 source: group.source,
-                component: group.components[pos],
-                sigma: group.covariance[(pos, pos)].sqrt(),
+                component: group.component(pos),
+                sigma: group.covariance(network, pos, pos).sqrt(),
                 residual: -v[i],
                 redundancy: r,
                 // w takes the sign of the residual as reported.
@@ -123,7 +127,7 @@ pub fn statistics(
             });
         }
     }
-    (out, vtpv)
+    Ok((out, vtpv))
 }
 
 /// The covariance between two unknowns' coordinate sets (rows `a`, columns
