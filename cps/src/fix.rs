@@ -334,9 +334,15 @@ pub fn fix_parent_mixed(
         // At national-grid coordinates (10⁶–10⁷ m) a step below 1e-10 m is
         // below the coordinates' own resolution (one ulp of 5·10⁶ is
         // 9·10⁻¹⁰ m): the tolerance is at least a few ulps of them.
+        // Nor need a step be below a billionth of the fix's own σ: far
+        // along an open traverse the children's covariance dominates the
+        // weights, which move with the pose, and the steps shrink by a
+        // constant factor — at 53 km they were still 1e-10 after 20
+        // iterations, and the run stopped with a fix "not converged".
+        let sigma = step.r.try_inverse().map_or(Vector4::zeros(), |r_inv| Vector4::from_fn(|i, _| r_inv.row(i).norm()));
         let resolution = 8.0 * f64::EPSILON * pose.position.coords.amax();
-        let converged = dx.fixed_rows::<3>(0).amax() < options.position_tolerance_m.max(resolution)
-            && dx[3].abs() < options.heading_tolerance_rad;
+        let converged = (0..3).all(|i| dx[i].abs() < options.position_tolerance_m.max(resolution).max(1e-9 * sigma[i]))
+            && dx[3].abs() < options.heading_tolerance_rad.max(1e-9 * sigma[3]);
         if converged || iterations >= options.max_iterations {
             break (lin, step, converged);
         }

@@ -87,6 +87,9 @@ pub enum FieldTest {
         /// Else the reading the fix from every reading disagrees with most,
         /// and by how much.
         worst: Option<(usize, Misclosure)>,
+        /// The fix from every reading, when there is one: whether it
+        /// converged, in how many iterations, and its σ0².
+        fix: Option<(bool, usize, f64)>,
     },
 }
 
@@ -130,7 +133,10 @@ pub fn field_test(state: &TeamState, readings: &[(usize, Reading, &Instrument)],
     match best {
         _ if passes => FieldTest::Passed,
         Some((index, misclosure, _)) => FieldTest::Culprit { index, misclosure },
-        None => FieldTest::Failed { error: full.err(), worst },
+        None => {
+            let fix = full.as_ref().ok().map(|f| (f.converged, f.iterations, f.sigma0_squared));
+            FieldTest::Failed { error: full.err(), worst, fix }
+        }
     }
 }
 
@@ -255,7 +261,7 @@ mod tests {
         assert!(!worst.1.is_gross(), "spread below the bounds: {worst:?}");
         assert!(fix.sigma0_squared > GROSS_SIGMA0_SQUARED, "σ0² = {}", fix.sigma0_squared);
         let verdict = field_test(&state, &with(&readings, &i), &options);
-        assert!(matches!(verdict, FieldTest::Failed { error: None, worst: Some(_) }), "{verdict:?}");
+        assert!(matches!(verdict, FieldTest::Failed { error: None, worst: Some(_), .. }), "{verdict:?}");
     }
 
     #[test]

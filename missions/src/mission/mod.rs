@@ -374,7 +374,9 @@ pub struct Mission {
     pub plan: Plan,
     /// Tolerances.
     pub acceptance: Acceptance,
-    /// The simulator's settings.
+    /// Where the devices come from (`[backend]`): the simulator's scene,
+    /// seed, odometry and retry settings, or the serial ports of real
+    /// instruments.
     pub backend: Backend,
     /// The scanner's settings.
     pub scan: ScanPlan,

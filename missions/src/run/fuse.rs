@@ -12,7 +12,7 @@
 //!   together ([`fusion::multiview::register_with_priors`]).
 //!
 //! A run's scans ([`ScanView`]) come from the runner as it goes, or from a
-//! run directory's journal ([`crate::run::resume::load_run`]).
+//! run directory's journal ([`crate::run::resume::load`]).
 
 use std::time::Instant;
 

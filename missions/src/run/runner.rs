@@ -1,5 +1,6 @@
 //! `cps-survey run`: a mission end to end — the dance cycle by cycle, a
-//! scan at each scan station fused directly with the CPS pose, a journal of
+//! scan at each scan station, the scans fused by `[fusion] mode` (directly
+//! with the CPS poses, by ICP, or both adjusted together), a journal of
 //! every command and reading, and the outputs.
 //!
 //! Outputs in the run directory:
@@ -389,9 +390,21 @@ impl Run<'_> {
             let (k, off) = match cps::screen::field_test(&self.team, &readings, &options) {
                 FieldTest::Passed => return Ok(self.team.fix_parent_mixed(&readings, &options)?),
                 FieldTest::Culprit { index, misclosure } => (index, misclosure),
-                FieldTest::Failed { error, worst } => {
+                FieldTest::Failed { error, worst, fix } => {
                     let why = match (error, worst) {
                         (Some(e), _) => format!("it fails: {e}"),
+                        // Not the readings: the fix itself.
+                        (None, _) if fix.is_some_and(|(converged, ..)| !converged) => format!(
+                            "it does not converge in {} iterations",
+                            fix.map_or(0, |(_, iterations, _)| iterations)
+                        ),
+                        (None, Some((k, m))) if !m.is_gross() => format!(
+                            "its σ0² is {:.3e} (at most {:.0e}: the readings disagree far beyond their noise); the reading of {} is {} from it",
+                            fix.map_or(f64::NAN, |(.., s)| s),
+                            cps::screen::GROSS_SIGMA0_SQUARED,
+                            self.prism_name(sightings[k].point),
+                            misclosure_words(&m)
+                        ),
                         (None, Some((k, m))) => format!(
                             "the reading of {} is {} from it, and {}",
                             self.prism_name(sightings[k].point),
