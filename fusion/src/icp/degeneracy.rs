@@ -136,6 +136,23 @@ impl Observability {
         0.5 * (h + h.transpose())
     }
 
+    /// How far a motion ξ = (ω, v) (about the frame's origin, in the frame
+    /// of `h`) goes along the directions whose eigenvalue is at least
+    /// `ratio` of the largest: its length in u = (L·ω, v_c), metres of
+    /// motion the matches see well. A pair matched alone slides along a
+    /// corridor's axis (with the slight yaw noise couples to it), which the
+    /// set's other links hold: that slide is not a disagreement with the
+    /// set's poses.
+    pub fn seen_motion(&self, xi: &Vector6<f64>, ratio: f64) -> f64 {
+        let u = scale(1.0 / self.lever_arm_m) * self.about_inverse() * xi;
+        let max = self.eigen.eigenvalues.max();
+        (0..6)
+            .filter(|&i| max > 0.0 && self.eigen.eigenvalues[i] >= ratio * max)
+            .map(|i| self.eigen.eigenvectors.column(i).dot(&u).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    }
+
     /// The solution of `h ξ = rhs` within the observed directions only
     /// (zero along the others): Zhang et al.'s remapped update.
     pub fn solve(&self, rhs: &Vector6<f64>) -> Vector6<f64> {

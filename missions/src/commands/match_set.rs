@@ -252,14 +252,20 @@ struct CheckReport {
     chi2: Option<f64>,
     /// `moved_m` as a fraction of the source points' RMS radius.
     relative_motion: Option<f64>,
+    /// The motion along the directions the match sees well (eigenvalue at
+    /// least 5 % of the largest, about the source's centroid, rotation
+    /// scaled by the radius), metres: what judges the pair (a corridor
+    /// pair matched alone slides along the axis the set's other links hold).
+    seen_motion_m: Option<f64>,
     /// The match's point-to-plane RMS residual, metres; null when it failed.
     rmse_m: Option<f64>,
     /// What a right registration of the two scans leaves: the RMS of their
     /// noise floors (each scan's two random halves matched at the
     /// identity), metres.
     noise_m: f64,
-    /// The match moved the points by at most the finest
-    /// stage's voxel or 5 % of their RMS radius.
+    /// The match moved the points by at most the finest stage's voxel, or
+    /// along what it sees well by at most 5 % of their RMS radius and
+    /// turned them by at most 5°.
     consistent: bool,
 }
 
@@ -736,6 +742,7 @@ fn report(
                 angle_deg: c.angle_rad.map(f64::to_degrees),
                 chi2: c.chi2,
                 relative_motion: c.relative_motion,
+                seen_motion_m: c.seen_motion_m,
                 rmse_m: c.rmse_m,
                 noise_m: c.noise_m,
                 consistent: c.consistent,
