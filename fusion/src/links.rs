@@ -214,8 +214,22 @@ pub(crate) fn pair_links(
     let meet = |a: usize, b: usize| {
         (0..3).all(|k| boxes[a].0[k] - overlap_m <= boxes[b].1[k] && boxes[b].0[k] - overlap_m <= boxes[a].1[k])
     };
-    // Each scan's earlier scans whose boxes meet its own.
-    let earlier: Vec<Vec<usize>> = (0..n).map(|c| (0..c).filter(|&j| meet(j, c)).collect()).collect();
+    // Each scan's earlier scans whose boxes meet its own and that share
+    // cells of twice the overlap distance with it, the best-ranked few
+    // ([`crate::candidates`]: counting against every earlier scan was
+    // quadratic where all see one another).
+    let occupancy = crate::candidates::Occupancy::new(
+        &prepared.iter().map(|p| p.source.as_slice()).collect::<Vec<_>>(),
+        poses,
+        2.0 * overlap_m,
+    );
+    let earlier: Vec<Vec<usize>> = (0..n)
+        .map(|c| {
+            let mut e = occupancy.ranked(c, |j| j < c && meet(j, c), crate::candidates::SCREEN * config.max_partners);
+            e.sort_unstable();
+            e
+        })
+        .collect();
     let total: usize = earlier.iter().map(Vec::len).sum();
     let mut done = 0;
     progress(0, total);

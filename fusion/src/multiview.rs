@@ -185,6 +185,9 @@ pub fn register_views<S: AsRef<[Point3<f32>]> + Sync>(
         matches: 0,
         settled: true,
         traces: Vec::new(),
+        occupancy: crate::candidates::Occupancy::empty(
+            2.0 * config.overlap_m.unwrap_or(config.icp.max_correspondence_m),
+        ),
     };
     progress(1, n);
     for i in 1..n {
@@ -295,12 +298,23 @@ pub fn register_with_priors<S: AsRef<[Point3<f32>]> + Sync>(
             matches: 0,
             settled: true,
             traces: Vec::new(),
+            occupancy: crate::candidates::Occupancy::empty(
+                2.0 * round_config.overlap_m.unwrap_or(round_config.icp.max_correspondence_m),
+            ),
         };
         let mut matches = Vec::new();
         let mut failed = Vec::new();
+        // The exact overlap only with the earlier scans that share the
+        // most cells ([`crate::candidates`]).
+        let occupancy = crate::candidates::Occupancy::new(
+            &m.prepared.iter().map(|p| p.source.as_slice()).collect::<Vec<_>>(),
+            &m.poses,
+            2.0 * m.overlap_distance(),
+        );
         for c in 0..n {
             progress(round * n + c + 1, total);
-            let mut overlaps: Vec<(usize, usize)> = (0..c).map(|j| (j, m.overlap(c, j))).collect();
+            let screened = occupancy.ranked(c, |j| j < c, crate::candidates::SCREEN * max_partners);
+            let mut overlaps: Vec<(usize, usize)> = screened.into_iter().map(|j| (j, m.overlap(c, j))).collect();
             overlaps.retain(|&(_, pairs)| pairs > config.min_pairs);
             overlaps.sort_by_key(|&(j, pairs)| std::cmp::Reverse((pairs, j)));
             overlaps.truncate(max_partners);
@@ -417,6 +431,11 @@ pub(crate) fn prepare<S: AsRef<[Point3<f32>]> + Sync>(scans: &[S], config: &Mult
         .collect()
 }
 
+/// Pairwise matching's screened candidates, before the [`crate::candidates::SCREEN`]
+/// factor: the exact overlap is counted with this many times that many
+/// best-ranked earlier scans.
+const PAIRWISE_CANDIDATES: usize = 2;
+
 struct Matcher<'a> {
     prepared: Vec<Prepared>,
     config: &'a MultiviewConfig,
@@ -427,6 +446,9 @@ struct Matcher<'a> {
     matches: usize,
     settled: bool,
     traces: Vec<IcpTrace>,
+    /// The registered scans' cells, for pairwise matching's candidates
+    /// (filled as scans are registered).
+    occupancy: crate::candidates::Occupancy,
 }
 
 impl Matcher<'_> {
@@ -514,8 +536,19 @@ impl Matcher<'_> {
     fn pairwise(&mut self, i: usize) -> Result<()> {
         // Each earlier scan's nearest neighbours of scan i's points, counted
         // within the overlap distance; the best one's start the match.
+        // The exact overlap only with the earlier scans that share the most
+        // cells at their registered poses ([`crate::candidates`]).
+        while self.occupancy.len() < i {
+            let j = self.occupancy.len();
+            self.occupancy.push(&self.prepared[j].source, &self.poses[j]);
+        }
+        let screened = self.occupancy.ranked_for(
+            &self.prepared[i].source,
+            &self.poses[i],
+            crate::candidates::SCREEN * PAIRWISE_CANDIDATES,
+        );
         let source = &self.prepared[i].source;
-        let found: Vec<(usize, usize, Partners)> = (0..i)
+        let found: Vec<(usize, usize, Partners)> = screened
             .into_par_iter()
             .map(|j| {
                 let partners =
