@@ -1,7 +1,10 @@
 //! Every command in the README runs as written, in the README's order, from
 //! a folder that holds only what a clone ships (`missions/examples/`,
 //! `data/`) — as a new user would type them, with the built binary — and
-//! exits 0; every subcommand has its example.
+//! exits 0; every subcommand has its example. The README's commands are
+//! the default build's (`match` writes `match.rrd`; the headless build
+//! refuses what asks for a recording: `tests/headless.rs`).
+#![cfg(feature = "recording")]
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
