@@ -17,6 +17,7 @@ use crate::mission::Mission;
 use crate::planning::Planned;
 use crate::run::adjust::AdjustmentReport;
 use crate::run::inspection::Inspection;
+pub use crate::view::target::{Layout, Viewer};
 
 const WHY: &str = "this cps-survey was built without the `recording` feature (cargo build --no-default-features): \
                    it writes no Rerun recording; build it with the default features for one";
@@ -29,27 +30,6 @@ pub fn available() -> Result<()> {
 /// A plan recording cannot be written in this build.
 pub fn write_plan_rrd(_mission: &Mission, path: &Path, _plans: &[(&str, &Planned, &[Violation])]) -> Result<()> {
     bail!("cannot write {}: {WHY}", path.display())
-}
-
-/// Which default layout a recording opens with.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Layout {
-    /// A run.
-    Mission,
-    /// A plan.
-    Plan,
-}
-
-/// Where the recording goes besides `mission.rrd`.
-#[derive(Debug, Clone, Default, PartialEq, Eq)]
-pub enum Viewer {
-    /// The file only.
-    #[default]
-    None,
-    /// Start a viewer and stream to it too.
-    Spawn,
-    /// Stream to a running viewer at this URL too.
-    Connect(String),
 }
 
 /// A recorder that records nothing.

@@ -2,7 +2,7 @@
 //! a versioned [`document`]), the
 //! adjustment's [`listing`],
 //! [`plot`]s (SVG) and the Rerun [`recording`]; [`shapes`] is the geometry
-//! the plot and the recording share.
+//! the plot and the recording share; [`target`] where a recording goes.
 
 pub mod document;
 pub mod json;
@@ -15,3 +15,4 @@ pub mod recording;
 pub mod recording;
 pub mod shapes;
 pub mod tables;
+pub mod target;

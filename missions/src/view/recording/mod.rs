@@ -53,6 +53,7 @@ use rerun::{RecordingStream, RecordingStreamBuilder};
 use crate::mission::Mission;
 use crate::planning::Planned;
 
+pub use crate::view::target::{Layout, Viewer};
 use colours::height_colour;
 
 mod colours;
@@ -61,15 +62,6 @@ mod run;
 
 /// Voxel for the display copy of each scan, metres.
 pub const DISPLAY_VOXEL_M: f64 = 0.05;
-
-/// Which default layout a recording opens with.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Layout {
-    /// A run: the world, the accuracy series, fix σ0², the event log.
-    Mission,
-    /// A plan (`--rrd`): the world, the predicted series, the violations.
-    Plan,
-}
 
 /// The default layout: the 3D world large on the left, the series and the
 /// log on the right, side panels collapsed, time on the run's timeline.
@@ -115,19 +107,6 @@ fn blueprint(layout: Layout) -> rerun::blueprint::Blueprint {
 /// Whether this build can record: it can (the `recording` feature).
 pub fn available() -> Result<()> {
     Ok(())
-}
-
-/// Where the recording goes besides `mission.rrd`.
-#[derive(Debug, Clone, Default, PartialEq, Eq)]
-pub enum Viewer {
-    /// The file only.
-    #[default]
-    None,
-    /// Start a viewer (`rerun` on the PATH) and stream to it too.
-    Spawn,
-    /// Stream to a running viewer at this URL too
-    /// (e.g. `rerun+http://127.0.0.1:9876/proxy`).
-    Connect(String),
 }
 
 /// The time series gathered during the run, sent column-wise at the end.
