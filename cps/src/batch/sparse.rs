@@ -120,18 +120,7 @@ impl SymmetricBuilder {
         let mut w = 0usize;
         for c in 0..n {
             let (from, to) = (self.start[c], self.next[c]);
-            // Insertion sort by row of the column's few entries, in both arrays.
-            for k in from + 1..to {
-                let (r, v) = (self.rows[k], self.values[k]);
-                let mut m = k;
-                while m > from && self.rows[m - 1] > r {
-                    self.rows[m] = self.rows[m - 1];
-                    self.values[m] = self.values[m - 1];
-                    m -= 1;
-                }
-                self.rows[m] = r;
-                self.values[m] = v;
-            }
+            sort_by_row(&mut self.rows[from..to], &mut self.values[from..to]);
             let column_start = w;
             for k in from..to {
                 if w > column_start && self.rows[w - 1] == self.rows[k] {
@@ -229,17 +218,7 @@ impl SymmetricBuilder {
             }
             for c in 0..n {
                 let (from, to) = (p_col_ptr[c] as usize, p_col_ptr[c + 1] as usize);
-                for k in from + 1..to {
-                    let (r, v) = (p_row_idx[k], p_values[k]);
-                    let mut m = k;
-                    while m > from && p_row_idx[m - 1] > r {
-                        p_row_idx[m] = p_row_idx[m - 1];
-                        p_values[m] = p_values[m - 1];
-                        m -= 1;
-                    }
-                    p_row_idx[m] = r;
-                    p_values[m] = v;
-                }
+                sort_by_row(&mut p_row_idx[from..to], &mut p_values[from..to]);
             }
             (p_col_ptr, p_row_idx, p_values)
         };
@@ -304,6 +283,22 @@ impl SymmetricBuilder {
             }
         }
         Ok(factor)
+    }
+}
+
+/// Sorts one column's few entries by row (insertion sort), moving each
+/// value with its row.
+fn sort_by_row(rows: &mut [u32], values: &mut [f64]) {
+    for k in 1..rows.len() {
+        let (r, v) = (rows[k], values[k]);
+        let mut m = k;
+        while m > 0 && rows[m - 1] > r {
+            rows[m] = rows[m - 1];
+            values[m] = values[m - 1];
+            m -= 1;
+        }
+        rows[m] = r;
+        values[m] = v;
     }
 }
 
