@@ -19,6 +19,7 @@
 //!   ([`pipe::fit_pipe`], [`pipe::anomalies`]).
 #![warn(missing_docs)]
 
+mod agreement;
 mod candidates;
 pub mod direct;
 pub mod error;

@@ -217,6 +217,12 @@ pub(crate) struct MatchReport {
     settings: SettingsReport,
     /// Each stage of the schedule as it ran.
     stages: Vec<StageReport>,
+    /// The registration from the starts again without the schedule's
+    /// first stage, run when the schedule moved a scan further from its
+    /// start than the second stage's correspondence distance (a coarse
+    /// stage can drag good starts away on narrow overlaps); null when it
+    /// did not run.
+    restart: Option<RestartReport>,
     /// The verification: every pair of scans that overlaps at the final
     /// poses, matched once more from them at the finest stage.
     checks: Vec<CheckReport>,
@@ -282,6 +288,32 @@ struct StageReport {
     seconds: f64,
     /// False when a simultaneous queue was abandoned at its cap.
     settled: bool,
+}
+
+/// The second registration from the starts, without the schedule's first
+/// stage.
+#[derive(Debug, Clone, Serialize, schemars::JsonSchema)]
+struct RestartReport {
+    /// The scan the schedule moved furthest from its start (index into
+    /// `scans`).
+    scan: usize,
+    /// How far, metres (its centroid's displacement plus the turn times
+    /// its points' RMS radius).
+    moved_m: f64,
+    /// The restart's stages as they ran.
+    stages: Vec<StageReport>,
+    /// How badly the scans agree at the schedule's poses: the mean over
+    /// every reduced point of the squared point-to-plane distance to the
+    /// other scans, truncated at the finest correspondence distance (a
+    /// point with no partner pays its square), m².
+    schedule_disagreement_m2: f64,
+    /// The same at the restart's poses; null when the restart failed.
+    restart_disagreement_m2: Option<f64>,
+    /// Why the restart failed.
+    error: Option<String>,
+    /// True when the restart's poses are the result: the schedule's
+    /// disagreement is more than 1.5 times the restart's.
+    kept: bool,
 }
 
 /// What the scans measured and the settings they were matched with.
@@ -720,17 +752,16 @@ fn report(
         variance_factor: r.variance_factor,
         seconds,
         settings,
-        stages: r
-            .stages
-            .iter()
-            .map(|s| StageReport {
-                voxel_m: s.voxel_m,
-                max_correspondence_m: s.max_correspondence_m,
-                matches: s.matches,
-                seconds: s.seconds,
-                settled: s.settled,
-            })
-            .collect(),
+        stages: stage_reports(&r.stages),
+        restart: r.restart.as_ref().map(|x| RestartReport {
+            scan: x.scan,
+            moved_m: x.moved_m,
+            stages: stage_reports(&x.stages),
+            schedule_disagreement_m2: x.disagreement_m2.0,
+            restart_disagreement_m2: x.disagreement_m2.1,
+            error: x.error.clone(),
+            kept: x.kept,
+        }),
         checks: r
             .checks
             .iter()
@@ -752,6 +783,19 @@ fn report(
         untrusted: fusion::verify::untrusted(scans.len(), &r.checks),
         blind_without_start: Vec::new(),
     }
+}
+
+fn stage_reports(stages: &[fusion::scanset::StageRun]) -> Vec<StageReport> {
+    stages
+        .iter()
+        .map(|s| StageReport {
+            voxel_m: s.voxel_m,
+            max_correspondence_m: s.max_correspondence_m,
+            matches: s.matches,
+            seconds: s.seconds,
+            settled: s.settled,
+        })
+        .collect()
 }
 
 /// poses.json, frames/NAME.frames, links.csv, the clouds and match.rrd.
@@ -959,15 +1003,35 @@ fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &MatchReport) ->
         report.matches,
         report.seconds
     )?;
-    let stages: Vec<String> = report
-        .stages
-        .iter()
-        .map(|s| {
-            let cap = if s.settled { "" } else { ", abandoned at its cap" };
-            format!("{:.3}/{:.3} m: {} runs, {:.3} s{cap}", s.voxel_m, s.max_correspondence_m, s.matches, s.seconds)
-        })
-        .collect();
-    writeln!(out, "stages: {}", stages.join("; "))?;
+    let stages = |stages: &[StageReport]| -> String {
+        let each: Vec<String> = stages
+            .iter()
+            .map(|s| {
+                let cap = if s.settled { "" } else { ", abandoned at its cap" };
+                format!("{:.3}/{:.3} m: {} runs, {:.3} s{cap}", s.voxel_m, s.max_correspondence_m, s.matches, s.seconds)
+            })
+            .collect();
+        each.join("; ")
+    };
+    writeln!(out, "stages: {}", stages(&report.stages))?;
+    if let Some(r) = &report.restart {
+        let outcome = match (r.restart_disagreement_m2, &r.error) {
+            (Some(after), _) => format!(
+                "the scans disagree {:.3e} m² a point there against {:.3e} at the schedule's poses: {}",
+                after,
+                r.schedule_disagreement_m2,
+                if r.kept { "its poses kept" } else { "the schedule's poses kept" }
+            ),
+            (None, e) => format!("it failed ({}): the schedule's poses kept", e.as_deref().unwrap_or("")),
+        };
+        writeln!(
+            out,
+            "restart: the schedule moved {} {:.3} m from its start; from the starts without the first stage ({}), {outcome}",
+            scans[r.scan].name,
+            r.moved_m,
+            stages(&r.stages)
+        )?;
+    }
     for i in unlinked(report) {
         writeln!(
             out,

@@ -816,8 +816,9 @@ fn room_wedges(dir: &Path, offset_m: f64, offset_deg: f64) -> Vec<OsString> {
 /// 0.1° and 5 mm, and the verification (each overlapping pair matched once
 /// more from the final poses) finds every pair consistent. From 1 m / 10°
 /// the coarse stages trap them in the room's other symmetric fit (90° off;
-/// every link was "used" and the exit 0): each mode now exits 1 and names
-/// scans of inconsistent pairs — only scans that are indeed off.
+/// every link was "used" and the exit 0): each mode now either lands, by
+/// the restart from the starts without the coarse stage, or exits 1 and
+/// names scans of inconsistent pairs — only scans that are indeed off.
 #[test]
 fn wedges_from_rough_starts_land_or_are_named_with_exit_1() {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -829,6 +830,7 @@ fn wedges_from_rough_starts_land_or_are_named_with_exit_1() {
             .map(|s| error(&pose(&s["world_from_scan"]), &Isometry3::identity()))
             .collect()
     };
+    let mut rescued = Vec::new();
     for (m, deg, lands) in [(0.5, 5.0, true), (1.0, 10.0, false)] {
         let inputs = room_wedges(&dir.path().join(format!("w{m}")), m, deg);
         for mode in ["graph", "pairwise", "incremental", "simultaneous"] {
@@ -843,11 +845,17 @@ fn wedges_from_rough_starts_land_or_are_named_with_exit_1() {
                 .iter()
                 .map(|i| i.as_u64().expect("index") as usize)
                 .collect();
-            if lands {
+            if lands || r.code == 0 {
                 assert_eq!(r.code, 0, "{m} m {mode}: {}", r.stderr);
                 assert!(untrusted.is_empty(), "{m} m {mode}: {}", v["checks"]);
                 for (k, (d, e)) in errors.iter().enumerate() {
                     assert!(*d < 0.1 && *e < 0.005, "{m} m {mode}: wedge {k} {d}° {e} m off");
+                }
+                if !lands {
+                    // Landed from 1 m / 10° only by the restart without
+                    // the coarse stage that trapped it.
+                    assert_eq!(v["restart"]["kept"], true, "{m} m {mode}: {}", v["restart"]);
+                    rescued.push(mode);
                 }
             } else {
                 assert_eq!(r.code, 1, "{m} m {mode}: {errors:?}");
@@ -878,6 +886,9 @@ fn wedges_from_rough_starts_land_or_are_named_with_exit_1() {
             }
         }
     }
+    // The trap is still there for the others: the restart is kept only
+    // where the scans agree clearly better (the others stay named).
+    assert!(rescued.len() < 4, "every mode rescued: {rescued:?}");
     // The text output names them.
     let mut args = room_wedges(&dir.path().join("text"), 1.0, 10.0);
     args.extend(["--mode".into(), "pairwise".into(), "--out".into(), dir.path().join("t").into_os_string()]);
