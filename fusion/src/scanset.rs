@@ -122,26 +122,31 @@ pub struct SetResult {
 /// (coarsest) stage, run when the first registration moved a scan further
 /// from its start than the second stage's correspondence distance (out of
 /// the restart's reach: the first stage decided where it went), and kept
-/// when the scans agree clearly better there ([`crate::agreement`]). On narrow overlaps
-/// a coarse stage can drag good starts away: small_gicp's outdoor frame
-/// cut into 150° wedges, from starts 0.1 m / 2° off, ended 1–77° and
-/// 1.1–10 m off in 5 of 10 trials with the auto schedule (first cell a
-/// metre, a street's 60° overlaps a few cells wide), and right in all 10
-/// without its first stage.
+/// when the scans agree clearly better there ([`crate::agreement`]); or
+/// run when a stage of the schedule moved two scans apart that overlapped
+/// at their starts, and kept when it succeeds. On narrow overlaps a
+/// coarse stage can drag good starts away: small_gicp's outdoor frame cut
+/// into 150° wedges, from starts 0.1 m / 2° off, ended 1–77° and 1.1–10 m
+/// off in 5 of 10 trials with the auto schedule (first cell 0.7 m, a
+/// street's 60° overlaps a few cells wide), and right in all 10 without
+/// its first stage.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Restart {
     /// The scan that moved furthest from its start in the first
-    /// registration.
+    /// registration, or that a stage of it moved away from its partner.
     pub scan: usize,
     /// How far it moved, metres (the centroid's displacement plus the turn
-    /// times the points' RMS radius about it).
-    pub moved_m: f64,
+    /// times the points' RMS radius about it); `None` when the first
+    /// registration failed.
+    pub moved_m: Option<f64>,
+    /// Why the first registration failed (a stage moved two scans apart).
+    pub schedule_error: Option<String>,
     /// The restart's stages.
     pub stages: Vec<StageRun>,
     /// The scans' disagreement at the first registration's poses and at
-    /// the restart's, m² a point ([`crate::agreement`]); the restart's
-    /// `None` when it failed.
-    pub disagreement_m2: (f64, Option<f64>),
+    /// the restart's, m² a point ([`crate::agreement`]); `None` for one
+    /// that failed.
+    pub disagreement_m2: (Option<f64>, Option<f64>),
     /// Why the restart failed.
     pub error: Option<String>,
     /// True when the restart's registration is the result.
@@ -209,8 +214,15 @@ pub fn register_set<S: AsRef<[Point3<f32>]> + Sync>(
     let local: Vec<Isometry3<f64>> = std::iter::once(Isometry3::identity())
         .chain(starts[1..].iter().map(|s| world_from_first.inverse() * s))
         .collect();
-    let mut r = register_in_first_frame(scans, &local, config, progress)?;
-    r = restart_if_dragged(scans, &local, config, r, progress)?;
+    let mut r = match register_in_first_frame(scans, &local, config, progress) {
+        Ok(r) => restart_if_dragged(scans, &local, config, r, progress)?,
+        // A stage moved two scans apart: the restart without the first
+        // stage may not.
+        Err(e @ FusionError::NoOverlap { stage: Some(2..), .. }) if config.stages.len() > 1 => {
+            restart_after_failure(scans, &local, config, e, progress)?
+        }
+        Err(e) => return Err(e),
+    };
     let started = std::time::Instant::now();
     r.checks = verify_set(scans, &r.world_from_scan, config)?;
     r.check_seconds = started.elapsed().as_secs_f64();
@@ -226,6 +238,35 @@ fn verify_set<S: AsRef<[Point3<f32>]> + Sync>(
 ) -> Result<Vec<PairCheck>> {
     let Some((finest, link)) = finest_link(config) else { return Ok(Vec::new()) };
     crate::verify::check_pairs(scans, poses, &link, finest.voxel_m)
+}
+
+/// The registration from the starts without the schedule's first stage,
+/// after the schedule failed with `failure` (a stage moved two scans
+/// apart); that failure when the restart fails too.
+fn restart_after_failure<S: AsRef<[Point3<f32>]> + Sync>(
+    scans: &[S],
+    starts: &[Isometry3<f64>],
+    config: &SetConfig,
+    failure: FusionError,
+    progress: &mut dyn FnMut(usize, usize, usize, usize),
+) -> Result<SetResult> {
+    let FusionError::NoOverlap { scan, .. } = failure else { return Err(failure) };
+    let shorter = SetConfig { stages: config.stages[1..].to_vec(), ..config.clone() };
+    let Ok(mut r) = register_in_first_frame(scans, starts, &shorter, progress) else { return Err(failure) };
+    let after = finest_link(config).and_then(|(finest, link)| {
+        let prepared = crate::multiview::prepare(scans, &link.multiview).ok()?;
+        Some(crate::agreement::disagreement(&prepared, &r.world_from_scan, finest.max_correspondence_m))
+    });
+    r.restart = Some(Restart {
+        scan,
+        moved_m: None,
+        schedule_error: Some(failure.to_string()),
+        stages: std::mem::take(&mut r.stages),
+        disagreement_m2: (None, after),
+        error: None,
+        kept: true,
+    });
+    Ok(r)
 }
 
 /// The finest stage and the link settings at it.
@@ -281,7 +322,15 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     let kept = after.is_some_and(|a| before > RESTART_RATIO * a);
     let stages = second.as_ref().map_or_else(Vec::new, |r| r.stages.clone());
     let matches = first.matches + second.as_ref().map_or(0, |r| r.matches);
-    let restart = Restart { scan, moved_m, stages, disagreement_m2: (before, after), error, kept };
+    let restart = Restart {
+        scan,
+        moved_m: Some(moved_m),
+        schedule_error: None,
+        stages,
+        disagreement_m2: (Some(before), after),
+        error,
+        kept,
+    };
     let mut r = match second.take() {
         Some(s) if kept => SetResult { stages: first.stages, ..s },
         _ => first,

@@ -294,19 +294,24 @@ struct StageReport {
 /// stage.
 #[derive(Debug, Clone, Serialize, schemars::JsonSchema)]
 struct RestartReport {
-    /// The scan the schedule moved furthest from its start (index into
-    /// `scans`).
+    /// The scan the schedule moved furthest from its start, or that a
+    /// stage of it moved away from its partner (index into `scans`).
     scan: usize,
     /// How far, metres (its centroid's displacement plus the turn times
-    /// its points' RMS radius).
-    moved_m: f64,
+    /// its points' RMS radius); null when the schedule failed.
+    moved_m: Option<f64>,
+    /// Why the schedule failed: a stage moved two scans apart that
+    /// overlapped at their starts (the restart is then the result when it
+    /// succeeds; when it fails too, the schedule's error is the command's).
+    schedule_error: Option<String>,
     /// The restart's stages as they ran.
     stages: Vec<StageReport>,
     /// How badly the scans agree at the schedule's poses: the mean over
     /// every reduced point of the squared point-to-plane distance to the
     /// other scans, truncated at the finest correspondence distance (a
-    /// point with no partner pays its square), m².
-    schedule_disagreement_m2: f64,
+    /// point with no partner pays its square), m²; null when the schedule
+    /// failed.
+    schedule_disagreement_m2: Option<f64>,
     /// The same at the restart's poses; null when the restart failed.
     restart_disagreement_m2: Option<f64>,
     /// Why the restart failed.
@@ -756,6 +761,7 @@ fn report(
         restart: r.restart.as_ref().map(|x| RestartReport {
             scan: x.scan,
             moved_m: x.moved_m,
+            schedule_error: x.schedule_error.clone(),
             stages: stage_reports(&x.stages),
             schedule_disagreement_m2: x.disagreement_m2.0,
             restart_disagreement_m2: x.disagreement_m2.1,
@@ -1015,22 +1021,19 @@ fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &MatchReport) ->
     };
     writeln!(out, "stages: {}", stages(&report.stages))?;
     if let Some(r) = &report.restart {
-        let outcome = match (r.restart_disagreement_m2, &r.error) {
-            (Some(after), _) => format!(
-                "the scans disagree {:.3e} m² a point there against {:.3e} at the schedule's poses: {}",
-                after,
-                r.schedule_disagreement_m2,
+        let why = match (r.moved_m, &r.schedule_error) {
+            (Some(m), _) => format!("the schedule moved {} {m:.3} m from its start", scans[r.scan].name),
+            (None, e) => format!("the schedule failed ({})", e.as_deref().unwrap_or("")),
+        };
+        let outcome = match (r.restart_disagreement_m2, r.schedule_disagreement_m2, &r.error) {
+            (Some(after), Some(before), _) => format!(
+                "the scans disagree {after:.3e} m² a point there against {before:.3e} at the schedule's poses: {}",
                 if r.kept { "its poses kept" } else { "the schedule's poses kept" }
             ),
-            (None, e) => format!("it failed ({}): the schedule's poses kept", e.as_deref().unwrap_or("")),
+            (_, _, Some(e)) => format!("it failed ({e}): the schedule's poses kept"),
+            _ => "its poses kept".into(),
         };
-        writeln!(
-            out,
-            "restart: the schedule moved {} {:.3} m from its start; from the starts without the first stage ({}), {outcome}",
-            scans[r.scan].name,
-            r.moved_m,
-            stages(&r.stages)
-        )?;
+        writeln!(out, "restart: {why}; from the starts without the first stage ({}), {outcome}", stages(&r.stages))?;
     }
     for i in unlinked(report) {
         writeln!(
