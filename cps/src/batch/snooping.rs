@@ -20,6 +20,9 @@
 //! earlier removals' terms; every group's A Q Aᵀ and residual follow from
 //! A y, and its w as in [`super::statistics`].
 
+// Small dense algebra on fixed arrays of at most 4×7 reads best indexed.
+#![allow(clippy::needless_range_loop)]
+
 use rayon::prelude::*;
 
 use super::model::{Group, Layout, Network};
@@ -122,7 +125,7 @@ impl Linear {
                 vc -= sol[a] * self.v[j];
             }
         }
-        if !(s > 0.0) {
+        if s.is_nan() || s <= 0.0 {
             return None;
         }
         let root = s.sqrt();
@@ -265,7 +268,7 @@ pub fn removals(
             y.iter_mut().zip(yi).for_each(|(a, b)| *a += b * coef);
         }
         let d = 1.0 - u.iter().map(|&(col, x)| x * y[col]).sum::<f64>();
-        if !(d > DETERMINED) {
+        if d.is_nan() || d <= DETERMINED {
             // Not this one (the last found; the caller's first is tried
             // exactly, which says why).
             if found.len() > 1 {

@@ -1,0 +1,132 @@
+//! `match`'s tables and messages on the terminal.
+
+use std::io::Write;
+
+use super::report::{MatchReport, StageReport};
+use crate::scans::inputs::InputScan;
+
+pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &MatchReport) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "{:<32} {:>10} {:>10} {:>10} {:>9} {:>9}  unseen",
+        "scan", "x m", "y m", "z m", "σ xyz mm", "σ rot °"
+    )?;
+    for (s, r) in scans.iter().zip(&report.scans) {
+        let m = &r.world_from_scan;
+        let c = &r.covariance;
+        let (rot, pos) = ((c[0][0] + c[1][1] + c[2][2]).max(0.0).sqrt(), (c[3][3] + c[4][4] + c[5][5]).max(0.0).sqrt());
+        writeln!(
+            out,
+            "{:<32} {:>10.4} {:>10.4} {:>10.4} {:>9.2} {:>9.4}  {}",
+            s.name,
+            m[0][3],
+            m[1][3],
+            m[2][3],
+            pos * 1e3,
+            rot.to_degrees(),
+            r.degenerate_directions.len()
+        )?;
+    }
+    let accepted = report.links.iter().filter(|l| l.accepted).count();
+    writeln!(
+        out,
+        "{} links, {accepted} used; {} ICP runs; {:.3} s",
+        report.links.len(),
+        report.matches,
+        report.seconds
+    )?;
+    let stages = |stages: &[StageReport]| -> String {
+        let each: Vec<String> = stages
+            .iter()
+            .map(|s| {
+                let cap = if s.settled { "" } else { ", abandoned at its cap" };
+                format!("{:.3}/{:.3} m: {} runs, {:.3} s{cap}", s.voxel_m, s.max_correspondence_m, s.matches, s.seconds)
+            })
+            .collect();
+        each.join("; ")
+    };
+    writeln!(out, "stages: {}", stages(&report.stages))?;
+    if let Some(r) = &report.restart {
+        let why = match (r.moved_m, &r.schedule_error) {
+            (Some(m), _) => format!("the schedule moved {} {m:.3} m from its start", scans[r.scan].name),
+            (None, e) => format!("the schedule failed ({})", e.as_deref().unwrap_or("")),
+        };
+        let outcome = match (r.restart_disagreement_m2, r.schedule_disagreement_m2, &r.error) {
+            (Some(after), Some(before), _) => format!(
+                "the scans disagree {after:.3e} m² a point there against {before:.3e} at the schedule's poses: {}",
+                if r.kept { "its poses kept" } else { "the schedule's poses kept" }
+            ),
+            (_, _, Some(e)) => format!("it failed ({e}): the schedule's poses kept"),
+            _ => "its poses kept".into(),
+        };
+        writeln!(out, "restart: {why}; from the starts without the first stage ({}), {outcome}", stages(&r.stages))?;
+    }
+    for i in unlinked(report) {
+        writeln!(
+            out,
+            "  not trusted: {} has no accepted link at the last stage: it keeps the coarser stages' pose, blind in every direction",
+            scans[i].name
+        )?;
+    }
+    for &i in &report.blind_without_start {
+        writeln!(
+            out,
+            "  not trusted: {}: blind in {} direction(s), and a start found by --init global says nothing along them",
+            scans[i].name,
+            report.scans[i].degenerate_directions.len()
+        )?;
+    }
+    let tolerance = report.stages.last().map_or(0.0, |s| s.voxel_m);
+    for &i in &report.untrusted {
+        let against: Vec<String> = report
+            .checks
+            .iter()
+            .filter(|c| !c.consistent && (c.source == i || c.target == i))
+            .filter_map(|c| {
+                let other = if c.source == i { c.target } else { c.source };
+                Some(format!("{} ({:.3} m, {:.2}°)", scans[other].name, c.moved_m?, c.angle_deg.unwrap_or_default()))
+            })
+            .collect();
+        writeln!(
+            out,
+            "  not trusted: {}: matched again from the final poses it moves beyond {tolerance:.3} m and 5 % of its \
+             radius against {}: the poses are not where the data agree (a symmetric fit from rough starts?)",
+            scans[i].name,
+            against.join(", ")
+        )?;
+    }
+    for l in report.links.iter().filter(|l| !l.accepted) {
+        let targets: Vec<&str> = l.targets.iter().map(|&t| scans[t].name.as_str()).collect();
+        let cycle = l.cycle.as_ref().map_or_else(String::new, |c| {
+            let names: Vec<&str> = c.scans.iter().map(|&i| scans[i].name.as_str()).collect();
+            format!(
+                "; it contradicts the cycle {} → {} (the used links from {} to {} and this one disagree by {:.3}°, {:.3} m)",
+                names.join(" → "),
+                names.first().copied().unwrap_or_default(),
+                names.first().copied().unwrap_or_default(),
+                names.last().copied().unwrap_or_default(),
+                c.angle_deg,
+                c.translation_m
+            )
+        });
+        writeln!(
+            out,
+            "  rejected {} → {}: {}{cycle}",
+            scans[l.source].name,
+            targets.join(", "),
+            l.reason.as_deref().unwrap_or("")
+        )?;
+    }
+    Ok(())
+}
+
+/// In graph mode, the scans (after the first, which holds the frame) that
+/// no accepted link of the last stage reaches.
+pub(super) fn unlinked(report: &MatchReport) -> Vec<usize> {
+    if report.mode != "graph" {
+        return Vec::new();
+    }
+    (1..report.scans.len())
+        .filter(|&i| !report.links.iter().any(|l| l.accepted && (l.source == i || l.targets.contains(&i))))
+        .collect()
+}
