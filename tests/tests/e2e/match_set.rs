@@ -770,25 +770,40 @@ fn match_writes_only_into_a_directory_of_its_own_and_leaves_nothing_stale() {
 /// (truth: one frame), written as PLY with starts `offset_m` and
 /// `offset_deg` off per wedge (deterministic directions); returns the
 /// inputs and the `--init-poses` file.
+/// The points of `cloud` whose azimuth about z lies within `width_deg`
+/// from `from_deg`, in the frame of `world_from_wedge` (`cloud` holds
+/// world coordinates), written as binary PLY to `path`.
+fn write_wedge(
+    path: &Path,
+    cloud: &scanner::io::PointCloud,
+    from_deg: f32,
+    width_deg: f32,
+    world_from_wedge: &Isometry3<f64>,
+) -> OsString {
+    let (from, width) = (from_deg.to_radians(), width_deg.to_radians());
+    let wedge: Vec<Point3<f32>> = cloud
+        .points
+        .iter()
+        .filter(|p| (p.y.atan2(p.x) - from).rem_euclid(std::f32::consts::TAU) < width)
+        .map(|p| (world_from_wedge.inverse() * p.cast::<f64>()).cast::<f32>())
+        .collect();
+    scanner::io::write(
+        path,
+        &scanner::io::PointCloud::from_points(wedge),
+        scanner::io::Format::Ply(scanner::io::PlyEncoding::BinaryLittleEndian),
+    )
+    .expect("PLY");
+    path.as_os_str().to_owned()
+}
+
 fn room_wedges(dir: &Path, offset_m: f64, offset_deg: f64) -> Vec<OsString> {
     let room = scanner::io::read(Path::new(&data("pcl_room_scans/room_scan1.pcd"))).expect("room");
     std::fs::create_dir_all(dir).expect("dir");
     let mut inputs = Vec::new();
     let mut entries = Vec::new();
     for k in 0..4 {
-        let from = k as f32 * 90f32.to_radians();
-        let wedge: Vec<Point3<f32>> = room
-            .points
-            .iter()
-            .filter(|p| (p.y.atan2(p.x) - from).rem_euclid(std::f32::consts::TAU) < 150f32.to_radians())
-            .copied()
-            .collect();
-        let cloud = scanner::io::PointCloud::from_points(wedge);
         let name = format!("wedge{k}.ply");
-        let path = dir.join(&name);
-        scanner::io::write(&path, &cloud, scanner::io::Format::Ply(scanner::io::PlyEncoding::BinaryLittleEndian))
-            .expect("PLY");
-        inputs.push(path.into_os_string());
+        inputs.push(write_wedge(&dir.join(&name), &room, k as f32 * 90.0, 150.0, &Isometry3::identity()));
         let a = 1.3 * k as f64 + 0.4;
         let start = if k == 0 {
             Isometry3::identity()
@@ -955,7 +970,7 @@ fn init_global_registers_scans_that_come_with_no_guess() {
     let mut truth = Vec::new();
     let mut inputs = Vec::new();
     for (k, turn) in turns.iter().enumerate() {
-        let from = k as f32 * 45f32.to_radians();
+        let from = k as f32 * 45.0;
         // The wedge in a frame turned by `turn` about a tilted axis and
         // moved: world_from_wedge is that motion.
         let world_from_wedge = Isometry3::from_parts(
@@ -966,20 +981,7 @@ fn init_global_registers_scans_that_come_with_no_guess() {
             ),
         )
         .inverse();
-        let wedge: Vec<Point3<f32>> = room
-            .points
-            .iter()
-            .filter(|p| (p.y.atan2(p.x) - from).rem_euclid(std::f32::consts::TAU) < 120f32.to_radians())
-            .map(|p| (world_from_wedge.inverse() * p.cast::<f64>()).cast::<f32>())
-            .collect();
-        let path = set.join(format!("wedge{k}.ply"));
-        scanner::io::write(
-            &path,
-            &scanner::io::PointCloud::from_points(wedge),
-            scanner::io::Format::Ply(scanner::io::PlyEncoding::BinaryLittleEndian),
-        )
-        .expect("PLY");
-        inputs.push(path.into_os_string());
+        inputs.push(write_wedge(&set.join(format!("wedge{k}.ply")), &room, from, 120.0, &world_from_wedge));
         truth.push(world_from_wedge);
     }
     let v = global(inputs, "wedges-out");
@@ -1085,22 +1087,8 @@ fn street_wedges_that_the_coarse_stage_dragged_land_by_the_restart() {
         let mut inputs: Vec<OsString> = Vec::new();
         let mut entries = Vec::new();
         for (k, truth) in truths.iter().enumerate() {
-            let from = (k as f32 * 90.0 - 75.0).to_radians();
-            let wedge: Vec<Point3<f32>> = street
-                .points
-                .iter()
-                .filter(|p| (p.y.atan2(p.x) - from).rem_euclid(std::f32::consts::TAU) < 150f32.to_radians())
-                .map(|p| (truth.inverse() * p.cast::<f64>()).cast::<f32>())
-                .collect();
             let name = format!("wedge{k}.ply");
-            let path = set.join(&name);
-            scanner::io::write(
-                &path,
-                &scanner::io::PointCloud::from_points(wedge),
-                scanner::io::Format::Ply(scanner::io::PlyEncoding::BinaryLittleEndian),
-            )
-            .expect("PLY");
-            inputs.push(path.into_os_string());
+            inputs.push(write_wedge(&set.join(&name), &street, k as f32 * 90.0 - 75.0, 150.0, truth));
             // The start: 0.1 m and 2° off the truth, in directions that
             // differ by wedge and variant.
             let a = 2.1 * variant as f64 + 1.3 * k as f64;
