@@ -123,8 +123,9 @@ pub struct SetResult {
 /// from its start than the second stage's correspondence distance (out of
 /// the restart's reach: the first stage decided where it went), and kept
 /// when the scans agree clearly better there ([`crate::agreement`]); or
-/// run when a stage of the schedule moved two scans apart that overlapped
-/// at their starts, and kept when it succeeds. On narrow overlaps a
+/// run when the schedule failed (a stage moved two scans apart that
+/// overlapped at their starts, a match lost every correspondence), and
+/// kept when it succeeds. On narrow overlaps a
 /// coarse stage can drag good starts away: small_gicp's outdoor frame cut
 /// into 150° wedges, from starts 0.1 m / 2° off, ended 1–77° and 1.1–10 m
 /// off in 5 of 10 trials with the auto schedule (first cell 0.7 m, a
@@ -133,8 +134,8 @@ pub struct SetResult {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Restart {
     /// The scan that moved furthest from its start in the first
-    /// registration, or that a stage of it moved away from its partner.
-    pub scan: usize,
+    /// registration, or that its failure names.
+    pub scan: Option<usize>,
     /// How far it moved, metres (the centroid's displacement plus the turn
     /// times the points' RMS radius about it); `None` when the first
     /// registration failed.
@@ -216,11 +217,11 @@ pub fn register_set<S: AsRef<[Point3<f32>]> + Sync>(
         .collect();
     let mut r = match register_in_first_frame(scans, &local, config, progress) {
         Ok(r) => restart_if_dragged(scans, &local, config, r, progress)?,
-        // A stage moved two scans apart: the restart without the first
-        // stage may not.
-        Err(e @ FusionError::NoOverlap { stage: Some(2..), .. }) if config.stages.len() > 1 => {
-            restart_after_failure(scans, &local, config, e, progress)?
-        }
+        // A stage moved two scans apart, or a match lost its partner: the
+        // restart without the first stage may not. (Where the starts
+        // themselves do not overlap, or the input is at fault, the restart
+        // fails too and the schedule's error stands.)
+        Err(e) if config.stages.len() > 1 => restart_after_failure(scans, &local, config, e, progress)?,
         Err(e) => return Err(e),
     };
     let started = std::time::Instant::now();
@@ -242,7 +243,8 @@ fn verify_set<S: AsRef<[Point3<f32>]> + Sync>(
 
 /// The registration from the starts without the schedule's first stage,
 /// after the schedule failed with `failure` (a stage moved two scans
-/// apart); that failure when the restart fails too.
+/// apart, a match found no correspondence); that failure when the restart
+/// fails too.
 fn restart_after_failure<S: AsRef<[Point3<f32>]> + Sync>(
     scans: &[S],
     starts: &[Isometry3<f64>],
@@ -250,7 +252,10 @@ fn restart_after_failure<S: AsRef<[Point3<f32>]> + Sync>(
     failure: FusionError,
     progress: &mut dyn FnMut(usize, usize, usize, usize),
 ) -> Result<SetResult> {
-    let FusionError::NoOverlap { scan, .. } = failure else { return Err(failure) };
+    let scan = match &failure {
+        FusionError::NoOverlap { scan, .. } | FusionError::InScan { scan, .. } => Some(*scan),
+        _ => None,
+    };
     let shorter = SetConfig { stages: config.stages[1..].to_vec(), ..config.clone() };
     let Ok(mut r) = register_in_first_frame(scans, starts, &shorter, progress) else { return Err(failure) };
     let after = finest_link(config).and_then(|(finest, link)| {
@@ -323,7 +328,7 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     let stages = second.as_ref().map_or_else(Vec::new, |r| r.stages.clone());
     let matches = first.matches + second.as_ref().map_or(0, |r| r.matches);
     let restart = Restart {
-        scan,
+        scan: Some(scan),
         moved_m: Some(moved_m),
         schedule_error: None,
         stages,

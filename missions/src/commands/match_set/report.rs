@@ -107,15 +107,16 @@ pub(super) struct StageReport {
 /// stage.
 #[derive(Debug, Clone, Serialize, schemars::JsonSchema)]
 pub(super) struct RestartReport {
-    /// The scan the schedule moved furthest from its start, or that a
-    /// stage of it moved away from its partner (index into `scans`).
-    pub(super) scan: usize,
+    /// The scan the schedule moved furthest from its start, or that its
+    /// failure names (index into `scans`; null when it names none).
+    pub(super) scan: Option<usize>,
     /// How far, metres (its centroid's displacement plus the turn times
     /// its points' RMS radius); null when the schedule failed.
     pub(super) moved_m: Option<f64>,
-    /// Why the schedule failed: a stage moved two scans apart that
-    /// overlapped at their starts (the restart is then the result when it
-    /// succeeds; when it fails too, the schedule's error is the command's).
+    /// Why the schedule failed — a stage moved two scans apart that
+    /// overlapped at their starts, a match lost every correspondence (the
+    /// restart is then the result when it succeeds; when it fails too, the
+    /// schedule's error is the command's).
     pub(super) schedule_error: Option<String>,
     /// The restart's stages as they ran.
     pub(super) stages: Vec<StageReport>,

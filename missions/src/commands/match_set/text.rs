@@ -48,7 +48,10 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
     writeln!(out, "stages: {}", stages(&report.stages))?;
     if let Some(r) = &report.restart {
         let why = match (r.moved_m, &r.schedule_error) {
-            (Some(m), _) => format!("the schedule moved {} {m:.3} m from its start", scans[r.scan].name),
+            (Some(m), _) => format!(
+                "the schedule moved {} {m:.3} m from its start",
+                r.scan.map_or("a scan", |i| scans[i].name.as_str())
+            ),
             (None, e) => format!("the schedule failed ({})", e.as_deref().unwrap_or("")),
         };
         let outcome = match (r.restart_disagreement_m2, r.schedule_disagreement_m2, &r.error) {
