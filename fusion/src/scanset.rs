@@ -113,8 +113,8 @@ pub struct SetResult {
     /// The verification's wall-clock time, seconds.
     pub check_seconds: f64,
     /// The registration from the starts again without the schedule's
-    /// first stage, when a scan moved beyond the finest stage's reach of
-    /// its start ([`Restart`]).
+    /// first stage, when a scan moved beyond the second stage's reach of
+    /// its start or the schedule failed ([`Restart`]).
     pub restart: Option<Restart>,
 }
 
@@ -140,7 +140,8 @@ pub struct Restart {
     /// times the points' RMS radius about it); `None` when the first
     /// registration failed.
     pub moved_m: Option<f64>,
-    /// Why the first registration failed (a stage moved two scans apart).
+    /// Why the first registration failed (a stage moved two scans apart,
+    /// a match lost every correspondence).
     pub schedule_error: Option<String>,
     /// The restart's stages.
     pub stages: Vec<StageRun>,

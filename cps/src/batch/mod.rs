@@ -264,7 +264,9 @@ pub fn adjust_without(network: &Network, options: &AdjustOptions, left_out: &[(S
             // them all, tested exactly on the next pass (the one-by-one
             // re-adjustments of a 10,000-station network took 3 s).
             let first = snooping::Found { group: g, pos, w, residual: o.residual };
-            let batch = snooping::removals(network, &groups, &layout, &solution, &inverse, first, w_critical)?;
+            let mut batch = snooping::removals(network, &groups, &layout, &solution, &inverse, first, w_critical)?;
+            // One by one, snooping removes while the redundancy exceeds 1.
+            batch.truncate(redundancy - 1);
             let mut tried = None;
             let mut accepted = None;
             for batch in [&batch[..], &batch[..1]] {

@@ -33,8 +33,8 @@ pub(crate) struct MatchReport {
     /// The registration from the starts again without the schedule's
     /// first stage, run when the schedule moved a scan further from its
     /// start than the second stage's correspondence distance (a coarse
-    /// stage can drag good starts away on narrow overlaps); null when it
-    /// did not run.
+    /// stage can drag good starts away on narrow overlaps), or when the
+    /// schedule failed; null when it did not run.
     pub(super) restart: Option<RestartReport>,
     /// The verification: every pair of scans that overlaps at the final
     /// poses, matched once more from them at the finest stage.
