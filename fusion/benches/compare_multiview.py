@@ -147,7 +147,7 @@ def errors(poses, truths):
     return out
 
 
-def cut_scenarios(rng_seed):
+def cut_scenarios():
     out = []
     for name, xyz, up in sources():
         out.append((f"{name} shares near", lambda rng, xyz=xyz: shares(rng, xyz, 4), up, 2, 0.1, 0.5))
@@ -176,7 +176,7 @@ def main():
     only = os.environ.get("MV_ONLY")
     rng = np.random.default_rng(11)
     cases = []  # (label, generator of (parts in own frames, truths, starts))
-    for label, cut, up, turn, move, frame in cut_scenarios(rng):
+    for label, cut, up, turn, move, frame in cut_scenarios():
 
         def trial(rng, cut=cut, up=up, turn=turn, move=move, frame=frame):
             pieces = cut(rng)

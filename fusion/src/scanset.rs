@@ -257,8 +257,7 @@ fn restart_after_failure<S: AsRef<[Point3<f32>]> + Sync>(
         FusionError::NoOverlap { scan, .. } | FusionError::InScan { scan, .. } => Some(*scan),
         _ => None,
     };
-    let shorter = SetConfig { stages: config.stages[1..].to_vec(), ..config.clone() };
-    let Ok(mut r) = register_in_first_frame(scans, starts, &shorter, progress) else { return Err(failure) };
+    let Ok(mut r) = without_first_stage(scans, starts, config, progress) else { return Err(failure) };
     let after = finest_link(config).and_then(|(finest, link)| {
         let prepared = crate::multiview::prepare(scans, &link.multiview).ok()?;
         Some(crate::agreement::disagreement(&prepared, &r.world_from_scan, finest.max_correspondence_m))
@@ -273,6 +272,18 @@ fn restart_after_failure<S: AsRef<[Point3<f32>]> + Sync>(
         kept: true,
     });
     Ok(r)
+}
+
+/// The registration from `starts` with the schedule of `config` less its
+/// first stage: the restart's ([`Restart`]).
+fn without_first_stage<S: AsRef<[Point3<f32>]> + Sync>(
+    scans: &[S],
+    starts: &[Isometry3<f64>],
+    config: &SetConfig,
+    progress: &mut dyn FnMut(usize, usize, usize, usize),
+) -> Result<SetResult> {
+    let shorter = SetConfig { stages: config.stages[1..].to_vec(), ..config.clone() };
+    register_in_first_frame(scans, starts, &shorter, progress)
 }
 
 /// The finest stage and the link settings at it.
@@ -319,8 +330,7 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     let prepared = crate::multiview::prepare(scans, &link.multiview)?;
     let tau = finest.max_correspondence_m;
     let before = crate::agreement::disagreement(&prepared, &first.world_from_scan, tau);
-    let shorter = SetConfig { stages: config.stages[1..].to_vec(), ..config.clone() };
-    let (mut second, error) = match register_in_first_frame(scans, starts, &shorter, progress) {
+    let (mut second, error) = match without_first_stage(scans, starts, config, progress) {
         Ok(r) => (Some(r), None),
         Err(e) => (None, Some(e.to_string())),
     };

@@ -255,7 +255,14 @@ pub fn removals(
     let l = &linear[first.group];
     let mut next = Some((first.group, l.pos[..l.k].iter().position(|&p| p == first.pos)));
     while let Some((g, Some(row))) = next {
-        let Some((u, t)) = linear[g].conditional(row) else { break };
+        let Some((u, t)) = linear[g].conditional(row) else {
+            // Not this one (the last found; the caller's first is tried
+            // exactly, which says why).
+            if found.len() > 1 {
+                found.pop();
+            }
+            break;
+        };
         let u: Vec<(usize, f64)> = (0..linear[g].m).map(|j| (linear[g].columns[j], u[j])).collect();
         let mut dense = vec![0.0; n];
         for &(col, x) in &u {
