@@ -4,7 +4,7 @@
 use std::io::Write;
 use std::path::PathBuf;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 
 use super::Outcome;
 use crate::mission::Mission;
@@ -89,7 +89,15 @@ pub fn run(args: &RunArgs, out: &mut dyn Write) -> Result<Outcome> {
         viewer,
         log_icp_iterations: args.log_icp_iterations,
     };
-    let summary = crate::run::runner::run(&mission, &planned, &dir, &options)?;
+    let mut summary = crate::run::runner::run(&mission, &planned, &dir, &options)?;
+    if mission.output.ros2_bag {
+        // From the finished journal and scans, as `export` writes it.
+        let run = crate::run::resume::load(&summary.dir)?;
+        crate::ros2::export::write(&run, &summary.dir, &summary.dir.join("rosbag2")).context(
+            "writing rosbag2/ ([output] ros2_bag); `cps-survey export RUN_DIR --ros2-bag DIR` writes it again",
+        )?;
+        summary.files.push("rosbag2/".into());
+    }
     crate::view::tables::run_summary(out, &mission, &summary)?;
     Ok(Outcome::passed(summary.accepted))
 }

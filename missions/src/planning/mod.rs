@@ -7,11 +7,13 @@
 //! [`preanalysis`] adjusts the planned network (every station's covariance,
 //! every reading's reliability); [`analysis`] is what `plan` reports (what
 //! the error is made of, what-ifs, reliability, the search); [`edit`]
-//! writes an optimized plan back into the mission file.
+//! writes an optimized plan back into the mission file; [`montecarlo`]
+//! checks the prediction by seeded simulated executions.
 
 pub mod analysis;
 pub mod constraints;
 pub mod edit;
+pub mod montecarlo;
 pub mod preanalysis;
 
 use std::sync::Arc;

@@ -18,7 +18,6 @@ use nalgebra::{Isometry3, Point3, Quaternion as NQuaternion, Translation3, UnitQ
 use serde::de::DeserializeOwned;
 
 use super::messages::{OdometryHead, PointCloud2, Pose, TfMessage};
-use crate::scans::inputs::InputScan;
 
 /// How far outside the span of a moving frame's transforms a stamp may
 /// fall and take the nearest one, seconds.
@@ -447,8 +446,25 @@ fn points(c: &PointCloud2, topic: &str) -> Result<Points> {
     Ok((out, inten, times))
 }
 
-/// The clouds of `path` as scans with their start poses (module docs).
-pub fn read(path: &Path, options: &BagOptions) -> Result<Vec<InputScan>> {
+/// A cloud of the bag with its start pose.
+#[derive(Debug, Clone)]
+pub struct BagCloud {
+    /// `BAG#TOPIC@SECONDS.NANOSECONDS`.
+    pub file: String,
+    /// Its points in its own frame.
+    pub points: Vec<Point3<f32>>,
+    /// Its start `fixed_from_cloud` at its stamp.
+    pub start: Isometry3<f64>,
+    /// Its points' intensities, when it has them.
+    pub intensity: Option<Vec<f32>>,
+    /// Its stamp, GPS seconds.
+    pub gps_time_s: f64,
+    /// Its points' times, GPS seconds, when it has them.
+    pub time: Option<Vec<f64>>,
+}
+
+/// The clouds of `path` with their start poses (module docs).
+pub fn read(path: &Path, options: &BagOptions) -> Result<Vec<BagCloud>> {
     let raw = messages(path)?;
     let what = path.display();
     let clouds_on: BTreeMap<&str, usize> =
@@ -527,7 +543,7 @@ pub fn read(path: &Path, options: &BagOptions) -> Result<Vec<InputScan>> {
         bail!("{what}: --frame {fixed} is not in the bag's transforms (frames: {})", frames.join(", "));
     }
     // The clouds with their poses, then the ones kept.
-    let mut scans: Vec<InputScan> = Vec::new();
+    let mut scans: Vec<BagCloud> = Vec::new();
     let mut last: Option<(u64, Isometry3<f64>)> = None;
     for r in raw.iter().filter(|r| r.topic == topic) {
         let c = decode::<PointCloud2>(r)?;
@@ -550,16 +566,13 @@ pub fn read(path: &Path, options: &BagOptions) -> Result<Vec<InputScan>> {
         let (pts, intensity, times) =
             points(&c, &topic).with_context(|| format!("{what}: the cloud at {stamp_s:.3} s"))?;
         let gps = scanner::io::gps_time_of_unix(stamp_s);
-        let k = scans.len();
-        scans.push(InputScan {
+        scans.push(BagCloud {
             file: format!("{what}#{topic}@{}.{:09}", at / 1_000_000_000, at % 1_000_000_000),
-            name: format!("scan{k:03}"),
             points: pts,
             start,
             intensity,
-            gps_time_s: Some(gps),
-            color: None,
-            time: times.map(|t| (t.into_iter().map(|d| gps + d).collect(), scanner::io::TimeBase::Gps)),
+            gps_time_s: gps,
+            time: times.map(|t| t.into_iter().map(|d| gps + d).collect()),
         });
     }
     Ok(scans)

@@ -916,14 +916,6 @@ impl Run<'_> {
         if recorded {
             files.push("mission.rrd".into());
         }
-        if self.mission.output.ros2_bag {
-            // From the finished journal and scans, as `export` writes it.
-            let run = super::resume::load(&self.dir)?;
-            crate::ros2::export::write(&run, &self.dir, &self.dir.join("rosbag2")).context(
-                "writing rosbag2/ ([output] ros2_bag); `cps-survey export RUN_DIR --ros2-bag DIR` writes it again",
-            )?;
-            files.push("rosbag2/".into());
-        }
         Ok(RunSummary {
             dir: self.dir,
             stations: self.stations,

@@ -70,7 +70,16 @@ pub fn read(
     let mut scans = Vec::new();
     for input in inputs {
         if crate::ros2::read::is_bag(input) {
-            scans.extend(crate::ros2::read::read(input, bag)?);
+            scans.extend(crate::ros2::read::read(input, bag)?.into_iter().enumerate().map(|(k, c)| InputScan {
+                file: c.file,
+                name: format!("scan{k:03}"),
+                points: c.points,
+                start: c.start,
+                intensity: c.intensity,
+                gps_time_s: Some(c.gps_time_s),
+                color: None,
+                time: c.time.map(|t| (t, scanner::io::TimeBase::Gps)),
+            }));
         } else if input.is_dir() {
             scans.extend(threedtk_directory(input)?);
         } else if scanner::io::Format::from_path(input).ok() == Some(scanner::io::Format::E57) {

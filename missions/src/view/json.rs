@@ -8,10 +8,10 @@ use cps::{CHI2_2D_95_SQRT, ErrorEllipse};
 use planner::{Action, Robot, StepEstimate};
 use serde::Serialize;
 
-use crate::commands::montecarlo::MonteCarlo;
 use crate::mission::Mission;
 use crate::planning::Planned;
 use crate::planning::analysis::{self, PlanReport};
+use crate::planning::montecarlo::MonteCarlo;
 use crate::view::document::{Document, write_line};
 
 /// A position: x, y, z, metres (the shape of every position in every

@@ -6,10 +6,10 @@ use std::io::Write;
 use cps::{CHI2_2D_95_SQRT, RAD_PER_ARCSEC};
 use planner::{Prediction, Robot, StepEstimate};
 
-use crate::commands::montecarlo::MonteCarlo;
 use crate::mission::Mission;
 use crate::planning::Planned;
 use crate::planning::analysis::{self, PlanReport};
+use crate::planning::montecarlo::MonteCarlo;
 use crate::run::adjust::AdjustmentOutcome;
 use crate::run::fuse::{Fused, ScanView, error_heading, error_xy};
 use crate::run::inspection::PipeReport;
