@@ -10,18 +10,24 @@
 //! - [`run`]: running a mission ([`run::runner`]) on the simulator or serial
 //!   ports ([`run::backend`]) with a typed journal ([`run::journal`]) that a
 //!   killed run resumes from ([`run::resume`]), the fusion of the scans
-//!   ([`run::fuse`]), the pipe inspection, the one output stage
-//!   ([`run::outputs`]) and the reports ([`run::report`]);
+//!   ([`run::fuse`]), the one output stage ([`run::outputs`]) and the
+//!   reports ([`run::report`]);
+//! - [`inspection`]: the `[pipe]` inspection of a fused cloud;
 //! - [`scans`]: a user's own scans outside a mission (files, 3DTK
 //!   directories, multi-scan E57) with their start poses, for `register`
 //!   and `match`;
+//! - [`documents`]: every JSON document the CLI writes, typed and
+//!   versioned, with the records they share (imports nothing of the
+//!   crate);
 //! - [`view`]: what the user sees — terminal tables, JSON documents, plots
-//!   and the Rerun recording;
+//!   and the Rerun recording (never imports `run`);
 //! - [`commands`]: one file per subcommand, [`cli`] the command line.
 #![warn(missing_docs)]
 
 pub mod cli;
 pub mod commands;
+pub mod documents;
+pub mod inspection;
 pub mod mission;
 pub mod planning;
 pub mod ros2;

@@ -80,7 +80,7 @@ pub fn run(args: &AdjustArgs, out: &mut dyn Write) -> Result<Outcome> {
     scanner::io::replace_file(&listing, crate::view::listing::listing(&run.mission, &report).as_bytes())
         .with_context(|| format!("writing {}", listing.display()))?;
     if args.json {
-        crate::view::document::write_line(out, &report)?;
+        crate::documents::write_line(out, &report)?;
     } else {
         crate::view::listing::summary(out, &report)?;
         writeln!(out, "the listing: {}", listing.display())?;

@@ -21,6 +21,8 @@ use scanner::emulate::{Emulator, Faults};
 use scanner::sim::SimWorld;
 use serde::Serialize;
 
+use crate::documents::ports::{InstrumentJson, PortsJson};
+
 use super::Outcome;
 use crate::mission::Mission;
 use crate::planning::Planned;
@@ -68,7 +70,7 @@ pub fn run(args: &EmulateArgs, out: &mut dyn Write) -> Result<Outcome> {
     let planned = Planned::new(&mission)?;
     let team = start(&mission, &planned, args.truth.as_deref(), &args.fault)?;
     if args.json {
-        crate::view::document::write_line(out, &ports_json(&mission, &team))?;
+        crate::documents::write_line(out, &ports_json(&mission, &team))?;
     } else {
         writeln!(
             out,
@@ -261,37 +263,6 @@ pub fn backend_toml(mission: &Mission, team: &EmulatedTeam) -> String {
         mission.children.join(", ")
     );
     t
-}
-
-/// `emulate --json`: the ports.
-#[derive(Serialize, schemars::JsonSchema)]
-pub(crate) struct PortsJson {
-    /// `[mission] name`.
-    mission: String,
-    /// The simulated world's seed.
-    seed: u64,
-    /// Every instrument served.
-    instruments: Vec<InstrumentJson>,
-    /// The `[backend.serial]` table with these ports (TOML).
-    backend_serial: String,
-}
-
-/// One served instrument.
-#[derive(Serialize, schemars::JsonSchema)]
-struct InstrumentJson {
-    /// `total-station`, `tilt`, `scanner`, `head`, `parent` or a child's name.
-    role: String,
-    /// The pseudo-terminal.
-    path: String,
-    /// Its baud rate.
-    baud: u32,
-    /// The protocol spoken.
-    protocol: &'static str,
-}
-
-impl crate::view::document::Document for PortsJson {
-    const NAME: &'static str = "emulate";
-    const VERSION: u32 = 1;
 }
 
 /// The ports as JSON: `{"mission", "seed", "instruments": [{"role", "path", "baud", "protocol"}], "backend_serial"}`.

@@ -9,8 +9,8 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 
 use super::Outcome;
+use crate::documents::run::{FusionReport, Timings};
 use crate::mission::FusionMode;
-use crate::run::report::{FusionReport, Timings};
 use crate::view::recording::Recorder;
 
 /// `fuse`'s arguments.
@@ -63,11 +63,11 @@ pub fn run(args: &FuseArgs, out: &mut dyn Write) -> Result<Outcome> {
     let mut report = FusionReport::new(views, &fused);
     report.seconds = Some(fused.seconds);
     report.pipe = written.pipe.clone();
-    crate::view::document::write_file(&target.join("fusion.json"), &report)?;
+    crate::documents::write_file(&target.join("fusion.json"), &report)?;
     if args.json {
-        crate::view::document::write_line(out, &report)?;
+        crate::documents::write_line(out, &report)?;
     } else {
-        crate::view::tables::fusion(out, views, &fused)?;
+        crate::run::text::fusion(out, views, &fused)?;
         if let Some(pipe) = &report.pipe {
             crate::view::tables::pipe_summary(out, pipe)?;
         }

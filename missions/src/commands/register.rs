@@ -5,9 +5,11 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, bail};
+
 use fusion::icp::{IcpConfig, IcpResult, Kernel, Method, Stage, align_coarse_to_fine};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
-use serde::Serialize;
+
+use crate::documents::register::RegisterReport;
 
 /// The error metric on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -68,25 +70,6 @@ pub struct RegisterArgs {
     pub json: bool,
 }
 
-/// `register --json`.
-#[derive(Serialize, schemars::JsonSchema)]
-pub(crate) struct Report {
-    target_from_source: [[f64; 4]; 4],
-    converged: bool,
-    iterations: usize,
-    inliers: usize,
-    rmse_m: f64,
-    seconds: f64,
-    /// 6×6, order (ωx, ωy, ωz, vx, vy, vz), radians and metres, left
-    /// perturbation in the target frame.
-    covariance: Vec<[f64; 6]>,
-}
-
-impl crate::view::document::Document for Report {
-    const NAME: &'static str = "register";
-    const VERSION: u32 = 1;
-}
-
 /// `--iterations`: a cap that ends (18446744073709551615 with zero
 /// tolerances never did).
 fn iterations(s: &str) -> Result<usize, String> {
@@ -123,7 +106,7 @@ pub fn run(args: &RegisterArgs, out: &mut dyn Write) -> anyhow::Result<super::Ou
         .with_context(|| format!("registering {} to {}", args.source.display(), args.target.display()))?;
     let seconds = start.elapsed().as_secs_f64();
     if args.json {
-        crate::view::document::write_line(out, &report(&result, seconds))?;
+        crate::documents::write_line(out, &report(&result, seconds))?;
     } else {
         write_text(out, &result, seconds)?;
     }
@@ -163,12 +146,12 @@ fn load(path: &Path, min_m: f64, max_m: f64) -> anyhow::Result<Vec<Point3<f32>>>
     Ok(points)
 }
 
-fn report(r: &IcpResult, seconds: f64) -> Report {
+fn report(r: &IcpResult, seconds: f64) -> RegisterReport {
     let m = r.target_from_source.to_homogeneous();
     let covariance =
         r.covariance().map_or_else(Vec::new, |c| (0..6).map(|i| std::array::from_fn(|j| c[(i, j)])).collect());
-    Report {
-        target_from_source: std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)])),
+    RegisterReport {
+        target_from_source: crate::documents::records::rows(&m),
         converged: r.converged,
         iterations: r.iterations,
         inliers: r.inliers,

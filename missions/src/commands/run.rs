@@ -98,6 +98,6 @@ pub fn run(args: &RunArgs, out: &mut dyn Write) -> Result<Outcome> {
         )?;
         summary.files.push("rosbag2/".into());
     }
-    crate::view::tables::run_summary(out, &mission, &summary)?;
+    crate::run::text::run_summary(out, &mission, &summary)?;
     Ok(Outcome::passed(summary.accepted))
 }

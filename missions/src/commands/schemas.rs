@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 
 use super::Outcome;
-use crate::view::document::{Document, schema};
+use crate::documents::{Document, schema};
 
 /// `schemas`' arguments.
 #[derive(Debug, Clone, clap::Args)]
@@ -30,15 +30,15 @@ pub fn documents() -> Vec<(&'static str, u32, &'static str, schemars::Schema)> {
         (T::NAME, T::VERSION, written, schema::<T>())
     }
     vec![
-        of::<crate::run::report::RunReport>("RUN_DIR/report.json"),
-        of::<crate::run::report::FusionReport>("RUN_DIR/fusion/<mode>/fusion.json, fuse --json"),
-        of::<crate::run::adjust::AdjustmentReport>("adjust --json, report.json's adjustment"),
-        of::<crate::view::json::PredictionJson>("predict --json"),
-        of::<crate::view::json::PlanJson>("plan --json"),
-        of::<crate::view::json::MonteCarloJson>("montecarlo --json"),
-        of::<super::register::Report>("register --json"),
-        of::<super::match_set::MatchReport>("match --json, OUT/poses.json"),
-        of::<super::emulate::PortsJson>("emulate --json"),
+        of::<crate::documents::run::RunReport>("RUN_DIR/report.json"),
+        of::<crate::documents::run::FusionReport>("RUN_DIR/fusion/<mode>/fusion.json, fuse --json"),
+        of::<crate::documents::adjustment::AdjustmentReport>("adjust --json, report.json's adjustment"),
+        of::<crate::documents::prediction::PredictionJson>("predict --json"),
+        of::<crate::documents::plan::PlanJson>("plan --json"),
+        of::<crate::documents::montecarlo::MonteCarloJson>("montecarlo --json"),
+        of::<crate::documents::register::RegisterReport>("register --json"),
+        of::<crate::documents::matching::MatchReport>("match --json, OUT/poses.json"),
+        of::<crate::documents::ports::PortsJson>("emulate --json"),
     ]
 }
 

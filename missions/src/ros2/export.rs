@@ -253,7 +253,7 @@ pub fn write(run: &RunDir, run_dir: &Path, dir: &Path) -> Result<Exported> {
         let Some(&at) = time.fixes.get(&station) else { continue };
         let stamp = time.ns(at);
         let pose: ParentPose = (&f.data.pose).into();
-        let covariance = crate::run::journal::matrix_of(&f.data.covariance);
+        let covariance = crate::documents::records::matrix4(&f.data.covariance);
         let world = planar(&pose);
         parent_at(&mut bag, stamp, &world, covariance6(&covariance, UNKNOWN_VARIANCE))?;
         route.push(PoseStamped { header: header(stamp, MAP), pose: Pose::from(&world) });
@@ -326,7 +326,7 @@ pub fn write(run: &RunDir, run_dir: &Path, dir: &Path) -> Result<Exported> {
 
 /// The network adjustment of the run's journal, if it adjusts (a robot
 /// alone, or a journal without readings, does not).
-fn adjustment(run: &RunDir, run_dir: &Path) -> Option<crate::run::adjust::AdjustmentReport> {
+fn adjustment(run: &RunDir, run_dir: &Path) -> Option<crate::documents::adjustment::AdjustmentReport> {
     let path = run_dir.join("journal.jsonl");
     let net = crate::run::adjust::network(&run.mission, &run.planned, &run.journal, &path).ok()?;
     crate::run::adjust::adjust(&run.mission, &run.planned, &net, &cps::batch::AdjustOptions::default()).ok()

@@ -111,25 +111,38 @@ pub struct Link {
     pub rmse_m: Option<f64>,
     /// Whether ICP converged.
     pub converged: bool,
+    /// ICP iterations (0 when it did not run).
+    pub iterations: usize,
     /// Whether the match is used, and if not why.
     pub rejected: Option<String>,
     /// `icp` with `[fusion] degeneracy_ratio`: the directions the match
-    /// could not see (unit ξ = (ω, v), world frame), held where the start
-    /// put them.
+    /// could not see (unit ξ = (ω, v), the world's axes, a motion of the
+    /// source about its first partner's origin), held where the start put
+    /// them.
     pub unobservable: Vec<nalgebra::Vector6<f64>>,
 }
 
 impl Link {
-    /// A match that ran: `m` of the scan at `source` against `targets`.
-    fn matched(source: usize, targets: Vec<usize>, m: &fusion::icp::IcpResult) -> Self {
+    /// A match that ran: `m` of the scan at `source` against `targets`,
+    /// its twists about `origin` (the world's axes), the blind directions
+    /// reported about the first partner's origin `partner` (in the same
+    /// frame).
+    fn matched(
+        source: usize,
+        targets: Vec<usize>,
+        m: &fusion::icp::IcpResult,
+        partner: &nalgebra::Vector3<f64>,
+    ) -> Self {
+        let about = fusion::se3::adjoint(&Isometry3::translation(-partner.x, -partner.y, -partner.z));
         Self {
             source,
             targets,
             correspondences: Some(m.inliers),
             rmse_m: Some(m.rmse_m),
             converged: m.converged,
+            iterations: m.iterations,
             rejected: None,
-            unobservable: m.unobservable.clone(),
+            unobservable: m.unobservable.iter().map(|d| (about * d).normalize()).collect(),
         }
     }
 }
@@ -238,7 +251,11 @@ pub fn fuse(
             traces = coarse.traces.into_iter().chain(r.traces).collect();
             for (s, (m, partners)) in r.last_match.iter().zip(&r.partners).enumerate() {
                 if let Some(m) = m {
-                    links.push(Link::matched(station(s), partners.iter().map(|&k| station(k)).collect(), m));
+                    // The match's twists are about the local frame's origin.
+                    let partner = partners
+                        .first()
+                        .map_or_else(nalgebra::Vector3::zeros, |&k| r.world_from_scan[k].translation.vector);
+                    links.push(Link::matched(station(s), partners.iter().map(|&k| station(k)).collect(), m, &partner));
                 }
             }
             let rmse = r.last_match.iter().map(|m| m.as_ref().map(|m| m.rmse_m)).collect();
@@ -270,7 +287,8 @@ pub fn fuse(
             let mut rmse = vec![None; views.len()];
             for (t, s, m) in &r.matches {
                 rmse[*s] = Some(m.rmse_m);
-                links.push(Link::matched(station(*s), vec![station(*t)], m));
+                // In the partner's frame, about its origin.
+                links.push(Link::matched(station(*s), vec![station(*t)], m, &nalgebra::Vector3::zeros()));
             }
             for (t, s, why) in &r.failed {
                 links.push(Link {
@@ -279,6 +297,7 @@ pub fn fuse(
                     correspondences: None,
                     rmse_m: None,
                     converged: false,
+                    iterations: 0,
                     rejected: Some(why.clone()),
                     unobservable: Vec::new(),
                 });
@@ -375,6 +394,7 @@ fn fuse_without(
                 correspondences: None,
                 rmse_m: None,
                 converged: false,
+                iterations: 0,
                 rejected: Some(format!(
                     "{} points, {} in {} m cells: too few to match (expected more than {}); the scan keeps its {} pose",
                     v.body.len(),

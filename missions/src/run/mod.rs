@@ -10,19 +10,19 @@
 //! - [`resume`]: a run directory opened for a new run or a resume, and read
 //!   back by `fuse`;
 //! - [`fuse`]: the scans fused by `[fusion] mode`;
-//! - [`inspection`]: the `[pipe]` inspection of the fused cloud;
 //! - [`outputs`]: the one output stage of `run` and `fuse`;
 //! - [`report`]: `report.json`, `fusion.json`, `stations.csv`;
-//! - [`adjust`]: the network adjustment of the journal's readings.
+//! - [`adjust`]: the network adjustment of the journal's readings;
+//! - [`text`]: what `run` and `fuse` print.
 
 pub mod adjust;
 pub mod backend;
 pub mod directory;
 pub mod fuse;
-pub mod inspection;
 pub mod journal;
 pub mod outputs;
 pub mod report;
 pub mod resume;
 pub mod runner;
 pub mod steps;
+pub mod text;

@@ -13,8 +13,9 @@ use anyhow::Result;
 use nalgebra::Point3;
 use scanner::io::{CloudHeader, CloudWriter, Format, PointCloud};
 
-use super::inspection::{DEVIATION_FILE, PipeReport};
-use super::report::Timings;
+use crate::documents::pipe::PipeReport;
+use crate::documents::run::Timings;
+use crate::inspection::DEVIATION_FILE;
 use crate::mission::Mission;
 use crate::view::recording::Recorder;
 
@@ -157,9 +158,9 @@ fn pipe(
 ) -> Result<Option<PipeReport>> {
     let Some(plan) = &mission.pipe else { return Ok(None) };
     let started = Instant::now();
-    let result = super::inspection::inspect(plan, world);
+    let result = crate::inspection::inspect(plan, world);
     if let Ok(inspection) = &result {
-        super::inspection::write_deviation_map(dir, world, inspection)?;
+        crate::inspection::write_deviation_map(dir, world, inspection)?;
         files.push(DEVIATION_FILE.into());
     }
     timings.pipe_s = Some(started.elapsed().as_secs_f64());
@@ -168,7 +169,7 @@ fn pipe(
             let t = Instant::now();
             rec.pipe(world, &inspection, plan.threshold_m)?;
             timings.recording_s += t.elapsed().as_secs_f64();
-            super::inspection::report(plan, &inspection)
+            crate::inspection::report(plan, &inspection)
         }
         Err(e) => {
             let error = format!("{e:#}");

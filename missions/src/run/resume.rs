@@ -12,7 +12,8 @@ use scanner::Tilt;
 
 use super::directory;
 use super::fuse::{Correlation, ScanView};
-use super::journal::{self, EndRecord, Event, Journal, Start, matrix_of};
+use super::journal::{self, EndRecord, Event, Journal, Start};
+use crate::documents::records::matrix4;
 use crate::mission::Mission;
 use crate::planning::Planned;
 
@@ -178,8 +179,8 @@ pub fn load(dir: &Path) -> Result<RunDir> {
         match &n.event {
             Event::Fix(f) => {
                 let d = &f.data;
-                pose = ((&d.pose).into(), matrix_of(&d.covariance));
-                cross = d.scan_cross_covariances.iter().flatten().map(matrix_of).collect();
+                pose = ((&d.pose).into(), matrix4(&d.covariance));
+                cross = d.scan_cross_covariances.iter().flatten().map(matrix4).collect();
                 chain = d.chain.clone();
             }
             Event::Tilt(t) => tilt = Some(Tilt { roll_rad: t.data.roll_rad, pitch_rad: t.data.pitch_rad }),
@@ -246,7 +247,7 @@ pub fn load(dir: &Path) -> Result<RunDir> {
 fn refuse_others_outputs(dir: &Path) -> Result<()> {
     let mut names: Vec<String> = ["report.json", "stations.csv", "adjustment.txt", "mission.toml", "scene.toml"]
         .into_iter()
-        .chain(["mission.rrd", "scans", "fusion", super::inspection::DEVIATION_FILE])
+        .chain(["mission.rrd", "scans", "fusion", crate::inspection::DEVIATION_FILE])
         .map(String::from)
         .collect();
     names.extend(crate::mission::OUTPUT_FORMATS.iter().map(|f| super::outputs::cloud_file(f)));

@@ -33,16 +33,18 @@ use scanner::io::{Format, PointCloud};
 use scanner::sim::Robot;
 use scanner::{PlanarPose, Prism, Target, Tilt};
 
-use super::adjust::{AdjustmentOutcome, AdjustmentReport};
 use super::backend::{DeviceKind, Fault, Team};
 use super::fuse::{Correlation, Fused, ScanView};
 use super::journal::{
     ChainRecord, Derived, DriveKey, Driven, EndKey, EndRecord, Event, FixKey, FixRecord, MeasureKey, Measured, Phase,
-    Scanned, StationKey, StepKey, Stop, Tilted, matrix_record,
+    Scanned, StationKey, StepKey, Stop, Tilted,
 };
 use super::outputs::{CloudFiles, Written};
-use super::report::{FusionReport, Remeasured, RunReport, StationRecord, Timings};
+use super::report::StationRecord;
 use super::steps::Steps;
+use crate::documents::adjustment::{AdjustmentOutcome, AdjustmentReport};
+use crate::documents::records::rows;
+use crate::documents::run::{FusionReport, Remeasured, RunReport, Timings};
 use crate::mission::{FusionMode, Mission};
 use crate::planning::Planned;
 use crate::view::recording::{Layout, Recorder, Viewer};
@@ -566,7 +568,7 @@ impl Run<'_> {
         let pose = self.team.parent();
         let (cross, chain) = if self.clones_scan_stations() {
             let cross = (0..self.team.clones())
-                .map(|a| self.team.parent_clone_covariance(a).map(|c| matrix_record(&c)))
+                .map(|a| self.team.parent_clone_covariance(a).map(|c| rows(&c)))
                 .collect::<cps::Result<Vec<_>>>()?;
             (Some(cross), None)
         } else {
@@ -576,7 +578,7 @@ impl Run<'_> {
             key: FixKey { cycle, station },
             data: FixRecord {
                 pose: (&pose).into(),
-                covariance: matrix_record(&self.team.parent_covariance()),
+                covariance: rows(&self.team.parent_covariance()),
                 sigma0_squared: Some(fix.sigma0_squared),
                 redundancy: Some(fix.redundancy),
                 scan_cross_covariances: cross,
@@ -647,7 +649,7 @@ impl Run<'_> {
             key: FixKey { cycle: cycle.cycle, station: cycle.to },
             data: FixRecord {
                 pose: (&pose).into(),
-                covariance: matrix_record(&predicted.covariance),
+                covariance: rows(&predicted.covariance),
                 sigma0_squared: None,
                 redundancy: None,
                 scan_cross_covariances: None,
@@ -898,7 +900,7 @@ impl Run<'_> {
             self.remeasured,
         )?;
         report.adjustment = adjustment;
-        crate::view::document::write_file(&self.dir.join("report.json"), &report)?;
+        crate::documents::write_file(&self.dir.join("report.json"), &report)?;
         let adjusted = report.adjustment.as_ref().and_then(AdjustmentOutcome::report);
         super::report::write_stations_csv(&self.dir.join("stations.csv"), &self.stations, adjusted)?;
         let viewer_warning = recording_end.map_err(|e| {

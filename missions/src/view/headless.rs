@@ -13,10 +13,10 @@ use cps::geom::Scene;
 use nalgebra::{Matrix3, Matrix4, Point3};
 use planner::Violation;
 
+use crate::documents::adjustment::AdjustmentReport;
+use crate::inspection::Inspection;
 use crate::mission::Mission;
 use crate::planning::Planned;
-use crate::run::adjust::AdjustmentReport;
-use crate::run::inspection::Inspection;
 pub use crate::view::target::{Layout, Viewer};
 
 const WHY: &str = "this cps-survey was built without the `recording` feature (cargo build --no-default-features): \

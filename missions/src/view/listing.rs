@@ -6,8 +6,8 @@
 use std::fmt::Write as _;
 use std::io::Write;
 
+use crate::documents::adjustment::AdjustmentReport;
 use crate::mission::Mission;
-use crate::run::adjust::AdjustmentReport;
 
 fn mm(v: f64) -> String {
     format!("{:.2}", 1e3 * v)

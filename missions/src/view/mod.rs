@@ -1,10 +1,9 @@
 //! What the user sees: [`tables`] on the terminal, [`json`] documents (each
-//! a versioned [`document`]), the
+//! a versioned [`crate::documents`] type), the
 //! adjustment's [`listing`],
 //! [`plot`]s (SVG) and the Rerun [`recording`]; [`shapes`] is the geometry
 //! the plot and the recording share; [`target`] where a recording goes.
 
-pub mod document;
 pub mod json;
 pub mod listing;
 pub mod plot;

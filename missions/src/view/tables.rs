@@ -6,14 +6,11 @@ use std::io::Write;
 use cps::{CHI2_2D_95_SQRT, RAD_PER_ARCSEC};
 use planner::{Prediction, Robot, StepEstimate};
 
+use crate::documents::pipe::PipeReport;
 use crate::mission::Mission;
 use crate::planning::Planned;
 use crate::planning::analysis::{self, PlanReport};
 use crate::planning::montecarlo::MonteCarlo;
-use crate::run::adjust::AdjustmentOutcome;
-use crate::run::fuse::{Fused, ScanView, error_heading, error_xy};
-use crate::run::inspection::PipeReport;
-use crate::run::runner::RunSummary;
 
 /// The children right after each placement: √(σx² + σy²) per child, one
 /// row per cycle that placed any.
@@ -382,112 +379,6 @@ pub fn plan(out: &mut dyn Write, mission: &Mission, report: &PlanReport) -> std:
         writeln!(out, "acceptance ({}): {verdict}", limits.join(", "))?;
     } else if verdict == "FAIL" {
         writeln!(out, "FAIL: the plan breaks constraints")?;
-    }
-    Ok(())
-}
-
-/// `run`: one line per station, the fusion and the pipe, the files written
-/// and the verdict.
-pub fn run_summary(out: &mut dyn Write, mission: &Mission, s: &RunSummary) -> std::io::Result<()> {
-    writeln!(
-        out,
-        "mission \"{}\" (seed {}): {} stations, {} points fused",
-        mission.name,
-        mission.backend.seed,
-        s.stations.len(),
-        s.points
-    )?;
-    writeln!(
-        out,
-        "{:>7} {:>10} {:>10} {:>9} {:>11} {:>11} {:>9}",
-        "station", "x_m", "y_m", "σxy_mm", "pred σxy_mm", "error_xy_mm", "scan"
-    )?;
-    for st in &s.stations {
-        writeln!(
-            out,
-            "{:>7} {:>10.3} {:>10.3} {:>9.2} {:>11.2} {:>11} {:>9}",
-            st.index,
-            st.pose.position.x,
-            st.pose.position.y,
-            1e3 * cps::sigma_xy2(&st.covariance).sqrt(),
-            1e3 * cps::sigma_xy2(&st.predicted_covariance).sqrt(),
-            st.error_xy_m.map_or("-".to_string(), |e| format!("{:.2}", 1e3 * e)),
-            if st.scan.is_some() { "yes" } else { "-" }
-        )?;
-    }
-    let fusion = &s.report.fusion;
-    if let (Some(rms), Some(direct)) = (fusion.rms_error_xy_m, fusion.direct_rms_error_xy_m)
-        && fusion.mode != "direct"
-    {
-        writeln!(
-            out,
-            "fusion {}: {} ICP matches; RMS horizontal error of the scan poses {:.2} mm (direct: {:.2} mm)",
-            fusion.mode,
-            fusion.matches,
-            1e3 * rms,
-            1e3 * direct
-        )?;
-    }
-    if let Some(pipe) = &s.report.pipe {
-        pipe_summary(out, pipe)?;
-    }
-    match &s.report.adjustment {
-        Some(AdjustmentOutcome::Adjusted(report)) => super::listing::summary(out, report)?,
-        Some(AdjustmentOutcome::Failed { error }) => writeln!(out, "network adjustment failed: {error}")?,
-        None => {}
-    }
-    for r in &s.report.remeasured {
-        writeln!(out, "measured again: {} (attempt {}): {}", r.point, r.attempt, r.why)?;
-    }
-    if s.replayed > 0 {
-        writeln!(out, "resumed: {} journal events replayed", s.replayed)?;
-    }
-    writeln!(out, "outputs in {}: {}", s.dir.display(), s.files.join(", "))?;
-    if let Some(warning) = &s.viewer_warning {
-        writeln!(out, "warning: {warning}")?;
-    }
-    if s.files.iter().any(|f| f == "mission.rrd") {
-        writeln!(out, "view with: rerun {}", s.dir.join("mission.rrd").display())?;
-    } else if mission.output.rerun {
-        writeln!(out, "no mission.rrd: this cps-survey was built without the `recording` feature")?;
-    }
-    writeln!(out, "acceptance: {}", if s.accepted { "passed" } else { "FAILED" })
-}
-
-/// `fuse`: one row per scan.
-pub fn fusion(out: &mut dyn Write, views: &[ScanView], fused: &Fused) -> std::io::Result<()> {
-    writeln!(
-        out,
-        "fusion {}: {} scans, {} ICP matches, {:.2} s",
-        fused.mode.name(),
-        views.len(),
-        fused.matches,
-        fused.seconds
-    )?;
-    writeln!(
-        out,
-        "{:>7} {:>10} {:>10} {:>9} {:>8} {:>11} {:>11} {:>11}",
-        "station", "x_m", "y_m", "z_m", "rmse_mm", "error_mm", "direct_mm", "Δθ_arcsec"
-    )?;
-    let mm = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{:.2}", 1e3 * v));
-    for (v, f) in views.iter().zip(&fused.scans) {
-        let t = f.world_from_body.translation.vector;
-        let truth = v.truth.as_ref();
-        writeln!(
-            out,
-            "{:>7} {:>10.3} {:>10.3} {:>9.3} {:>8} {:>11} {:>11} {:>11}",
-            v.station,
-            t.x,
-            t.y,
-            t.z,
-            mm(f.rmse_m),
-            mm(truth.map(|tr| error_xy(&f.world_from_body, tr))),
-            mm(truth.map(|tr| error_xy(&v.direct(), tr))),
-            truth.map_or("-".to_string(), |tr| format!(
-                "{:.1}",
-                error_heading(&f.world_from_body, tr).to_degrees() * 3600.0
-            )),
-        )?;
     }
     Ok(())
 }

@@ -1135,3 +1135,76 @@ fn street_wedges_that_the_coarse_stage_dragged_land_by_the_restart() {
     assert!(restarted >= 1, "no variant needed the restart");
     assert!(rescued_from_failure >= 1, "no variant's schedule failed");
 }
+
+/// `links[].degenerate_directions` mean one thing in every mode (and in
+/// `report.json`): the world's axes, a motion of the source about its
+/// partner's origin. The simulated sewer's scans (blind about the pipe's
+/// axis and along it, the world's x), each in a frame turned 90° about z
+/// from the run's: graph mode's matches are made in the partner's frame,
+/// where the pipe runs along y — and were reported so; the other modes'
+/// in the world.
+#[test]
+fn a_links_blind_directions_are_in_the_worlds_axes_in_every_mode() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let text = std::fs::read_to_string(tests::example("sewer.toml"))
+        .expect("sewer")
+        .edit("slices = 180", "slices = 60")
+        .edit("[output]", "[output]\nrerun = false");
+    let mission = tests::temp_mission(&text);
+    let run_dir = dir.path().join("run");
+    let done = tests::run_mission(&mission.path, &run_dir);
+    assert!(done.code <= 1, "{}", done.stderr);
+    let turn = Isometry3::from_parts(
+        nalgebra::Translation3::identity(),
+        UnitQuaternion::from_axis_angle(&nalgebra::Vector3::z_axis(), std::f64::consts::FRAC_PI_2),
+    );
+    let set = dir.path().join("turned");
+    std::fs::create_dir_all(&set).expect("set");
+    let (mut inputs, mut entries) = (Vec::<OsString>::new(), Vec::new());
+    for k in 0.. {
+        let scan = run_dir.join(format!("scans/scan{k:03}.3d"));
+        if !scan.exists() {
+            break;
+        }
+        let mut cloud = scanner::io::read(&scan).expect("scan");
+        let t = turn.cast::<f32>();
+        cloud.points.iter_mut().for_each(|p| *p = t * *p);
+        let path = set.join(format!("scan{k:03}.ply"));
+        scanner::io::write(&path, &cloud, scanner::io::Format::Ply(scanner::io::PlyEncoding::BinaryLittleEndian))
+            .expect("PLY");
+        let pose = scanner::io::read_3dtk_pose(&scan.with_extension("pose")).expect("pose");
+        let m = (pose * turn.inverse()).to_homogeneous();
+        let rows: Vec<Vec<f64>> = (0..4).map(|r| (0..4).map(|c| m[(r, c)]).collect()).collect();
+        entries.push(serde_json::json!({ "file": format!("scan{k:03}.ply"), "world_from_scan": rows }));
+        inputs.push(path.into_os_string());
+    }
+    assert!(inputs.len() >= 5, "the sewer's scans: {}", inputs.len());
+    let init = set.join("init.json");
+    std::fs::write(&init, serde_json::to_string(&entries).expect("JSON")).expect("init");
+    inputs.extend(["--init-poses".into(), init.into_os_string()]);
+    for mode in ["graph", "simultaneous", "pairwise"] {
+        let mut args = inputs.clone();
+        // The sewer mission's own `[fusion] degeneracy_ratio`.
+        args.extend(["--mode".into(), mode.into(), "--degeneracy-ratio".into(), "0.01".into()]);
+        let (r, v) = run(&args, &dir.path().join(mode));
+        let v = v.unwrap_or_else(|| panic!("{mode}: {}", r.stderr));
+        let blind: Vec<&Value> = v["links"]
+            .as_array()
+            .expect("links")
+            .iter()
+            .filter(|l| l["degenerate_directions"].as_array().is_some_and(|d| !d.is_empty()))
+            .collect();
+        assert!(!blind.is_empty(), "{mode}: no link is blind in a pipe: {}", v["links"]);
+        let c = |d: &Value, i: usize| d[i].as_f64().expect("number").abs();
+        for l in blind {
+            let d = l["degenerate_directions"].as_array().expect("directions");
+            // About the pipe or along it (or a screw of both): the world's
+            // x, never the scans' own.
+            for d in d {
+                let in_x = c(d, 0).hypot(c(d, 3));
+                assert!(in_x > 0.95, "{mode}: link {}: not about or along the world's x: {d:?}", l["source"]);
+                assert!(c(d, 1) < 0.3 && c(d, 4) < 0.3, "{mode}: link {}: the scans' own x: {d:?}", l["source"]);
+            }
+        }
+    }
+}

@@ -154,7 +154,9 @@ fn match_reads_the_scans_and_their_poses_back_from_a_bag() {
                 let (a, b) = (s.start * p.cast::<f64>(), v.direct() * b.cast::<f64>());
                 assert!((a - b).norm() < 1e-6, "{}: {a} vs {b}", s.file);
             }
-            assert!(s.gps_time_s.is_some());
+            // The stamp the label names, as GPS time.
+            let stamp: f64 = s.file.rsplit('@').next().and_then(|t| t.parse().ok()).expect("BAG#TOPIC@S.NS");
+            assert!((s.gps_time_s - scanner::io::gps_time_of_unix(stamp)).abs() < 1e-6, "{}", s.file);
         }
     }
     // One every 100 s of the mission clock: scans 0 and 2 of 0–3 (53 s apart).

@@ -22,8 +22,9 @@ use crate::scans::inputs::InputScan;
 use args::{GLOBAL_CELL_OF_RADIUS, bag_options, mode, output_crs};
 pub use args::{InitArg, MatchArgs, ModeArg};
 use outputs::{check_out, write_outputs};
-pub(crate) use report::MatchReport;
-use report::{GlobalMatchReport, GlobalReport, SettingsReport, report};
+
+use crate::documents::matching::{GlobalMatchReport, GlobalReport, SettingsReport};
+use report::report;
 use text::{unlinked, write_text};
 
 /// Runs `match`.
@@ -133,7 +134,7 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
     }
     let written = write_outputs(args, &crs, &scans, &result, &report)?;
     if args.json {
-        crate::view::document::write_line(out, &report)?;
+        crate::documents::write_line(out, &report)?;
     } else {
         write_text(out, &scans, &report)?;
         writeln!(out, "outputs in {}: {}", args.out.display(), written.join(", "))?;

@@ -8,7 +8,7 @@ use fusion::scanset::SetResult;
 use nalgebra::{Isometry3, Vector3};
 
 use super::args::MatchArgs;
-use super::report::MatchReport;
+use crate::documents::matching::MatchReport;
 use crate::scans::inputs::InputScan;
 use crate::view::recording::{Recorder, Viewer};
 
@@ -29,7 +29,7 @@ pub(super) fn write_outputs(
         std::fs::remove_file(&frames).with_context(|| format!("removing the link {}", frames.display()))?;
     }
     std::fs::create_dir_all(&frames).with_context(|| format!("creating {}", frames.display()))?;
-    crate::view::document::write_file(&dir.join("poses.json"), report)?;
+    crate::documents::write_file(&dir.join("poses.json"), report)?;
     let mut names = std::collections::HashSet::new();
     for (i, s) in scans.iter().enumerate() {
         // Unique, file-system-safe names (E57 scans may share theirs).

@@ -2,7 +2,7 @@
 
 use std::io::Write;
 
-use super::report::{MatchReport, StageReport};
+use crate::documents::matching::{MatchReport, StageReport};
 use crate::scans::inputs::InputScan;
 
 pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &MatchReport) -> std::io::Result<()> {

@@ -1,8 +1,7 @@
 //! The network adjustment of a run (`cps-survey adjust`, and at the end of
 //! `run`): the journal's readings as one network ([`planner::network`]),
 //! adjusted by [`cps::batch`] with its tests, the misclosures at the
-//! control points, and the typed report (`adjust --json`, `report.json`'s
-//! `adjustment`).
+//! control points, and its report ([`crate::documents::adjustment`]).
 //!
 //! **Misclosures.** Before the adjustment ties the route to a control
 //! point, the survey and the other control points say where it is: the
@@ -14,21 +13,20 @@
 //! start is resected on, sighted nowhere else) has none.
 
 mod network;
-mod report;
 
 use anyhow::{Context, Result};
 use cps::Reading;
 use cps::batch::{AdjustOptions, Adjustment, ScalarStats, Source};
-use nalgebra::{Matrix3, Matrix4, Point3};
+use nalgebra::{Matrix3, Point3};
 use planner::network::{DanceNetwork, PointId};
-use serde::{Deserialize, Serialize};
 
+use crate::documents::adjustment::*;
+use crate::documents::records::{Ellipse, rows};
 use crate::mission::Mission;
 use crate::planning::Planned;
 use crate::planning::preanalysis::{KINDS, point_name};
 
 pub use network::network;
-pub use report::*;
 
 /// Adjusts the run's network: the statistics with `options`, the
 /// misclosures, the report.
@@ -54,10 +52,10 @@ pub fn adjust(
                 heading_rad: p.heading_rad,
                 covariance: rows(&cov),
                 sigma_xy_m: cps::sigma_xy2(&cov).sqrt(),
-                ellipse_95: EllipseReport::of(&cov.fixed_view::<2, 2>(0, 0).into_owned()),
+                ellipse_95: Ellipse::of_95(&cov.fixed_view::<2, 2>(0, 0).into_owned()),
                 relative_ellipse_95: k
                     .checked_sub(1)
-                    .map(|j| EllipseReport::of(&a.relative_covariance(j).fixed_view::<2, 2>(0, 0).into_owned())),
+                    .map(|j| Ellipse::of_95(&a.relative_covariance(j).fixed_view::<2, 2>(0, 0).into_owned())),
             }
         })
         .collect();
@@ -84,7 +82,7 @@ pub fn adjust(
         .map(|(observation, station, shift_m)| WorstMdb { observation, station, shift_m });
     Ok(AdjustmentReport {
         schema_version: SCHEMA_VERSION,
-        tool_version: crate::view::document::TOOL_VERSION.into(),
+        tool_version: crate::documents::TOOL_VERSION.into(),
         sigma0_squared: a.sigma0_squared,
         redundancy: a.redundancy,
         unknowns: a.unknowns,
@@ -291,33 +289,4 @@ fn misclosures(net: &DanceNetwork, name: &dyn Fn(usize) -> String, a: &Adjustmen
             })
         })
         .collect()
-}
-
-/// The adjustment at the end of a run, as `report.json` has it: the report,
-/// or why the network could not be adjusted.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
-#[serde(untagged)]
-pub enum AdjustmentOutcome {
-    /// The adjustment.
-    Adjusted(Box<AdjustmentReport>),
-    /// Why there is none.
-    Failed {
-        /// The reason.
-        error: String,
-    },
-}
-
-impl AdjustmentOutcome {
-    /// The report, if the network was adjusted.
-    pub fn report(&self) -> Option<&AdjustmentReport> {
-        match self {
-            AdjustmentOutcome::Adjusted(r) => Some(r),
-            AdjustmentOutcome::Failed { .. } => None,
-        }
-    }
-}
-
-/// The adjusted covariance of station `k` from a report.
-pub fn station_covariance(report: &AdjustmentReport, k: usize) -> Option<Matrix4<f64>> {
-    report.stations.get(k).map(|s| Matrix4::from_fn(|i, j| s.covariance[i][j]))
 }

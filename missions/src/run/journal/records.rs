@@ -5,6 +5,8 @@ use anyhow::{Result, bail};
 use scanner::{TsMeasurement, TsStatus};
 use serde::{Deserialize, Serialize};
 
+use crate::documents::records::{Matrix4Rows, Pose, nested};
+
 /// The schema version this build writes.
 pub const VERSION: u32 = 3;
 
@@ -224,52 +226,14 @@ pub struct Scanned {
     pub unix_time_s: Option<f64>,
 }
 
-/// A pose in a record: x, y, z (m) and heading (rad).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
-pub struct PoseRecord {
-    /// x, metres.
-    pub x_m: f64,
-    /// y, metres.
-    pub y_m: f64,
-    /// z, metres.
-    pub z_m: f64,
-    /// Heading, radians.
-    pub heading_rad: f64,
-}
-
-impl From<&cps::ParentPose> for PoseRecord {
-    fn from(p: &cps::ParentPose) -> Self {
-        Self { x_m: p.position.x, y_m: p.position.y, z_m: p.position.z, heading_rad: p.heading_rad }
-    }
-}
-
-impl From<&PoseRecord> for cps::ParentPose {
-    fn from(p: &PoseRecord) -> Self {
-        cps::ParentPose::new(p.x_m, p.y_m, p.z_m, p.heading_rad)
-    }
-}
-
-/// A 4×4 matrix, row-major.
-pub type Matrix4Record = [[f64; 4]; 4];
-
-/// A 4×4 nalgebra matrix as a record.
-pub fn matrix_record(m: &nalgebra::Matrix4<f64>) -> Matrix4Record {
-    std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)]))
-}
-
-/// A record as a 4×4 nalgebra matrix.
-pub fn matrix_of(r: &Matrix4Record) -> nalgebra::Matrix4<f64> {
-    nalgebra::Matrix4::from_fn(|i, j| r[i][j])
-}
-
 /// A parent fix: the pose, its covariance and the fix's statistics; for a
 /// robot alone the odometry's pose (`source`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FixRecord {
     /// The estimated pose.
-    pub pose: PoseRecord,
+    pub pose: Pose,
     /// Its 4×4 covariance (x, y, z, θ).
-    pub covariance: Matrix4Record,
+    pub covariance: Matrix4Rows,
     /// The fix's a-posteriori variance factor.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sigma0_squared: Option<f64>,
@@ -279,7 +243,7 @@ pub struct FixRecord {
     /// cov(this station, each earlier scan station), 4×4 each, in scan
     /// order (versions 1 and 2).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub scan_cross_covariances: Option<Vec<Matrix4Record>>,
+    pub scan_cross_covariances: Option<Vec<Matrix4Rows>>,
     /// How the team state here depends on the last scan station's
     /// (version 3), from which the scan stations' joint covariance is
     /// rebuilt.
@@ -309,7 +273,7 @@ impl ChainRecord {
         let m = c.nrows() - 4 * team.clones();
         Self {
             parent_columns: (0..m).map(|r| [c[(r, 0)], c[(r, 1)], c[(r, 2)], c[(r, 3)]]).collect(),
-            from_last_scan: team.from_anchor().map(|s| s.row_iter().map(|r| r.iter().copied().collect()).collect()),
+            from_last_scan: team.from_anchor().map(nested),
         }
     }
 

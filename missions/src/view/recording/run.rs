@@ -8,9 +8,9 @@ use cps::geom::Scene;
 use cps::{ParentPose, TeamState};
 use nalgebra::{Matrix3, Matrix4, Point3};
 
+use crate::documents::adjustment::AdjustmentReport;
+use crate::inspection::{Inspection, label};
 use crate::mission::Mission;
-use crate::run::adjust::AdjustmentReport;
-use crate::run::inspection::{Inspection, label};
 use crate::view::shapes::{ellipse_scale, ellipse_scale_name, scene_mesh};
 
 use super::colours::{deviation_colour, ellipsoid_95, red, w_colour};

@@ -1,7 +1,26 @@
-//! The versioned JSON contract: every JSON document the CLI writes opens
-//! with `schema_version` (of that document's schema,
+//! Every JSON document the CLI writes, typed, and the versioned contract
+//! they keep: each opens with `schema_version` (of that document's schema,
 //! `docs/schemas/<name>.schema.json`) and `tool_version` (the cps-survey
-//! that wrote it), then the document's own keys.
+//! that wrote it), then the document's own keys (docs/json.md).
+//!
+//! [`records`] are the shapes every document shares (position, pose,
+//! ellipse, link, matrices as rows); then one file a document: [`run`]
+//! (`report.json`, `fusion.json`), [`adjustment`], [`pipe`],
+//! [`prediction`], [`plan`], [`montecarlo`], [`register`], [`matching`]
+//! (`poses.json`), [`ports`] (`emulate --json`). The documents are made
+//! where their data is (the runner, the commands, the views); this room
+//! imports nothing of the crate.
+
+pub mod adjustment;
+pub mod matching;
+pub mod montecarlo;
+pub mod pipe;
+pub mod plan;
+pub mod ports;
+pub mod prediction;
+pub mod records;
+pub mod register;
+pub mod run;
 
 use std::io::Write;
 

@@ -15,8 +15,8 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use fusion::pipe::{Anomaly, AnomalyKind, Pipe, PipeConfig, PipeFit, anomalies, deviation_map, fit_pipe};
 use nalgebra::{Point3, Vector3};
-use serde::{Deserialize, Serialize};
 
+use crate::documents::pipe::{AnomalyReport, DeviationStats, PipeFitted, PipeReport, TubeReport};
 use crate::mission::PipePlan;
 
 /// File of the deviation map in a run directory.
@@ -93,42 +93,10 @@ pub fn label(pipe: &Pipe, anomaly: &Anomaly) -> String {
     format!("{} {:.0} mm at {clock}", kind_name(anomaly.kind), 1e3 * anomaly.depth_m)
 }
 
-/// A tube: its axis ends and radius, metres, world frame.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
-pub struct TubeReport {
-    /// One end of the axis.
-    pub axis_from_m: [f64; 3],
-    /// The other end.
-    pub axis_to_m: [f64; 3],
-    /// The radius.
-    pub radius_m: f64,
-}
-
 impl From<&Pipe> for TubeReport {
     fn from(p: &Pipe) -> Self {
         Self { axis_from_m: xyz(&p.a), axis_to_m: xyz(&p.b), radius_m: p.radius_m }
     }
-}
-
-/// Distribution of the deviations, metres.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
-pub struct DeviationStats {
-    /// Points mapped.
-    pub points: usize,
-    /// Mean deviation.
-    pub mean_m: f64,
-    /// RMS deviation.
-    pub rms_m: f64,
-    /// Smallest (most inside).
-    pub min_m: Option<f64>,
-    /// 1st percentile.
-    pub p01_m: Option<f64>,
-    /// 99th percentile.
-    pub p99_m: Option<f64>,
-    /// Largest (most outside).
-    pub max_m: Option<f64>,
-    /// Points beyond the threshold either way.
-    pub beyond_threshold: usize,
 }
 
 /// Count, mean, RMS, extremes, 1st and 99th percentiles of the deviations
@@ -148,84 +116,6 @@ fn deviation_stats(deviations: &[f32], threshold_m: f64) -> DeviationStats {
         max_m: sorted.last().copied(),
         beyond_threshold: sorted.iter().filter(|d| d.abs() > threshold_m).count(),
     }
-}
-
-/// One anomaly as reported.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
-pub struct AnomalyReport {
-    /// `intrusion` or `bulge`.
-    pub kind: String,
-    /// Its points.
-    pub points: usize,
-    /// Their centroid.
-    pub centroid_m: [f64; 3],
-    /// Where it starts along the fitted axis from its `from` end.
-    pub axial_from_m: f64,
-    /// Where it ends.
-    pub axial_to_m: f64,
-    /// Its clock position, "hh:mm".
-    pub clock: String,
-    /// The same as an hour in (0, 12].
-    pub clock_hour: f64,
-    /// Bounding box corner.
-    pub bounds_min_m: [f64; 3],
-    /// Opposite corner.
-    pub bounds_max_m: [f64; 3],
-    /// The box's size.
-    pub size_m: [f64; 3],
-    /// Depth: the 95th percentile of its points' |deviation|.
-    pub depth_m: f64,
-    /// The largest |deviation|.
-    pub max_deviation_m: f64,
-}
-
-/// The pipe inspection as reported (`report.json`'s and `fusion.json`'s
-/// `pipe`): the fitted tube and its anomalies, or why there is no fit.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
-#[serde(untagged)]
-pub enum PipeReport {
-    /// The fit and the deviation map.
-    Fitted(Box<PipeFitted>),
-    /// The fit failed: why.
-    Failed {
-        /// The reason.
-        error: String,
-    },
-}
-
-/// A fitted pipe's report.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
-pub struct PipeFitted {
-    /// The nominal tube.
-    pub nominal: TubeReport,
-    /// The fitted tube.
-    pub fitted: TubeReport,
-    /// Fitted minus nominal radius.
-    pub radius_change_m: f64,
-    /// Angle between the axes, degrees.
-    pub axis_tilt_deg: f64,
-    /// Fit iterations.
-    pub iterations: usize,
-    /// Whether the fit converged.
-    pub converged: bool,
-    /// Points within the gate.
-    pub inliers: usize,
-    /// RMS of their radial residuals.
-    pub rmse_m: f64,
-    /// The gate.
-    pub gate_m: f64,
-    /// `[pipe] threshold_m`.
-    pub threshold_m: f64,
-    /// `[pipe] link_m`.
-    pub link_m: f64,
-    /// `[pipe] min_points`.
-    pub min_points: usize,
-    /// The deviations' distribution.
-    pub deviations: DeviationStats,
-    /// The deviation map's file.
-    pub deviation_file: String,
-    /// The anomalies, largest first.
-    pub anomalies: Vec<AnomalyReport>,
 }
 
 /// The report of an inspection: the nominal and fitted tubes, the fit's

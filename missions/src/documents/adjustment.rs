@@ -1,15 +1,17 @@
-//! The adjustment's report: `adjust --json`, `report.json`'s `adjustment`.
+//! The adjustment: `adjust --json`, `report.json`'s `adjustment` (the
+//! same object, or why there is none).
 
-use cps::{CHI2_2D_95_SQRT, ErrorEllipse};
-use nalgebra::Matrix2;
+use nalgebra::Matrix4;
 use serde::{Deserialize, Serialize};
+
+use super::records::Ellipse;
 
 /// The version of the adjustment report's shape.
 pub const SCHEMA_VERSION: u32 = 1;
 
 /// `adjust --json`, nested whole as `report.json`'s `adjustment`: it
 /// carries its own header.
-impl crate::view::document::Document for AdjustmentReport {
+impl super::Document for AdjustmentReport {
     const NAME: &'static str = "adjust";
     const VERSION: u32 = SCHEMA_VERSION;
     const SELF_VERSIONED: bool = true;
@@ -109,25 +111,6 @@ pub struct TestingReport {
     pub snooping: bool,
 }
 
-/// A horizontal error ellipse, metres, orientation counter-clockwise from +x.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
-pub struct EllipseReport {
-    /// Semi-major axis.
-    pub semi_major_m: f64,
-    /// Semi-minor axis.
-    pub semi_minor_m: f64,
-    /// Direction of the major axis, radians.
-    pub orientation_rad: f64,
-}
-
-impl EllipseReport {
-    /// The 95 % ellipse of a covariance's (x, y) block.
-    pub fn of(cov: &Matrix2<f64>) -> Self {
-        let e = ErrorEllipse::from_covariance(cov).scaled(CHI2_2D_95_SQRT);
-        Self { semi_major_m: e.semi_major_m, semi_minor_m: e.semi_minor_m, orientation_rad: e.orientation_rad }
-    }
-}
-
 /// An adjusted station.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct StationAdjusted {
@@ -146,9 +129,9 @@ pub struct StationAdjusted {
     /// √(σx² + σy²), metres.
     pub sigma_xy_m: f64,
     /// The absolute 95 % ellipse.
-    pub ellipse_95: EllipseReport,
+    pub ellipse_95: Ellipse,
     /// The 95 % ellipse relative to the previous station (none for the first).
-    pub relative_ellipse_95: Option<EllipseReport>,
+    pub relative_ellipse_95: Option<Ellipse>,
 }
 
 /// An adjusted point.
@@ -255,6 +238,31 @@ pub struct WorstMdb {
     pub shift_m: f64,
 }
 
-pub(super) fn rows<const R: usize>(m: &nalgebra::SMatrix<f64, R, R>) -> [[f64; R]; R] {
-    std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)]))
+/// The adjustment at the end of a run, as `report.json` has it: the report,
+/// or why the network could not be adjusted.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(untagged)]
+pub enum AdjustmentOutcome {
+    /// The adjustment.
+    Adjusted(Box<AdjustmentReport>),
+    /// Why there is none.
+    Failed {
+        /// The reason.
+        error: String,
+    },
+}
+
+impl AdjustmentOutcome {
+    /// The report, if the network was adjusted.
+    pub fn report(&self) -> Option<&AdjustmentReport> {
+        match self {
+            AdjustmentOutcome::Adjusted(r) => Some(r),
+            AdjustmentOutcome::Failed { .. } => None,
+        }
+    }
+}
+
+/// The adjusted covariance of station `k` from a report.
+pub fn station_covariance(report: &AdjustmentReport, k: usize) -> Option<Matrix4<f64>> {
+    report.stations.get(k).map(|s| super::records::matrix4(&s.covariance))
 }

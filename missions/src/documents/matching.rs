@@ -1,0 +1,218 @@
+//! `poses.json` (`match --json`): every scan's pose, the links, the
+//! schedule as it ran, the verification.
+
+use serde::Serialize;
+
+use super::Document;
+use super::records::Link;
+use super::run::CrsReport;
+
+/// `match --json` and `poses.json`.
+#[derive(Debug, Serialize, schemars::JsonSchema)]
+pub struct MatchReport {
+    /// The mode.
+    pub mode: String,
+    /// The coordinate reference system of the poses and clouds.
+    pub crs: CrsReport,
+    /// Every scan in input order.
+    pub scans: Vec<ScanReport>,
+    /// The final stage's matches, used or not.
+    pub links: Vec<Link>,
+    /// ICP runs in all.
+    pub matches: usize,
+    /// The link graph's variance factor σ̂₀² (graph mode).
+    pub variance_factor: Option<f64>,
+    /// Registration time, seconds (reading the scans and writing excluded).
+    pub seconds: f64,
+    /// The length scales measured on the scans and the schedule used.
+    pub settings: SettingsReport,
+    /// Each stage of the schedule as it ran.
+    pub stages: Vec<StageReport>,
+    /// The registration from the starts again without the schedule's
+    /// first stage, run when the schedule moved a scan further from its
+    /// start than the second stage's correspondence distance (a coarse
+    /// stage can drag good starts away on narrow overlaps), or when the
+    /// schedule failed; null when it did not run.
+    pub restart: Option<RestartReport>,
+    /// The verification: every pair of scans that overlaps at the final
+    /// poses, matched once more from them at the finest stage.
+    pub checks: Vec<CheckReport>,
+    /// The verification's wall-clock time, seconds (within `seconds`).
+    pub check_seconds: f64,
+    /// With `--init global`: scans blind in some direction (indices into
+    /// `scans`) — their start, found from the shape, says nothing along it,
+    /// so the exit is 1.
+    pub blind_without_start: Vec<usize>,
+    /// Scans an inconsistent pair names (indices into `scans`; never the
+    /// first, which holds the frame, when its partner is named): their
+    /// poses are not where the data agree, and the exit is 1.
+    pub untrusted: Vec<usize>,
+}
+
+/// One pair of the verification.
+#[derive(Debug, Clone, Serialize, schemars::JsonSchema)]
+pub struct CheckReport {
+    /// The scan matched (index into `scans`).
+    pub source: usize,
+    /// The scan it was matched against.
+    pub target: usize,
+    /// Correspondences at the final poses.
+    pub overlap: usize,
+    /// How far the match moved the source's points from the final poses,
+    /// metres (its centroid's displacement plus the turn times their RMS
+    /// radius); null when the match failed.
+    pub moved_m: Option<f64>,
+    /// The match's turn from the final poses, degrees.
+    pub angle_deg: Option<f64>,
+    /// The motion against the match's own information (δᵀ·I·δ; the matches'
+    /// information is optimistic on real scans: informative only).
+    pub chi2: Option<f64>,
+    /// `moved_m` as a fraction of the source points' RMS radius.
+    pub relative_motion: Option<f64>,
+    /// The motion along the directions the match sees well (eigenvalue at
+    /// least 5 % of the largest, about the source's centroid, rotation
+    /// scaled by the radius), metres: what judges the pair (a corridor
+    /// pair matched alone slides along the axis the set's other links hold).
+    pub seen_motion_m: Option<f64>,
+    /// The match's point-to-plane RMS residual, metres; null when it failed.
+    pub rmse_m: Option<f64>,
+    /// What a right registration of the two scans leaves: the RMS of their
+    /// noise floors (each scan's two random halves matched at the
+    /// identity), metres.
+    pub noise_m: f64,
+    /// The match moved the points by at most the finest stage's voxel, or
+    /// along what it sees well by at most 5 % of their RMS radius and
+    /// turned them by at most 5°.
+    pub consistent: bool,
+}
+
+/// One stage of the schedule as it ran.
+#[derive(Debug, Clone, Serialize, schemars::JsonSchema)]
+pub struct StageReport {
+    /// Its voxel, metres.
+    pub voxel_m: f64,
+    /// Its correspondence distance, metres.
+    pub max_correspondence_m: f64,
+    /// ICP runs in it (graph mode's last stage: the links matched).
+    pub matches: usize,
+    /// Its wall-clock time, seconds.
+    pub seconds: f64,
+    /// False when a simultaneous queue was abandoned at its cap.
+    pub settled: bool,
+}
+
+/// The second registration from the starts, without the schedule's first
+/// stage.
+#[derive(Debug, Clone, Serialize, schemars::JsonSchema)]
+pub struct RestartReport {
+    /// The scan the schedule moved furthest from its start, or that its
+    /// failure names (index into `scans`; null when it names none).
+    pub scan: Option<usize>,
+    /// How far, metres (its centroid's displacement plus the turn times
+    /// its points' RMS radius); null when the schedule failed.
+    pub moved_m: Option<f64>,
+    /// Why the schedule failed — a stage moved two scans apart that
+    /// overlapped at their starts, a match lost every correspondence (the
+    /// restart is then the result when it succeeds; when it fails too, the
+    /// schedule's error is the command's).
+    pub schedule_error: Option<String>,
+    /// The restart's stages as they ran.
+    pub stages: Vec<StageReport>,
+    /// How badly the scans agree at the schedule's poses: the mean over
+    /// every reduced point of the squared point-to-plane distance to the
+    /// other scans, truncated at the finest correspondence distance (a
+    /// point with no partner pays its square), m²; null when the schedule
+    /// failed.
+    pub schedule_disagreement_m2: Option<f64>,
+    /// The same at the restart's poses; null when the restart failed.
+    pub restart_disagreement_m2: Option<f64>,
+    /// Why the restart failed.
+    pub error: Option<String>,
+    /// True when the restart's poses are the result: the schedule's
+    /// disagreement is more than 1.5 times the restart's.
+    pub kept: bool,
+}
+
+/// What the scans measured and the settings they were matched with.
+#[derive(Debug, Clone, Serialize, schemars::JsonSchema)]
+pub struct SettingsReport {
+    /// The median distance from a point to its nearest neighbour over the
+    /// scans' surfaces (one point per cell of a fiftieth of the radius),
+    /// metres: the median over the scans.
+    pub spacing_m: f64,
+    /// The 90th percentile of a scan's points' distances from their
+    /// centroid, metres: the median over the scans.
+    pub radius_m: f64,
+    /// Whether the schedule was derived from the scans (`--schedule auto`).
+    pub auto_schedule: bool,
+    /// The stages, [voxel, correspondence distance] in metres.
+    pub schedule: Vec<[f64; 2]>,
+    /// The Huber width, metres (0: least squares).
+    pub huber_m: f64,
+    /// σ of the start's step between scans, metres (0.2 × the first
+    /// voxel).
+    pub step_sigma_m: f64,
+    /// ICP's convergence tolerance in translation, metres (0.002 × the
+    /// last voxel).
+    pub translation_tolerance_m: f64,
+    /// `simultaneous`: a match that moves its scan by more than this
+    /// (metres, 0.2 × the last voxel) or 0.05° re-queues its neighbours.
+    pub moved_translation_m: f64,
+    /// With `--init global`: how the starts were found.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub global: Option<GlobalReport>,
+}
+
+/// `--init global`'s starts.
+#[derive(Debug, Clone, Serialize, schemars::JsonSchema)]
+pub struct GlobalReport {
+    /// The descriptors' cell, metres (a fortieth of the radius).
+    pub voxel_m: f64,
+    /// Its wall-clock time, seconds (outside `seconds`).
+    pub seconds: f64,
+    /// Each later scan's match: against which earlier scan, with how many
+    /// feature correspondences and inliers.
+    pub matches: Vec<GlobalMatchReport>,
+}
+
+/// One scan's global match.
+#[derive(Debug, Clone, Serialize, schemars::JsonSchema)]
+pub struct GlobalMatchReport {
+    /// The scan placed (index into `scans`).
+    pub source: usize,
+    /// The earlier scan it was placed against.
+    pub target: usize,
+    /// Mutual nearest neighbours in feature space.
+    pub correspondences: usize,
+    /// Of them, within 1.5 cells after the transform.
+    pub inliers: usize,
+}
+
+/// One scan in a [`MatchReport`].
+#[derive(Debug, Serialize, schemars::JsonSchema)]
+pub struct ScanReport {
+    /// The scan as given (`FILE.e57#NAME` for an E57's scans).
+    pub file: String,
+    /// Its name (the file's stem, or the E57 `data3D`'s name): its frames
+    /// file, E57 `data3D` and recording entity.
+    pub name: String,
+    /// Its number: the input's own (3DTK `scanNNN`, the trailing digits of
+    /// the name) when they tell the scans apart, else its input order; each
+    /// of its points carries it (LAS `point_source_id`).
+    pub number: u16,
+    /// Its registered pose, 4×4 row-major, metres.
+    pub world_from_scan: [[f64; 4]; 4],
+    /// 6×6, order (ωx, ωy, ωz, x, y, z), radians and metres, left
+    /// perturbation (as `register`'s) in the world's axes about the first
+    /// scan's origin; zero for the first scan, which holds the frame.
+    pub covariance: [[f64; 6]; 6],
+    /// Directions the matches cannot see (unit vectors in the order and
+    /// frame of the covariance): held where the start put them, their σ
+    /// the start's.
+    pub degenerate_directions: Vec<[f64; 6]>,
+}
+
+impl Document for MatchReport {
+    const NAME: &'static str = "match";
+    const VERSION: u32 = 1;
+}
