@@ -38,8 +38,8 @@ use super::messages::{
     PoseWithCovariance, PoseWithCovarianceStamped, SPHERE, TEXT_VIEW_FACING, TfMessage, Time, TransformStamped,
 };
 use crate::run::journal::{Event, Phase};
+use crate::run::observer::{DRIVE_SPEED_M_PER_S, MEASURE_S, TILT_S};
 use crate::run::resume::RunDir;
-use crate::run::runner::{DRIVE_SPEED_M_PER_S, MEASURE_S, TILT_S};
 
 /// The variance given to a rotation nothing measured, rad².
 pub const UNKNOWN_VARIANCE: f64 = 1e6;

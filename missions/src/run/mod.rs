@@ -2,7 +2,9 @@
 //! resumable, then the scans fused and the outputs written.
 //!
 //! - [`runner`]: the dance itself, a short loop of named steps;
-//! - [`steps`]: every device command replayed or given, retried, journaled;
+//! - [`dispatch`]: every device command replayed or given, retried, journaled;
+//! - [`observer`]: the recording, the progress bars and the timings, one
+//!   call per event of the dance;
 //! - [`backend`]: the simulator or the instruments on serial ports;
 //! - [`journal`]: the typed, versioned `journal.jsonl`;
 //! - [`directory`]: the run directory's lock and its refusal of symbolic
@@ -18,11 +20,12 @@
 pub mod adjust;
 pub mod backend;
 pub mod directory;
+pub mod dispatch;
 pub mod fuse;
 pub mod journal;
+pub mod observer;
 pub mod outputs;
 pub mod report;
 pub mod resume;
 pub mod runner;
-pub mod steps;
 pub mod text;

@@ -1,8 +1,8 @@
 //! `mission.rrd`: the run as a Rerun recording a surveyor reads at a glance.
 //!
 //! Timelines `step` (one tick per journal step) and `sim_time` (nominal
-//! seconds: drives at [`crate::run::runner::DRIVE_SPEED_M_PER_S`], [`crate::run::runner::MEASURE_S`] per total-station
-//! measurement, [`crate::run::runner::TILT_S`] per tilt reading, the LMS's own slice rate per
+//! seconds: drives at [`crate::run::observer::DRIVE_SPEED_M_PER_S`], [`crate::run::observer::MEASURE_S`] per total-station
+//! measurement, [`crate::run::observer::TILT_S`] per tilt reading, the LMS's own slice rate per
 //! scan). Entities:
 //!
 //! | path | archetype | when |

@@ -1,4 +1,4 @@
-//! Every command of a run goes through [`Steps`]: replayed from the journal
+//! Every command of a run goes through the [`Dispatch`]: replayed from the journal
 //! while it holds recorded steps, else given to the device — again after a
 //! failure, up to the mission's retries — and journaled with the team's
 //! state after it.
@@ -9,17 +9,15 @@ use anyhow::{Context, Result, bail};
 
 use super::backend::{DeviceKind, Team};
 use super::journal::{Event, Journal, Recorded, Retry, Step, StepKey, Stop};
-use crate::view::recording::Recorder;
+use super::observer::Observer;
 
 /// The journal, the devices and the retry policy of a run.
 #[derive(Debug)]
-pub struct Steps {
+pub struct Dispatch {
     /// The journal.
     pub journal: Journal,
     /// The devices.
     pub team: Team,
-    /// The recording (warnings for retries and stops).
-    pub rec: Recorder,
     /// Attempts after the first.
     pub max_retries: u32,
     /// Pause before each retry.
@@ -30,18 +28,20 @@ pub struct Steps {
     pub replayed: usize,
 }
 
-impl Steps {
+impl Dispatch {
     /// One device command keyed by `key`. While the journal holds recorded
     /// steps, the next one (which must be this command) is used as it was
     /// and the team is put back to its recorded state after it. Otherwise
     /// the device is commanded — again after a failure, up to the mission's
     /// retries — and the reading is journaled with the team's state.
+    /// `obs` shows retries and stops, and is the command's to show its work.
     pub fn step<T: Step + Clone>(
         &mut self,
+        obs: &mut Observer,
         key: T::Key,
         to_step_key: impl Fn(T::Key) -> StepKey,
         device: DeviceKind,
-        mut command: impl FnMut(&mut Team) -> scanner::Result<T>,
+        mut command: impl FnMut(&mut Team, &mut Observer) -> scanner::Result<T>,
     ) -> Result<T> {
         if let Some((line, event)) = self.journal.next_recorded() {
             let described = serde_json::to_string(&key).unwrap_or_default();
@@ -58,7 +58,7 @@ impl Steps {
         }
         let mut attempt = 0;
         loop {
-            match command(&mut self.team) {
+            match command(&mut self.team, obs) {
                 Ok(data) => {
                     let sim = Some(self.team.checkpoint());
                     // Real instruments' steps carry their UTC time (the
@@ -70,7 +70,7 @@ impl Steps {
                 // A file that cannot be written is not a device fault:
                 // no retry (the device would measure again for nothing).
                 Err(scanner::ScannerError::Io { path, source }) => {
-                    self.rec.error(format!("writing {}: {source}: mission stopped", path.display()))?;
+                    obs.stopped(format!("writing {}: {source}: mission stopped", path.display()))?;
                     bail!(
                         "writing {}: {source}. A file-system error, not a {} fault: the mission stopped cleanly; \
                          the journal keeps every reading before it. Free space (or fix the permission), then \
@@ -85,7 +85,7 @@ impl Steps {
                     let step = to_step_key(key.clone());
                     let retry = Retry { device: device.name().into(), attempt, error: e.to_string(), step };
                     self.journal.append(Event::Retry(retry))?;
-                    self.rec.warn(format!("{e}: retry {attempt} of {}", self.max_retries))?;
+                    obs.warn(format!("{e}: retry {attempt} of {}", self.max_retries))?;
                     std::thread::sleep(self.retry_delay);
                 }
                 Err(e) => {
@@ -95,7 +95,7 @@ impl Steps {
                         error: e.to_string(),
                         step,
                     }))?;
-                    self.rec.error(format!("{e}: mission stopped"))?;
+                    obs.stopped(format!("{e}: mission stopped"))?;
                     bail!(
                         "{} failed {} time(s), last: {e}. The mission stopped cleanly; the journal keeps every \
                          reading so far. Once the device answers, continue with: {}",
