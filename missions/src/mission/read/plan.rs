@@ -24,90 +24,15 @@ pub(super) fn read_plan_table(
     plan
 }
 
+/// `[plan]`'s keys: each read (every problem reported), then the plan
+/// with the spans its later checks point at.
 pub(super) fn read_plan(r: &mut Reader<'_>, t: &mut Table<'_, '_>, n_children: Option<usize>) -> Option<(Plan, Spans)> {
-    let route = t.required(r, "route_m", "parent waypoints [[x, y, z], ...] in metres (at least 2)", |r, v, f| {
-        let pts = r.array(v, f, |r, e, f| r.point3(e, f))?;
-        if pts.len() < 2 {
-            r.problem(&v.span(), f, format!("route_m has {} waypoint(s); expected at least 2", pts.len()));
-            return None;
-        }
-        let mut ok = true;
-        for k in 1..pts.len() {
-            let (a, b) = (pts[k - 1].get_ref(), pts[k].get_ref());
-            if (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt() <= 1e-9 {
-                r.problem(
-                    &pts[k].span(),
-                    &format!("{f}[{k}]"),
-                    "repeats the previous waypoint; expected a segment of non-zero length",
-                );
-                ok = false;
-            }
-        }
-        ok.then_some(pts)
-    });
+    let route = t.required(r, "route_m", "parent waypoints [[x, y, z], ...] in metres (at least 2)", read_route);
     let stride = t.required(r, "stride_m", "the distance between parent stations in metres (> 0)", |r, v, f| {
         r.number_in(v, f, 0.0, false, None).map(|x| (*x.get_ref(), x.span()))
     });
-    let read_formation = |r: &mut Reader<'_>, v: &Raw<'_>, f: &str| {
-        let offsets = r.array(v, f, |r, e, f| r.point3(e, f))?;
-        if let Some(n) = n_children
-            && offsets.len() != n
-        {
-            r.problem(
-                &v.span(),
-                f,
-                format!("{} offsets given; expected one per child ({n}, as in team.children)", offsets.len()),
-            );
-            return None;
-        }
-        for (k, o) in offsets.iter().enumerate() {
-            if o.get_ref()[0].hypot(o.get_ref()[1]) < 1e-6 {
-                r.problem(
-                    &o.span(),
-                    &format!("{f}[{k}]"),
-                    "the child stands vertically above or below the parent; expected a horizontal offset",
-                );
-                return None;
-            }
-        }
-        Some(offsets)
-    };
-    let n = n_children.unwrap_or(0);
-    let formation = if n_children == Some(0) {
-        for key in ["formation_m", "formation"] {
-            if let Some(v) = t.get(key) {
-                r.problem(&v.span(), &format!("plan.{key}"), "the team has no children to place; remove it");
-            }
-        }
-        Some(Formation::Listed(Vec::new(), 0..0))
-    } else if t.has("formation") {
-        if let Some(v) = t.get("formation_m") {
-            r.problem(&v.span(), "plan.formation_m", "give either formation_m or formation, not both");
-        }
-        let span = t.get("formation").map_or(t.span(), |v| v.span());
-        let mut g = t.table(r, "formation");
-        let kind = read_formation_kind(r, &mut g);
-        g.finish(r);
-        kind.map(|(kind, up)| Formation::Generated(kind, up, span))
-    } else {
-        t.required(
-            r,
-            "formation_m",
-            "one offset [forward, left, up] in metres per child (or a generated formation = { kind = ... })",
-            |r, v, f| read_formation(r, v, f).map(|o| Formation::Listed(o, v.span())),
-        )
-    };
-    let start_sigma = t.optional(r, "start_sigma_m", |r, v, f| {
-        let p = r.point3(v, f)?;
-        let mut ok = true;
-        for (i, x) in p.get_ref().iter().enumerate() {
-            if *x < 0.0 {
-                r.problem(&p.span(), &format!("{f}[{i}]"), format!("value {x} is out of range; expected ≥ 0"));
-                ok = false;
-            }
-        }
-        ok.then(|| *p.get_ref())
-    });
+    let formation = read_formation(r, t, n_children);
+    let start_sigma = t.optional(r, "start_sigma_m", read_start_sigma);
     let start_heading =
         t.optional(r, "start_sigma_heading_arcsec", |r, v, f| r.number_in(v, f, 0.0, true, None).map(At::into_inner));
     let strategy_v =
@@ -116,43 +41,14 @@ pub(super) fn read_plan(r: &mut Reader<'_>, t: &mut Table<'_, '_>, n_children: O
     let track = t.optional(r, "track", |r, v, f| r.boolean(v, f));
     let slope = t.optional(r, "max_slope_deg", |r, v, f| r.number_in(v, f, 0.0, false, Some(90.0)).map(At::into_inner));
     let control_at = t.optional(r, "control_at", read_control_at);
-    let mut st = t.table(r, "search");
-    let strategies = st.optional(r, "strategies", |r, v, f| {
-        let list = r.array(v, f, |r, e, f| r.choice(e, f, &planner::STRATEGIES).map(At::into_inner))?;
-        if list.is_empty() {
-            r.problem(&v.span(), f, format!("expected at least one of {}", planner::STRATEGIES.join(", ")));
-            return None;
-        }
-        Some(list)
-    });
-    let max_hops = st.optional(r, "max_hops", |r, v, f| r.integer_in(v, f, 2, 100).map(|h| h as usize));
-    let strides = st.optional(r, "strides_m", |r, v, f| {
-        let list = r.array(v, f, |r, e, f| r.number_in(e, f, 0.0, false, None).map(At::into_inner))?;
-        if list.is_empty() {
-            r.problem(&v.span(), f, "expected at least one stride");
-            return None;
-        }
-        Some(list)
-    });
-    let sight = st.optional(r, "max_sight_line_m", |r, v, f| r.number_in(v, f, 0.0, false, None).map(At::into_inner));
-    st.finish(r);
+    let search = read_search(r, t);
     let (strategy_v, hops_v) = (strategy_v?, hops_v?);
-    let strategy = match (strategy_v.as_ref().map(|(s, _)| s.as_str()), &hops_v) {
-        (Some("parent-hops"), hops) => Some(planner::Strategy::ParentHops { hops: hops.as_ref().map_or(2, |h| h.0) }),
-        (_, Some((_, span))) => {
-            r.problem(
-                span,
-                "plan.hops",
-                "hops applies to strategy = \"parent-hops\" only; remove it or set the strategy",
-            );
-            None
-        }
-        _ => Some(planner::Strategy::Leapfrog),
-    };
+    let strategy = strategy_of(r, strategy_v.as_ref().map(|(s, _)| s.as_str()), hops_v.as_ref());
     let (route, stride, formation) = (route?, stride?, formation?);
     let (strategy, track, slope, control_at) = (strategy?, track?, slope?, control_at?);
     let s = start_sigma?.unwrap_or([0.0; 3]);
     let h = start_heading?.unwrap_or(0.0) * RAD_PER_ARCSEC;
+    let n = n_children.unwrap_or(0);
     let (offsets, generated, offset_spans, formation_value) = match formation {
         Formation::Listed(o, span) => {
             let spans = o.iter().map(|p| p.span()).collect();
@@ -184,15 +80,166 @@ pub(super) fn read_plan(r: &mut Reader<'_>, t: &mut Table<'_, '_>, n_children: O
         track: track.unwrap_or(false),
         max_slope_rad: slope.map(f64::to_radians),
         footprint_radius_m: 0.3,
-        search: Search {
-            strategies: strategies?.unwrap_or_else(|| planner::STRATEGIES.iter().map(|s| s.to_string()).collect()),
-            max_hops: max_hops?.unwrap_or(4),
-            strides_m: strides?.unwrap_or_else(|| [0.5, 0.75, 1.0, 1.25, 1.5, 2.0].map(|f| f * stride_m).to_vec()),
-            max_sight_line_m: sight?.unwrap_or(f64::INFINITY),
-        },
+        search: search?.with_defaults(stride_m),
         control_at: control_at.map(|(c, _)| c).unwrap_or_default(),
     };
     Some((plan, spans))
+}
+
+/// `route_m`: two or more waypoints, no segment of zero length.
+fn read_route(r: &mut Reader<'_>, v: &Raw<'_>, f: &str) -> Option<Vec<At<[f64; 3]>>> {
+    let pts = r.array(v, f, |r, e, f| r.point3(e, f))?;
+    if pts.len() < 2 {
+        r.problem(&v.span(), f, format!("route_m has {} waypoint(s); expected at least 2", pts.len()));
+        return None;
+    }
+    let mut ok = true;
+    for k in 1..pts.len() {
+        let (a, b) = (pts[k - 1].get_ref(), pts[k].get_ref());
+        if (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt() <= 1e-9 {
+            r.problem(
+                &pts[k].span(),
+                &format!("{f}[{k}]"),
+                "repeats the previous waypoint; expected a segment of non-zero length",
+            );
+            ok = false;
+        }
+    }
+    ok.then_some(pts)
+}
+
+/// The formation: none for a team without children, `formation = { … }`
+/// generated, or `formation_m` listed (one horizontal offset per child).
+fn read_formation(r: &mut Reader<'_>, t: &mut Table<'_, '_>, n_children: Option<usize>) -> Option<Formation> {
+    let listed = |r: &mut Reader<'_>, v: &Raw<'_>, f: &str| {
+        let offsets = r.array(v, f, |r, e, f| r.point3(e, f))?;
+        if let Some(n) = n_children
+            && offsets.len() != n
+        {
+            r.problem(
+                &v.span(),
+                f,
+                format!("{} offsets given; expected one per child ({n}, as in team.children)", offsets.len()),
+            );
+            return None;
+        }
+        for (k, o) in offsets.iter().enumerate() {
+            if o.get_ref()[0].hypot(o.get_ref()[1]) < 1e-6 {
+                r.problem(
+                    &o.span(),
+                    &format!("{f}[{k}]"),
+                    "the child stands vertically above or below the parent; expected a horizontal offset",
+                );
+                return None;
+            }
+        }
+        Some(offsets)
+    };
+    if n_children == Some(0) {
+        for key in ["formation_m", "formation"] {
+            if let Some(v) = t.get(key) {
+                r.problem(&v.span(), &format!("plan.{key}"), "the team has no children to place; remove it");
+            }
+        }
+        Some(Formation::Listed(Vec::new(), 0..0))
+    } else if t.has("formation") {
+        if let Some(v) = t.get("formation_m") {
+            r.problem(&v.span(), "plan.formation_m", "give either formation_m or formation, not both");
+        }
+        let span = t.get("formation").map_or(t.span(), |v| v.span());
+        let mut g = t.table(r, "formation");
+        let kind = read_formation_kind(r, &mut g);
+        g.finish(r);
+        kind.map(|(kind, up)| Formation::Generated(kind, up, span))
+    } else {
+        t.required(
+            r,
+            "formation_m",
+            "one offset [forward, left, up] in metres per child (or a generated formation = { kind = ... })",
+            |r, v, f| listed(r, v, f).map(|o| Formation::Listed(o, v.span())),
+        )
+    }
+}
+
+/// `start_sigma_m`: three σ ≥ 0.
+fn read_start_sigma(r: &mut Reader<'_>, v: &Raw<'_>, f: &str) -> Option<[f64; 3]> {
+    let p = r.point3(v, f)?;
+    let mut ok = true;
+    for (i, x) in p.get_ref().iter().enumerate() {
+        if *x < 0.0 {
+            r.problem(&p.span(), &format!("{f}[{i}]"), format!("value {x} is out of range; expected ≥ 0"));
+            ok = false;
+        }
+    }
+    ok.then(|| *p.get_ref())
+}
+
+/// The strategy of `strategy` and `hops` (which only parent hops take).
+fn strategy_of(
+    r: &mut Reader<'_>,
+    strategy: Option<&str>,
+    hops: Option<&(usize, Range<usize>)>,
+) -> Option<planner::Strategy> {
+    match (strategy, hops) {
+        (Some("parent-hops"), hops) => Some(planner::Strategy::ParentHops { hops: hops.map_or(2, |h| h.0) }),
+        (_, Some((_, span))) => {
+            r.problem(
+                span,
+                "plan.hops",
+                "hops applies to strategy = \"parent-hops\" only; remove it or set the strategy",
+            );
+            None
+        }
+        _ => Some(planner::Strategy::Leapfrog),
+    }
+}
+
+/// `[plan.search]` as given (defaults applied once the stride is known).
+struct SearchKeys {
+    strategies: Option<Vec<String>>,
+    max_hops: Option<usize>,
+    strides_m: Option<Vec<f64>>,
+    max_sight_line_m: Option<f64>,
+}
+
+impl SearchKeys {
+    /// The search, with the defaults: every strategy, up to 4 hops,
+    /// strides from half to twice `stride_m`, sight lines of any length.
+    fn with_defaults(self, stride_m: f64) -> Search {
+        Search {
+            strategies: self.strategies.unwrap_or_else(|| planner::STRATEGIES.iter().map(|s| s.to_string()).collect()),
+            max_hops: self.max_hops.unwrap_or(4),
+            strides_m: self
+                .strides_m
+                .unwrap_or_else(|| [0.5, 0.75, 1.0, 1.25, 1.5, 2.0].map(|f| f * stride_m).to_vec()),
+            max_sight_line_m: self.max_sight_line_m.unwrap_or(f64::INFINITY),
+        }
+    }
+}
+
+/// `[plan.search]`.
+fn read_search(r: &mut Reader<'_>, t: &mut Table<'_, '_>) -> Option<SearchKeys> {
+    let mut st = t.table(r, "search");
+    let strategies = st.optional(r, "strategies", |r, v, f| {
+        let list = r.array(v, f, |r, e, f| r.choice(e, f, &planner::STRATEGIES).map(At::into_inner))?;
+        if list.is_empty() {
+            r.problem(&v.span(), f, format!("expected at least one of {}", planner::STRATEGIES.join(", ")));
+            return None;
+        }
+        Some(list)
+    });
+    let max_hops = st.optional(r, "max_hops", |r, v, f| r.integer_in(v, f, 2, 100).map(|h| h as usize));
+    let strides = st.optional(r, "strides_m", |r, v, f| {
+        let list = r.array(v, f, |r, e, f| r.number_in(e, f, 0.0, false, None).map(At::into_inner))?;
+        if list.is_empty() {
+            r.problem(&v.span(), f, "expected at least one stride");
+            return None;
+        }
+        Some(list)
+    });
+    let sight = st.optional(r, "max_sight_line_m", |r, v, f| r.number_in(v, f, 0.0, false, None).map(At::into_inner));
+    st.finish(r);
+    Some(SearchKeys { strategies: strategies?, max_hops: max_hops?, strides_m: strides?, max_sight_line_m: sight? })
 }
 
 /// `control_at = "every" | "start-end" | [station indices]`.
