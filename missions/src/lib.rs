@@ -13,6 +13,8 @@
 //!   ([`run::fuse`]), the one output stage ([`run::outputs`]) and the
 //!   reports ([`run::report`]);
 //! - [`inspection`]: the `[pipe]` inspection of a fused cloud;
+//! - [`output`]: the one output stage of every merged cloud (its origin,
+//!   its files, each scan's part);
 //! - [`scans`]: a user's own scans outside a mission (files, 3DTK
 //!   directories, multi-scan E57) with their start poses, for `register`
 //!   and `match`;
@@ -29,6 +31,7 @@ pub mod commands;
 pub mod documents;
 pub mod inspection;
 pub mod mission;
+pub mod output;
 pub mod planning;
 pub mod ros2;
 pub mod run;

@@ -56,8 +56,7 @@ pub fn run(args: &FuseArgs, out: &mut dyn Write) -> Result<Outcome> {
     let points = views.iter().map(|v| v.body.len()).sum();
     let mut cloud = crate::run::outputs::CloudFiles::create(mission, &target, Some(points))?;
     for (v, f) in views.iter().zip(&fused.scans) {
-        let world = fusion::direct::transform(&v.body, &crate::run::fuse::relative(&origin, &f.world_from_body));
-        cloud.push(&crate::run::fuse::part(world, v, &f.world_from_body, &origin), &mut timings)?;
+        cloud.push(&crate::output::part(&v.body, &f.world_from_body, &origin, v.label()), &mut timings)?;
     }
     let written = cloud.finish(mission, &target, &mut Recorder::disabled(), &mut timings)?;
     let mut report = FusionReport::new(views, &fused);

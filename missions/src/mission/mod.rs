@@ -427,12 +427,9 @@ impl MissionError {
 
 impl Mission {
     /// What the merged cloud's points are relative to: the route's first
-    /// point, each axis rounded to the kilometre (zero for a site within
-    /// 500 m of its datum's origin). The cloud files add it back in f64, so
-    /// a survey at national-grid coordinates keeps its 0.1 mm.
+    /// point rounded as [`crate::output::cloud_origin`] rounds it.
     pub fn cloud_origin(&self) -> nalgebra::Vector3<f64> {
-        let first = self.plan.route_m.first().map_or_else(nalgebra::Vector3::zeros, |p| p.coords);
-        first.map(|v| if v.is_finite() { (v / 1000.0).round() * 1000.0 } else { 0.0 })
+        crate::output::cloud_origin(&self.plan.route_m.first().map_or_else(nalgebra::Vector3::zeros, |p| p.coords))
     }
 
     /// The scene of `[backend]`: the simulator's world, on serial ports the

@@ -22,7 +22,6 @@ use fusion::icp::{IcpConfig, Kernel};
 use fusion::multiview::{MultiviewConfig, Strategy};
 use nalgebra::{Isometry3, Matrix4, Point3, Translation3, Vector3};
 use scanner::Tilt;
-use scanner::io::PointCloud;
 
 use crate::mission::{FusionMode, FusionPlan};
 
@@ -64,6 +63,36 @@ pub enum Correlation {
 }
 
 impl ScanView {
+    /// The scan the journal records at `station` (`scanned`: its file and
+    /// time) with its `body` points: the CPS `estimate` (pose, covariance,
+    /// correlation with the earlier scan stations), its `tilt`; the pose
+    /// its odometry believed (x, y, heading; the nominal station's height
+    /// — without a belief, the nominal station) and the simulator's true
+    /// pose and tilt, when known.
+    pub fn new(
+        station: usize,
+        scanned: &crate::run::journal::Scanned,
+        body: Vec<Point3<f32>>,
+        estimate: (ParentPose, Matrix4<f64>, Correlation),
+        tilt: Tilt,
+        (believed, nominal): (Option<scanner::PlanarPose>, &ParentPose),
+        truth: Option<(&ParentPose, &Tilt)>,
+    ) -> Self {
+        let (pose, covariance, correlation) = estimate;
+        Self {
+            station,
+            file: scanned.file.clone(),
+            body,
+            pose,
+            covariance,
+            correlation,
+            tilt,
+            odometry: believed.map_or(*nominal, |b| ParentPose::new(b.x_m, b.y_m, nominal.position.z, b.heading_rad)),
+            truth: truth.map(|(parent, tilt)| tilt.world_from_body(parent)),
+            gps_time_s: scanned.unix_time_s.map(scanner::io::gps_time_of_unix),
+        }
+    }
+
     /// `world_from_body` of the direct transformation.
     pub fn direct(&self) -> Isometry3<f64> {
         self.tilt.world_from_body(&self.pose)
@@ -472,36 +501,23 @@ pub fn error_heading(a: &Isometry3<f64>, b: &Isometry3<f64>) -> f64 {
     cps::wrap_angle(xa.y.atan2(xa.x) - xb.y.atan2(xb.x))
 }
 
-/// One scan of the merged cloud: its `points` (already moved by
-/// `world_from_body` and made relative to `origin`), each with the
-/// station's index as its scan (LAS `point_source_id`: 65535 for stations
-/// from 65535 on), the scan with its name, pose and time.
-pub fn part(
-    points: Vec<Point3<f32>>,
-    view: &ScanView,
-    world_from_body: &Isometry3<f64>,
-    origin: &Vector3<f64>,
-) -> PointCloud {
-    let id = u16::try_from(view.station).unwrap_or(u16::MAX);
-    let n = points.len();
-    PointCloud {
-        points,
-        source: Some(vec![id; n]),
-        origin: *origin,
-        scans: vec![scanner::io::ScanInfo {
-            name: scan_name(view),
-            points: 0..n,
-            world_from_scan: *world_from_body,
-            gps_time_s: view.gps_time_s,
-        }],
-        ..PointCloud::default()
-    }
-}
-
 /// A scan's name: its file's stem (`scan003`).
 fn scan_name(view: &ScanView) -> String {
     let stem = std::path::Path::new(&view.file).file_stem().map(|s| s.to_string_lossy().into_owned());
     stem.unwrap_or_else(|| format!("scan{:03}", view.station))
+}
+
+impl ScanView {
+    /// Who the scan is in the merged cloud: its name, the station's index
+    /// as its number (LAS `point_source_id`: 65535 for stations from 65535
+    /// on), its time.
+    pub fn label(&self) -> crate::output::ScanLabel {
+        crate::output::ScanLabel {
+            name: scan_name(self),
+            number: u16::try_from(self.station).unwrap_or(u16::MAX),
+            gps_time_s: self.gps_time_s,
+        }
+    }
 }
 
 /// Writes each scan's fused pose into `dir` as a 3DTK `.frames` file named
@@ -516,22 +532,4 @@ pub fn write_frames(dir: &std::path::Path, views: &[ScanView], fused: &Fused) ->
         names.push(name);
     }
     Ok(names)
-}
-
-/// The world points of a scan for the recording (f32 world coordinates,
-/// a viewer's): the merged cloud's own points when its origin is zero,
-/// else `body` moved by `world_from_body` anew.
-pub fn recorded_world(
-    relative: &[Point3<f32>],
-    origin: &Vector3<f64>,
-    body: &[Point3<f32>],
-    world_from_body: &Isometry3<f64>,
-) -> Vec<Point3<f32>> {
-    if *origin == Vector3::zeros() { relative.to_vec() } else { fusion::direct::transform(body, world_from_body) }
-}
-
-/// `world_from_body` as seen from `origin`: the transform whose points are
-/// world coordinates minus the origin (exact in f64, small in f32).
-pub fn relative(origin: &Vector3<f64>, world_from_body: &Isometry3<f64>) -> Isometry3<f64> {
-    Translation3::from(-origin) * world_from_body
 }

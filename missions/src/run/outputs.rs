@@ -11,7 +11,7 @@ use std::time::Instant;
 
 use anyhow::Result;
 use nalgebra::Point3;
-use scanner::io::{CloudHeader, CloudWriter, Format, PointCloud};
+use scanner::io::{CloudHeader, PointCloud};
 
 use crate::documents::pipe::PipeReport;
 use crate::documents::run::Timings;
@@ -38,12 +38,6 @@ impl Written {
     }
 }
 
-/// The file name of the merged cloud in `format` (an `[output] formats`
-/// name): `cloud.<format>`, `cloud.copc.laz` for COPC.
-pub fn cloud_file(format: &str) -> String {
-    if format == "copc" { "cloud.copc.laz".into() } else { format!("cloud.{format}") }
-}
-
 /// Checks, before any work, that the output stage can write into `dir`
 /// (which need not exist yet): refuses a `dir` that is not a directory,
 /// and a target of [`CloudFiles`] — a cloud file, the deviation map, and
@@ -55,35 +49,25 @@ pub fn check_targets(mission: &Mission, dir: &Path, extra: &[&str]) -> Result<()
     if dir.exists() && !dir.is_dir() {
         bail!("{}: exists and is not a directory; expected the output directory", dir.display());
     }
-    let clouds = mission.output.formats.iter().map(|f| cloud_file(f));
+    let clouds = mission.output.formats.iter().map(|f| crate::output::cloud_file(f));
     let pipe = mission.pipe.as_ref().map(|_| DEVIATION_FILE.to_string());
     // (A symbolic link is the run directory's guard's to name.)
-    if let Some((name, _)) = taken(dir, clouds.chain(pipe).chain(extra.iter().map(|e| e.to_string()))) {
+    if let Some((name, _)) = crate::output::taken(dir, clouds.chain(pipe).chain(extra.iter().map(|e| e.to_string()))) {
         let path = dir.join(&name);
         bail!("{}: exists and is not a file; the outputs write {name} there (remove or rename it)", path.display());
     }
     Ok(())
 }
 
-/// The first of `names` in `dir` that exists as neither a file nor a
-/// symbolic link (a directory, say): an output file cannot replace it.
-pub fn taken(dir: &Path, names: impl IntoIterator<Item = String>) -> Option<(String, std::fs::Metadata)> {
-    names.into_iter().find_map(|name| {
-        let meta = std::fs::symlink_metadata(dir.join(&name)).ok()?;
-        (!meta.file_type().is_file() && !meta.file_type().is_symlink()).then_some((name, meta))
-    })
-}
-
 /// The merged cloud's files, one per `[output] formats`, written a scan
-/// at a time ([`scanner::io::CloudWriter`]): a run holds one scan's
-/// points, not the cloud's (with `[pipe]`, the inspection needs the whole
+/// at a time ([`crate::output::CloudFiles`]: a run holds one scan's
+/// points, not the cloud's; with `[pipe]`, the inspection needs the whole
 /// cloud: its world points are kept). Dropped unfinished, the files go.
 #[derive(Debug)]
 pub struct CloudFiles {
-    files: Vec<(String, CloudWriter)>,
+    files: crate::output::CloudFiles,
     /// With `[pipe]`: every point, world coordinates (f32).
     pipe: Option<Vec<Point3<f32>>>,
-    points: usize,
 }
 
 impl CloudFiles {
@@ -101,21 +85,14 @@ impl CloudFiles {
             color: false,
             time: None,
         };
-        let mut files = Vec::with_capacity(mission.output.formats.len());
-        for format in &mission.output.formats {
-            let name = cloud_file(format);
-            let path = dir.join(&name);
-            files.push((name, CloudWriter::create(&path, Format::from_path(&path)?, header.clone())?));
-        }
-        Ok(Self { files, pipe: mission.pipe.as_ref().map(|_| Vec::new()), points: 0 })
+        let files = crate::output::CloudFiles::create(dir, &mission.output.formats, &header)?;
+        Ok(Self { files, pipe: mission.pipe.as_ref().map(|_| Vec::new()) })
     }
 
-    /// Appends one scan's points (see [`super::fuse::part`]) to every file.
+    /// Appends one scan's points (see [`crate::output::part`]) to every file.
     pub fn push(&mut self, part: &PointCloud, timings: &mut Timings) -> Result<()> {
         let started = Instant::now();
-        for (_, writer) in &mut self.files {
-            writer.push(part)?;
-        }
+        self.files.push(part)?;
         if let Some(world) = &mut self.pipe {
             // The inspection works in world coordinates (f32).
             if part.georeferenced() {
@@ -124,7 +101,6 @@ impl CloudFiles {
                 world.extend_from_slice(&part.points);
             }
         }
-        self.points += part.len();
         timings.cloud_files_s += started.elapsed().as_secs_f64();
         Ok(())
     }
@@ -134,14 +110,11 @@ impl CloudFiles {
     /// `timings`.
     pub fn finish(self, mission: &Mission, dir: &Path, rec: &mut Recorder, timings: &mut Timings) -> Result<Written> {
         let started = Instant::now();
-        let mut files = Vec::with_capacity(self.files.len());
-        for (name, writer) in self.files {
-            writer.finish()?;
-            files.push(name);
-        }
+        let points = self.files.points();
+        let mut files = self.files.finish()?;
         timings.cloud_files_s += started.elapsed().as_secs_f64();
         let pipe = pipe(mission, dir, self.pipe.as_deref().unwrap_or(&[]), &mut files, rec, timings)?;
-        Ok(Written { points: self.points, files, pipe })
+        Ok(Written { points, files, pipe })
     }
 }
 

@@ -199,14 +199,10 @@ pub fn load(dir: &Path) -> Result<RunDir> {
                 }
                 let truth = s.sim.as_ref().and_then(|c| c.truth.as_ref()).map(|t| {
                     let p = ParentPose::new(t.parent[0], t.parent[1], t.parent[2], t.parent[3]);
-                    Tilt { roll_rad: t.tilt[0], pitch_rad: t.tilt[1] }.world_from_body(&p)
+                    (p, Tilt { roll_rad: t.tilt[0], pitch_rad: t.tilt[1] })
                 });
                 let nominal = dance.station_pose(station.min(dance.stations.len() - 1));
-                let odometry = s
-                    .sim
-                    .as_ref()
-                    .and_then(|c| c.parent_believed())
-                    .map_or(nominal, |b| ParentPose::new(b.x_m, b.y_m, nominal.position.z, b.heading_rad));
+                let believed = s.sim.as_ref().and_then(|c| c.parent_believed());
                 let correlation = if by_chain {
                     // A station without a chain link (a robot alone, or a
                     // start without a resection) is independent of the
@@ -221,18 +217,9 @@ pub fn load(dir: &Path) -> Result<RunDir> {
                 } else {
                     Correlation::Earlier(std::mem::take(&mut cross))
                 };
-                views.push(ScanView {
-                    station,
-                    file,
-                    body: cloud.points,
-                    pose: pose.0,
-                    covariance: pose.1,
-                    correlation,
-                    tilt,
-                    odometry,
-                    truth,
-                    gps_time_s: s.data.unix_time_s.map(scanner::io::gps_time_of_unix),
-                });
+                let estimate = (pose.0, pose.1, correlation);
+                let truth = truth.as_ref().map(|(p, t)| (p, t));
+                views.push(ScanView::new(station, &s.data, cloud.points, estimate, tilt, (believed, &nominal), truth));
             }
             _ => {}
         }
@@ -250,7 +237,7 @@ fn refuse_others_outputs(dir: &Path) -> Result<()> {
         .chain(["mission.rrd", "scans", "fusion", crate::inspection::DEVIATION_FILE])
         .map(String::from)
         .collect();
-    names.extend(crate::mission::OUTPUT_FORMATS.iter().map(|f| super::outputs::cloud_file(f)));
+    names.extend(crate::mission::OUTPUT_FORMATS.iter().map(|f| crate::output::cloud_file(f)));
     let found: Vec<&String> = names.iter().filter(|n| std::fs::symlink_metadata(dir.join(n)).is_ok()).collect();
     if !found.is_empty() {
         bail!(

@@ -5,7 +5,6 @@ use std::path::Path;
 
 use anyhow::{Context, Result, bail};
 use fusion::scanset::SetResult;
-use nalgebra::{Isometry3, Vector3};
 
 use super::args::MatchArgs;
 use crate::documents::matching::MatchReport;
@@ -114,7 +113,7 @@ pub(super) fn write_links(path: &Path, scans: &[InputScan], report: &MatchReport
 
 /// The merged cloud in every format, a scan at a time, relative to the
 /// first pose's position rounded to the kilometre (64-bit coordinates when
-/// that is not zero).
+/// that is not zero) — [`crate::output`].
 pub(super) fn write_clouds(
     dir: &Path,
     formats: &[String],
@@ -123,8 +122,7 @@ pub(super) fn write_clouds(
     numbers: &[u16],
     r: &SetResult,
 ) -> Result<Vec<String>> {
-    let first = r.world_from_scan[0].translation.vector;
-    let origin: Vector3<f64> = first.map(|v| (v / 1000.0).round() * 1000.0);
+    let origin = crate::output::cloud_origin(&r.world_from_scan[0].translation.vector);
     let header = scanner::io::CloudHeader {
         origin,
         crs: Some(crs.clone()),
@@ -137,46 +135,18 @@ pub(super) fn write_clouds(
         color: scans.iter().all(|s| s.color.is_some()),
         time: point_time_base(scans),
     };
-    let mut writers = Vec::with_capacity(formats.len());
-    for format in formats {
-        let name = crate::run::outputs::cloud_file(format);
-        let path = dir.join(&name);
-        writers.push((
-            name,
-            scanner::io::CloudWriter::create(&path, scanner::io::Format::from_path(&path)?, header.clone())?,
-        ));
-    }
+    let mut clouds = crate::output::CloudFiles::create(dir, formats, &header)?;
     // Each scan moved into the world once, into every file.
     for (i, s) in scans.iter().enumerate() {
-        let pose = r.world_from_scan[i];
-        let relative = Isometry3::from_parts((pose.translation.vector - origin).into(), pose.rotation);
-        let n = s.points.len();
-        let part = scanner::io::PointCloud {
-            points: fusion::direct::transform(&s.points, &relative),
-            source: Some(vec![numbers[i]; n]),
-            intensity: s.intensity.clone().filter(|_| header.intensity),
-            color: s.color.clone().filter(|_| header.color),
-            time: s.time.as_ref().filter(|_| header.time.is_some()).map(|(t, _)| t.clone()),
-            time_base: header.time.unwrap_or_default(),
-            origin,
-            scans: vec![scanner::io::ScanInfo {
-                name: s.name.clone(),
-                points: 0..n,
-                world_from_scan: pose,
-                gps_time_s: s.gps_time_s,
-            }],
-            ..scanner::io::PointCloud::default()
-        };
-        for (_, writer) in &mut writers {
-            writer.push(&part)?;
-        }
+        let label = crate::output::ScanLabel { name: s.name.clone(), number: numbers[i], gps_time_s: s.gps_time_s };
+        let mut part = crate::output::part(&s.points, &r.world_from_scan[i], &origin, label);
+        part.intensity = s.intensity.clone().filter(|_| header.intensity);
+        part.color = s.color.clone().filter(|_| header.color);
+        part.time = s.time.as_ref().filter(|_| header.time.is_some()).map(|(t, _)| t.clone());
+        part.time_base = header.time.unwrap_or_default();
+        clouds.push(&part)?;
     }
-    let mut files = Vec::with_capacity(writers.len());
-    for (name, writer) in writers {
-        writer.finish()?;
-        files.push(name);
-    }
-    Ok(files)
+    clouds.finish()
 }
 
 /// The base of the scans' point times, when every scan has times and all
@@ -203,8 +173,8 @@ pub(super) fn check_out(args: &MatchArgs) -> Result<()> {
     // directory where a file goes, a file where frames/ goes) is refused
     // now, not after the registration (with a `.partial` left).
     let files = ["poses.json", "links.csv", "match.rrd"].map(String::from);
-    let clouds = args.formats.iter().map(|f| crate::run::outputs::cloud_file(f));
-    if let Some((name, meta)) = crate::run::outputs::taken(out, files.into_iter().chain(clouds)) {
+    let clouds = args.formats.iter().map(|f| crate::output::cloud_file(f));
+    if let Some((name, meta)) = crate::output::taken(out, files.into_iter().chain(clouds)) {
         bail!(
             "--out {}: {name} is {}: expected match's output file there (or nothing)",
             out.display(),
@@ -236,7 +206,7 @@ pub(super) fn check_out(args: &MatchArgs) -> Result<()> {
 /// stale result stands beside the new ones. Only `match`'s own names.
 pub(super) fn remove_stale_outputs(dir: &Path, formats: &[String]) -> Result<()> {
     for format in crate::mission::OUTPUT_FORMATS.iter().filter(|f| !formats.iter().any(|g| g == *f)) {
-        let path = dir.join(crate::run::outputs::cloud_file(format));
+        let path = dir.join(crate::output::cloud_file(format));
         if std::fs::symlink_metadata(&path).is_ok_and(|m| m.is_file() || m.file_type().is_symlink()) {
             std::fs::remove_file(&path).with_context(|| format!("removing the stale {}", path.display()))?;
         }

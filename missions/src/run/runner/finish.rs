@@ -38,15 +38,14 @@ impl Run<'_> {
         let origin = self.origin;
         let cloud = self.cloud.as_mut().ok_or_else(|| anyhow::anyhow!("the cloud's files are already finished"))?;
         for ((view, at), f) in views.iter().zip(&self.scan_times).zip(&fused.scans) {
-            let relative_from_body = crate::run::fuse::relative(&origin, &f.world_from_body);
-            let world = obs.fusing(|| fusion::direct::transform(&view.body, &relative_from_body));
+            let part = obs.fusing(|| crate::output::part(&view.body, &f.world_from_body, &origin, view.label()));
             obs.scan("icp", &format!("scan{:03}", view.station), Some(*at), || {
-                crate::run::fuse::recorded_world(&world, &origin, &view.body, &f.world_from_body)
+                crate::output::viewed(&part, &view.body, &f.world_from_body)
             })?;
             if let Some(rmse) = f.rmse_m {
                 obs.icp_residual(at.0, rmse);
             }
-            cloud.push(&crate::run::fuse::part(world, view, &f.world_from_body, &origin), &mut obs.timings)?;
+            cloud.push(&part, &mut obs.timings)?;
         }
         Ok(fused)
     }

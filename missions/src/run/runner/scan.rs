@@ -3,7 +3,6 @@
 //! stations whose joint covariance the team carries.
 
 use anyhow::{Result, bail};
-use cps::ParentPose;
 use nalgebra::Point3;
 use scanner::Tilt;
 use scanner::io::{Format, PointCloud};
@@ -29,15 +28,15 @@ impl Run<'_> {
     /// cloud's files, and joined to the scan stations; returns its file.
     pub(super) fn scan(&mut self, index: usize) -> Result<String> {
         let Taken { tilt, world_from_body, scanned, cloud } = self.take_scan(index)?;
+        let mut view = self.scan_view(index, tilt, &scanned, cloud.points)?;
         let origin = self.origin;
-        let relative_from_body = crate::run::fuse::relative(&origin, &world_from_body);
-        let world = self.obs.fusing(|| fusion::direct::transform(&cloud.points, &relative_from_body));
+        let part = self.obs.fusing(|| crate::output::part(&view.body, &world_from_body, &origin, view.label()));
         self.obs.scan("direct", &format!("scan{index:03}"), None, || {
-            crate::run::fuse::recorded_world(&world, &origin, &cloud.points, &world_from_body)
+            crate::output::viewed(&part, &view.body, &world_from_body)
         })?;
-        let view = self.scan_view(index, tilt, &scanned, cloud.points)?;
         if self.mission.fusion.mode == FusionMode::Direct {
-            let part = crate::run::fuse::part(world, &view, &world_from_body, &origin);
+            // Merged as it goes; the ICP modes need every scan's points at the end.
+            view.body = Vec::new();
             let cloud = self.cloud.as_mut().ok_or_else(|| anyhow::anyhow!("the cloud's files are already finished"))?;
             cloud.push(&part, &mut self.obs.timings)?;
         }
@@ -100,9 +99,6 @@ impl Run<'_> {
     /// covariance and its correlation with the earlier scan stations (the
     /// station joins them: a robot alone, by odometry, carries none).
     fn scan_view(&mut self, index: usize, tilt: Tilt, scanned: &Scanned, body: Vec<Point3<f32>>) -> Result<ScanView> {
-        let truth = self.dispatch.team.truth();
-        let believed = self.dispatch.team.parent_believed();
-        let nominal_z = self.planned.dance.station_pose(index).position.z;
         let correlation = if self.clones_scan_stations() {
             let cross = (0..self.team.clones().min(self.views.len()))
                 .map(|a| self.team.parent_clone_covariance(a))
@@ -114,18 +110,11 @@ impl Run<'_> {
             self.team.set_anchor();
             Correlation::Chain(link)
         };
-        Ok(ScanView {
-            station: index,
-            file: scanned.file.clone(),
-            // Direct fusion merges as it goes; the ICP modes need every scan at the end.
-            body: if self.mission.fusion.mode == FusionMode::Direct { Vec::new() } else { body },
-            pose: self.team.parent(),
-            covariance: self.team.parent_covariance(),
-            correlation,
-            tilt,
-            odometry: ParentPose::new(believed.x_m, believed.y_m, nominal_z, believed.heading_rad),
-            truth: truth.map(|t| t.tilt.world_from_body(&t.parent)),
-            gps_time_s: scanned.unix_time_s.map(scanner::io::gps_time_of_unix),
-        })
+        let estimate = (self.team.parent(), self.team.parent_covariance(), correlation);
+        let believed = Some(self.dispatch.team.parent_believed());
+        let nominal = self.planned.dance.station_pose(index);
+        let truth = self.dispatch.team.truth();
+        let truth = truth.as_ref().map(|t| (&t.parent, &t.tilt));
+        Ok(ScanView::new(index, scanned, body, estimate, tilt, (believed, &nominal), truth))
     }
 }
