@@ -26,7 +26,6 @@ use crate::documents::ports::{InstrumentJson, PortsJson};
 use super::Outcome;
 use crate::mission::Mission;
 use crate::planning::Planned;
-use crate::run::backend::SimTeam;
 use crate::run::journal::TruthRecord;
 
 /// `emulate`'s arguments.
@@ -189,7 +188,7 @@ pub fn start(
     truth: Option<&Path>,
     faults: &[EmulatorFault],
 ) -> Result<EmulatedTeam> {
-    let parts = SimTeam::new(mission, &planned.dance, Vec::new())?.into_parts();
+    let parts = crate::run::backend::sim::parts(mission, &planned.dance)?;
     let world = parts.world.clone();
     let log: Option<Arc<Mutex<std::fs::File>>> = match truth {
         Some(path) => {

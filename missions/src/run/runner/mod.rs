@@ -41,7 +41,7 @@ mod finish;
 mod scan;
 mod sightings;
 
-use super::backend::{DeviceKind, Fault, Team};
+use super::backend::{DeviceKind, Fault};
 use super::dispatch::Dispatch;
 use super::observer::Observer;
 use super::outputs::CloudFiles;
@@ -136,7 +136,7 @@ pub fn run(mission: &Mission, planned: &Planned, dir: &Path, options: &RunOption
     // they are fused; their count is stated when they are finished.
     let cloud = CloudFiles::create(mission, dir, None)?;
 
-    let team = Team::new(mission, &planned.dance, options.faults.clone())?;
+    let team = super::backend::open(mission, &planned.dance, options.faults.clone())?;
     let rrd = mission.output.rerun.then(|| dir.join("mission.rrd"));
     let mut rec = Recorder::new(&mission.name, rrd.as_deref(), &options.viewer, mission.robot_labels())?;
     rec.layout(Layout::Mission)?;
