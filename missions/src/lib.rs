@@ -8,10 +8,14 @@
 //!   dance, steps, prediction), built once per command; its constraints,
 //!   its analysis and search, and the optimized mission file;
 //! - [`run`]: running a mission ([`run::runner`]) on the simulator or serial
-//!   ports ([`run::backend`]) with a typed journal ([`run::journal`]) that a
-//!   killed run resumes from ([`run::resume`]), the fusion of the scans
-//!   ([`run::fuse`]), the one output stage ([`run::outputs`]) and the
-//!   reports ([`run::report`]);
+//!   ports ([`run::backend`]), every command journaled so a killed run
+//!   resumes ([`run::resume`]);
+//! - [`journal`]: the typed, versioned `journal.jsonl` and the run
+//!   directory's guards;
+//! - [`products`]: what a run directory's readings make, at the end of a
+//!   run and again by `fuse`, `adjust`, `export` — the run read back, the
+//!   fusion of the scans, the run's output stage, the network adjustment,
+//!   the reports;
 //! - [`inspection`]: the `[pipe]` inspection of a fused cloud;
 //! - [`output`]: the one output stage of every merged cloud (its origin,
 //!   its files, each scan's part);
@@ -30,9 +34,11 @@ pub mod cli;
 pub mod commands;
 pub mod documents;
 pub mod inspection;
+pub mod journal;
 pub mod mission;
 pub mod output;
 pub mod planning;
+pub mod products;
 pub mod ros2;
 pub mod run;
 pub mod scans;

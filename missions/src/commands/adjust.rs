@@ -69,11 +69,11 @@ impl AdjustArgs {
 /// data snooping does not find the cause).
 pub fn run(args: &AdjustArgs, out: &mut dyn Write) -> Result<Outcome> {
     let dir = &args.run_dir;
-    let _lock = crate::run::directory::guard(dir, &format!("adjust {}", dir.display()))?;
-    let run = crate::run::resume::load_journal(dir)?;
+    let _lock = crate::journal::directory::guard(dir, &format!("adjust {}", dir.display()))?;
+    let run = crate::products::load::load_journal(dir)?;
     let path = dir.join("journal.jsonl");
-    let net = crate::run::adjust::network(&run.mission, &run.planned, &run.journal, &path)?;
-    let report = crate::run::adjust::adjust(&run.mission, &run.planned, &net, &args.options())?;
+    let net = crate::products::adjust::network(&run.mission, &run.planned, &run.journal, &path)?;
+    let report = crate::products::adjust::adjust(&run.mission, &run.planned, &net, &args.options())?;
     let listing = dir.join("adjustment.txt");
     // Renamed into place: a full disk leaves the last listing whole, and a
     // hard-link snapshot of the run keeps its own.

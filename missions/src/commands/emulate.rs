@@ -24,9 +24,9 @@ use serde::Serialize;
 use crate::documents::ports::{InstrumentJson, PortsJson};
 
 use super::Outcome;
+use crate::journal::TruthRecord;
 use crate::mission::Mission;
 use crate::planning::Planned;
-use crate::run::journal::TruthRecord;
 
 /// `emulate`'s arguments.
 #[derive(Debug, Clone, clap::Args)]

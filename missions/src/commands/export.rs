@@ -23,8 +23,8 @@ pub struct ExportArgs {
 /// Runs `export`.
 pub fn run(args: &ExportArgs, out: &mut dyn Write) -> Result<Outcome> {
     let dir = &args.run_dir;
-    let _lock = crate::run::directory::guard(dir, &format!("export {}", dir.display()))?;
-    let run = crate::run::resume::load(dir)?;
+    let _lock = crate::journal::directory::guard(dir, &format!("export {}", dir.display()))?;
+    let run = crate::products::load::load(dir)?;
     let bag = crate::ros2::export::write(&run, dir, &args.ros2_bag)?;
     writeln!(out, "rosbag2 written to {}:", bag.dir.display())?;
     for (topic, count) in &bag.topics {

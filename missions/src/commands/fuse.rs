@@ -35,8 +35,8 @@ fn parse_mode(s: &str) -> Result<FusionMode, String> {
 /// Runs `fuse`: exit 1 when a `[pipe]` fit of the re-fused cloud fails.
 pub fn run(args: &FuseArgs, out: &mut dyn Write) -> Result<Outcome> {
     let dir = &args.run_dir;
-    let _lock = crate::run::directory::guard(dir, &format!("fuse {}", dir.display()))?;
-    let run = crate::run::resume::load(dir)?;
+    let _lock = crate::journal::directory::guard(dir, &format!("fuse {}", dir.display()))?;
+    let run = crate::products::load::load(dir)?;
     let (mission, views) = (&run.mission, &run.views);
     if views.is_empty() {
         bail!("{}: the journal has no scans to fuse", dir.display());
@@ -44,17 +44,17 @@ pub fn run(args: &FuseArgs, out: &mut dyn Write) -> Result<Outcome> {
     let mode = args.mode.unwrap_or(mission.fusion.mode);
     // Where the results go, checked before the fusion runs.
     let target = dir.join("fusion").join(mode.name());
-    crate::run::outputs::check_targets(mission, &target, &["fusion.json"])?;
+    crate::products::outputs::check_targets(mission, &target, &["fusion.json"])?;
     let frames = target.join("frames");
-    crate::run::outputs::check_targets(mission, &frames, &[])?;
+    crate::products::outputs::check_targets(mission, &frames, &[])?;
     std::fs::create_dir_all(&frames).with_context(|| format!("creating {}", frames.display()))?;
     let scanner = mission.scan.scanner_in_body();
-    let fused = crate::run::fuse::fuse(views, mode, &mission.fusion, scanner, false, &mut |_, _| {})?;
-    crate::run::fuse::write_frames(&frames, views, &fused)?;
+    let fused = crate::products::fuse::fuse(views, mode, &mission.fusion, scanner, false, &mut |_, _| {})?;
+    crate::products::fuse::write_frames(&frames, views, &fused)?;
     // The cloud's files, a scan at a time.
     let (origin, mut timings) = (mission.cloud_origin(), Timings::default());
     let points = views.iter().map(|v| v.body.len()).sum();
-    let mut cloud = crate::run::outputs::CloudFiles::create(mission, &target, Some(points))?;
+    let mut cloud = crate::products::outputs::CloudFiles::create(mission, &target, Some(points))?;
     for (v, f) in views.iter().zip(&fused.scans) {
         cloud.push(&crate::output::part(&v.body, &f.world_from_body, &origin, v.label()), &mut timings)?;
     }
@@ -66,7 +66,7 @@ pub fn run(args: &FuseArgs, out: &mut dyn Write) -> Result<Outcome> {
     if args.json {
         crate::documents::write_line(out, &report)?;
     } else {
-        crate::run::text::fusion(out, views, &fused)?;
+        crate::products::text::fusion(out, views, &fused)?;
         if let Some(pipe) = &report.pipe {
             crate::view::tables::pipe_summary(out, pipe)?;
         }

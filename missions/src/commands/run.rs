@@ -70,7 +70,7 @@ pub fn run(args: &RunArgs, out: &mut dyn Write) -> Result<Outcome> {
         (None, true) => {
             let journal = dir.join("journal.jsonl");
             if journal.exists() {
-                mission.backend.seed = crate::run::journal::read(&journal)?.start(&journal)?.seed;
+                mission.backend.seed = crate::journal::read(&journal)?.start(&journal)?.seed;
             }
         }
         (None, false) => {}
@@ -92,7 +92,7 @@ pub fn run(args: &RunArgs, out: &mut dyn Write) -> Result<Outcome> {
     let mut summary = crate::run::runner::run(&mission, &planned, &dir, &options)?;
     if mission.output.ros2_bag {
         // From the finished journal and scans, as `export` writes it.
-        let run = crate::run::resume::load(&summary.dir)?;
+        let run = crate::products::load::load(&summary.dir)?;
         crate::ros2::export::write(&run, &summary.dir, &summary.dir.join("rosbag2")).context(
             "writing rosbag2/ ([output] ros2_bag); `cps-survey export RUN_DIR --ros2-bag DIR` writes it again",
         )?;

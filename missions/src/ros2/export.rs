@@ -37,9 +37,9 @@ use super::messages::{
     CYLINDER, Color, Covariance6, Header, Marker, MarkerArray, Path as PathMsg, PointCloud2, Pose, PoseStamped,
     PoseWithCovariance, PoseWithCovarianceStamped, SPHERE, TEXT_VIEW_FACING, TfMessage, Time, TransformStamped,
 };
-use crate::run::journal::{Event, Phase};
+use crate::journal::{Event, Phase};
+use crate::products::load::RunDir;
 use crate::run::observer::{DRIVE_SPEED_M_PER_S, MEASURE_S, TILT_S};
-use crate::run::resume::RunDir;
 
 /// The variance given to a rotation nothing measured, rad².
 pub const UNKNOWN_VARIANCE: f64 = 1e6;
@@ -186,7 +186,7 @@ pub fn topic_name(robot: &str) -> String {
     s
 }
 
-/// Writes the run in `run_dir` (`run`, as [`crate::run::resume::load`]
+/// Writes the run in `run_dir` (`run`, as [`crate::products::load::load`]
 /// read it) into the new rosbag2 directory `dir`.
 pub fn write(run: &RunDir, run_dir: &Path, dir: &Path) -> Result<Exported> {
     let time = Timeline::of(run);
@@ -194,7 +194,7 @@ pub fn write(run: &RunDir, run_dir: &Path, dir: &Path) -> Result<Exported> {
     let note = format!("mission {}; crs {}", run.mission.name, crs.name);
     let mut bag = BagWriter::create(dir, &note)?;
     let t0 = time.ns(0.0);
-    let tilt_variance = crate::run::fuse::TILT_SIGMA_RAD.powi(2);
+    let tilt_variance = crate::products::fuse::TILT_SIGMA_RAD.powi(2);
 
     // The scan head's mount.
     let mount = run.mission.scan.body_from_head();
@@ -328,15 +328,20 @@ pub fn write(run: &RunDir, run_dir: &Path, dir: &Path) -> Result<Exported> {
 /// alone, or a journal without readings, does not).
 fn adjustment(run: &RunDir, run_dir: &Path) -> Option<crate::documents::adjustment::AdjustmentReport> {
     let path = run_dir.join("journal.jsonl");
-    let net = crate::run::adjust::network(&run.mission, &run.planned, &run.journal, &path).ok()?;
-    crate::run::adjust::adjust(&run.mission, &run.planned, &net, &cps::batch::AdjustOptions::default()).ok()
+    let net = crate::products::adjust::network(&run.mission, &run.planned, &run.journal, &path).ok()?;
+    crate::products::adjust::adjust(&run.mission, &run.planned, &net, &cps::batch::AdjustOptions::default()).ok()
 }
 
 /// A scan as a `PointCloud2` in the scanner's frame (`body_from_scanner`
 /// = `mount`, no rotation: the rotating head's slices are assembled in
 /// it): x, y, z (and intensity when its file has one) as float32, read
 /// from its file (in the body frame).
-fn cloud(run_dir: &Path, view: &crate::run::fuse::ScanView, mount: &Isometry3<f64>, stamp: u64) -> Result<PointCloud2> {
+fn cloud(
+    run_dir: &Path,
+    view: &crate::products::fuse::ScanView,
+    mount: &Isometry3<f64>,
+    stamp: u64,
+) -> Result<PointCloud2> {
     let scan = scanner::io::read(&run_dir.join(&view.file)).with_context(|| format!("reading {}", view.file))?;
     if scan.points != view.body {
         anyhow::bail!("{}: the file changed since the journal named it", view.file);

@@ -8,8 +8,8 @@ use std::time::Duration;
 use anyhow::{Context, Result, bail};
 
 use super::backend::{DeviceKind, Team};
-use super::journal::{Event, Journal, Recorded, Retry, Step, StepKey, Stop};
 use super::observer::Observer;
+use crate::journal::{Event, Journal, Recorded, Retry, Step, StepKey, Stop};
 
 /// The journal, the devices and the retry policy of a run.
 #[derive(Debug)]
@@ -63,7 +63,7 @@ impl Dispatch {
                     let sim = Some(self.team.checkpoint());
                     // Real instruments' steps carry their UTC time (the
                     // rosbag2's stamps); the simulator's keep the mission clock.
-                    let unix_time_s = self.team.truth().is_none().then(super::journal::unix_now);
+                    let unix_time_s = self.team.truth().is_none().then(crate::journal::unix_now);
                     self.journal.append(T::event(Recorded { key, data: data.clone(), sim, unix_time_s }))?;
                     return Ok(data);
                 }

@@ -143,7 +143,7 @@ fn ros2_bag_in_the_mission_writes_rosbag2_in_the_run() {
 #[test]
 fn match_reads_the_scans_and_their_poses_back_from_a_bag() {
     let (_tmp, run, bag, _) = exported_fixture();
-    let views = missions::run::resume::load(&run).expect("the run").views;
+    let views = missions::products::load::load(&run).expect("the run").views;
     let options = missions::ros2::read::BagOptions::default();
     for input in [bag.clone(), bag.join("bag.mcap")] {
         let scans = missions::ros2::read::read(&input, &options).expect("the bag reads");

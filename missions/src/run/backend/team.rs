@@ -17,7 +17,7 @@ use scanner::{
 };
 
 use super::faults::{DeviceKind, Faults};
-use crate::run::journal::{Checkpoint, DriveState, NoiseState, TruthRecord};
+use crate::journal::{Checkpoint, DriveState, NoiseState, TruthRecord};
 
 /// What a journal checkpoint keeps of a device to resume it bit for bit:
 /// a simulated device's noise position; a real instrument keeps nothing.

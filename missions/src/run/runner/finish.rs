@@ -10,11 +10,11 @@ use nalgebra::Point3;
 use super::{Run, RunSummary};
 use crate::documents::adjustment::{AdjustmentOutcome, AdjustmentReport};
 use crate::documents::run::{FusionReport, RunReport};
+use crate::journal::{Derived, EndKey, EndRecord, Event};
 use crate::mission::{FusionMode, Mission};
-use crate::run::fuse::{Fused, ScanView};
-use crate::run::journal::{Derived, EndKey, EndRecord, Event};
-use crate::run::outputs::Written;
-use crate::run::report::StationRecord;
+use crate::products::fuse::{Fused, ScanView};
+use crate::products::outputs::Written;
+use crate::products::report::StationRecord;
 
 impl Run<'_> {
     /// Fuses the scans by the mission's `[fusion] mode` (direct fusion has
@@ -24,7 +24,7 @@ impl Run<'_> {
         let trace = obs.traces_icp();
         let scanner = self.mission.scan.scanner_in_body();
         let fused = obs.fusion(mode != FusionMode::Direct, |progress| {
-            crate::run::fuse::fuse(views, mode, &self.mission.fusion, scanner, trace, progress)
+            crate::products::fuse::fuse(views, mode, &self.mission.fusion, scanner, trace, progress)
         })?;
         if mode == FusionMode::Direct {
             return Ok(fused);
@@ -58,9 +58,9 @@ impl Run<'_> {
             return Ok(None);
         }
         let path = self.dir.join("journal.jsonl");
-        let read = crate::run::journal::read_without_cross_covariances(&path)?;
-        let report = crate::run::adjust::network(self.mission, self.planned, &read, &path).and_then(|net| {
-            crate::run::adjust::adjust(self.mission, self.planned, &net, &cps::batch::AdjustOptions::default())
+        let read = crate::journal::read_without_cross_covariances(&path)?;
+        let report = crate::products::adjust::network(self.mission, self.planned, &read, &path).and_then(|net| {
+            crate::products::adjust::adjust(self.mission, self.planned, &net, &cps::batch::AdjustOptions::default())
         });
         Ok(Some(match report {
             Ok(report) => {
@@ -83,7 +83,7 @@ impl Run<'_> {
     pub(super) fn finish(mut self, started: Instant) -> Result<RunSummary> {
         self.obs.dance_done();
         let fused = self.fuse()?;
-        crate::run::fuse::write_frames(&self.dir.join("scans"), &self.views, &fused)?;
+        crate::products::fuse::write_frames(&self.dir.join("scans"), &self.views, &fused)?;
         self.obs.fusion_done();
         let fusion = FusionReport::new(&self.views, &fused);
         let cloud = self.cloud.take().ok_or_else(|| anyhow::anyhow!("the cloud's files are already finished"))?;
@@ -109,7 +109,7 @@ impl Run<'_> {
         report.adjustment = adjustment;
         crate::documents::write_file(&self.dir.join("report.json"), &report)?;
         let adjusted = report.adjustment.as_ref().and_then(AdjustmentOutcome::report);
-        crate::run::report::write_stations_csv(&self.dir.join("stations.csv"), &self.stations, adjusted)?;
+        crate::products::report::write_stations_csv(&self.dir.join("stations.csv"), &self.stations, adjusted)?;
         let viewer_warning = recording_end.map_err(|e| {
             anyhow::anyhow!(
                 "{e:#}; report.json and stations.csv are written, `run --resume` writes the recording again"
@@ -159,7 +159,7 @@ fn mission_accepted(
             return None;
         }
         let (view, f) = views.iter().zip(&fused.scans).find(|(v, _)| v.station == index)?;
-        view.truth.map(|truth| crate::run::fuse::error_xy(&f.world_from_body, &truth))
+        view.truth.map(|truth| crate::products::fuse::error_xy(&f.world_from_body, &truth))
     };
     // Without a truth (serial ports) there is no station error to check.
     let max_error = stations.iter().filter_map(|s| refined(s.index).or(s.error_xy_m)).fold(0.0, f64::max);

@@ -5,15 +5,15 @@
 //!
 //! Outputs in the run directory:
 //! - `mission.toml` — the mission as run (a resume must use the same);
-//! - `journal.jsonl` — see [`crate::run::journal`]: every command with its
+//! - `journal.jsonl` — see [`crate::journal`]: every command with its
 //!   reading and the team's state after it, flushed as it happens;
 //! - `scans/scanNNN.3d` + `.pose` — each scan in the body frame with its
 //!   CPS `world_from_body` (3DTK layout), written before the journal
 //!   references it;
 //! - `report.json`, `stations.csv` — per-station estimate, covariance,
-//!   prediction, truth and error ([`crate::run::report`]);
+//!   prediction, truth and error ([`crate::products::report`]);
 //! - `cloud.<format>` (and with `[pipe]` its deviation map) — the output
-//!   stage ([`crate::run::outputs`]);
+//!   stage ([`crate::products::outputs`]);
 //! - `mission.rrd` — the Rerun recording ([`crate::view::recording`]).
 //!
 //! `--resume` replays the journal: each recorded reading is used as it was
@@ -44,14 +44,14 @@ mod sightings;
 use super::backend::{DeviceKind, Fault};
 use super::dispatch::Dispatch;
 use super::observer::Observer;
-use super::outputs::CloudFiles;
 use crate::documents::records::rows;
 use crate::documents::run::{Remeasured, RunReport};
+use crate::journal::{Derived, DriveKey, Driven, Event, FixKey, FixRecord, MeasureKey, Phase, StepKey};
 use crate::mission::Mission;
 use crate::planning::Planned;
-use crate::run::fuse::ScanView;
-use crate::run::journal::{Derived, DriveKey, Driven, Event, FixKey, FixRecord, MeasureKey, Phase, StepKey};
-use crate::run::report::StationRecord;
+use crate::products::fuse::ScanView;
+use crate::products::outputs::CloudFiles;
+use crate::products::report::StationRecord;
 use crate::view::recording::{Layout, Recorder, Viewer};
 
 /// How to run.
@@ -129,7 +129,11 @@ struct Run<'m> {
 pub fn run(mission: &Mission, planned: &Planned, dir: &Path, options: &RunOptions) -> Result<RunSummary> {
     let started = Instant::now();
     crate::planning::constraints::refuse_violations(mission, planned)?;
-    super::outputs::check_targets(mission, dir, &["report.json", "stations.csv", "adjustment.txt", "mission.rrd"])?;
+    crate::products::outputs::check_targets(
+        mission,
+        dir,
+        &["report.json", "stations.csv", "adjustment.txt", "mission.rrd"],
+    )?;
     let journal = super::resume::open(mission, planned, dir, options.resume, options.abort_after_events)?;
     std::fs::create_dir_all(dir.join("scans")).with_context(|| format!("creating {}", dir.join("scans").display()))?;
     // The cloud's files, filled as the scans come (direct fusion) or once

@@ -8,10 +8,10 @@ use scanner::Tilt;
 use scanner::io::{Format, PointCloud};
 
 use super::Run;
+use crate::journal::{ChainRecord, Scanned, StationKey, StepKey, Tilted};
 use crate::mission::FusionMode;
+use crate::products::fuse::{Correlation, ScanView};
 use crate::run::backend::DeviceKind;
-use crate::run::fuse::{Correlation, ScanView};
-use crate::run::journal::{ChainRecord, Scanned, StationKey, StepKey, Tilted};
 
 /// A scan as taken at a station: the tilt, the CPS pose they give the
 /// scanner's body, the journal's record and the points (body frame).
@@ -71,8 +71,8 @@ impl Run<'_> {
                 })?;
                 let points = cloud.len();
                 taken = Some(cloud);
-                let crc32 = Some(crate::run::journal::crc32_hex(crc));
-                Ok(Scanned { file, points, crc32, unix_time_s: Some(crate::run::journal::unix_now()) })
+                let crc32 = Some(crate::journal::crc32_hex(crc));
+                Ok(Scanned { file, points, crc32, unix_time_s: Some(crate::journal::unix_now()) })
             })?;
         let cloud = match taken {
             Some(cloud) => cloud,
@@ -80,7 +80,7 @@ impl Run<'_> {
                 // Replayed: the file must be the one the journal names, and
                 // its pose file (derived from the journal) is rewritten if
                 // it went missing.
-                crate::run::journal::check_scan_file(&self.dir, &scanned)?;
+                crate::journal::check_scan_file(&self.dir, &scanned)?;
                 let pose = self.dir.join(format!("{name}.pose"));
                 if !pose.exists() {
                     scanner::io::write_3dtk_pose(&pose, &world_from_body)?;

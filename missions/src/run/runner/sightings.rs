@@ -12,8 +12,8 @@ use scanner::{Prism, Target};
 use super::Run;
 use crate::documents::records::rows;
 use crate::documents::run::Remeasured;
+use crate::journal::{ChainRecord, Derived, Event, FixKey, FixRecord, MeasureKey, Measured, Phase, StepKey, Stop};
 use crate::run::backend::DeviceKind;
-use crate::run::journal::{ChainRecord, Derived, Event, FixKey, FixRecord, MeasureKey, Measured, Phase, StepKey, Stop};
 use crate::run::observer::Shown;
 
 /// How many times in one session a reading that fails a fix's field test

@@ -12,7 +12,7 @@
 //!   together ([`fusion::multiview::register_with_priors`]).
 //!
 //! A run's scans ([`ScanView`]) come from the runner as it goes, or from a
-//! run directory's journal ([`crate::run::resume::load`]).
+//! run directory's journal ([`crate::products::load::load`]).
 
 use std::time::Instant;
 
@@ -71,7 +71,7 @@ impl ScanView {
     /// pose and tilt, when known.
     pub fn new(
         station: usize,
-        scanned: &crate::run::journal::Scanned,
+        scanned: &crate::journal::Scanned,
         body: Vec<Point3<f32>>,
         estimate: (ParentPose, Matrix4<f64>, Correlation),
         tilt: Tilt,

@@ -6,9 +6,9 @@ use cps::ParentPose;
 use cps::screen::{GROSS_ANGLE_RAD, GROSS_DISTANCE_M};
 use planner::network::{DanceNetwork, Taken};
 
+use crate::journal::{self, Event, MeasureKey, Phase};
 use crate::mission::Mission;
 use crate::planning::Planned;
-use crate::run::journal::{self, Event, MeasureKey, Phase};
 
 /// The journal's readings as the dance's network: every `measure` event in
 /// the dance's reading order (checked), the stations reached (their fix's
@@ -152,7 +152,7 @@ fn screen(net: &DanceNetwork, lines: &[(usize, MeasureKey)], path: &std::path::P
 
 /// A journal reading's key in words: "the fix reading of child 1 in cycle 2".
 fn key_words(k: &MeasureKey) -> String {
-    use crate::run::journal::Phase;
+    use crate::journal::Phase;
     let phase = match k.phase {
         Phase::Placement => "placement",
         Phase::Fix => "fix",

@@ -12,6 +12,7 @@
 //! cross-covariance with every earlier scan station (O(n), so O(n²) bytes
 //! per run); a journal goes on in the version it was started with.
 
+pub mod directory;
 mod read;
 mod records;
 
@@ -25,7 +26,7 @@ use anyhow::{Context, Result};
 pub use read::*;
 pub use records::*;
 
-use super::directory::DirLock;
+use directory::DirLock;
 
 /// An open journal: appends live events, and on resume first hands back the
 /// recorded ones.
