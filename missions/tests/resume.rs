@@ -3,6 +3,8 @@
 //! that no longer answers continues from its journal and ends with the same
 //! `report.json` as an uninterrupted run, wall-clock fields aside.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
@@ -16,15 +18,13 @@ fn bin() -> Command {
 /// The hall example's first leg (8 stations) with a coarser scan (fast) or
 /// a finer one (slow enough to kill mid-run), and no pause between retries.
 fn mission(dir: &Path, slices: usize, resolution_deg: f64) -> PathBuf {
-    let text = std::fs::read_to_string(format!("{}/examples/hall.toml", env!("CARGO_MANIFEST_DIR"))).expect("hall");
-    let route = "route_m = [[1.5, 4.2, 1.5], [37.5, 4.2, 1.5], [37.5, 7.8, 1.5], [1.5, 7.8, 1.5]]";
-    assert!(text.contains(route), "hall.toml's route changed");
-    let text = text
-        .replace(route, "route_m = [[1.5, 4.2, 1.5], [26.7, 4.2, 1.5]]")
-        .replace("slices = 180", &format!("slices = {slices}"))
-        .replace("resolution_deg = 1", &format!("resolution_deg = {resolution_deg}"))
-        .replace("seed = 1", "seed = 1\nretry_delay_s = 0")
-        .replace("control_at = [0, 10, 21]", "control_at = \"start-end\"");
+    let text = common::hall_edited(&[
+        (common::HALL_ROUTE, "route_m = [[1.5, 4.2, 1.5], [26.7, 4.2, 1.5]]"),
+        ("slices = 180", &format!("slices = {slices}")),
+        ("resolution_deg = 1", &format!("resolution_deg = {resolution_deg}")),
+        ("seed = 1", "seed = 1\nretry_delay_s = 0"),
+        ("control_at = [0, 10, 21]", "control_at = \"start-end\""),
+    ]);
     let path = dir.join(format!("hall-{slices}.toml"));
     std::fs::write(&path, text).expect("write mission");
     path

@@ -4,7 +4,8 @@
 //!   [`Station`]s every stride ([`stations`]).
 //! - [`dance`]: a formation turns the stations into a leapfrog [`Dance`]
 //!   ([`leapfrog`], [`schedule`] for the other strategies, [`solo`] for a
-//!   robot alone), with its steps and their execution ([`run_dance`]).
+//!   robot alone), spelled out as the runner's [`Step`]s, and executed on
+//!   given readings ([`run_dance`]).
 //! - [`control`]: control points and the stations asked to sight them;
 //!   [`sighting`]: which station sees which, within the instrument's usable
 //!   [`range`] and in line of sight.
