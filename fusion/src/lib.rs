@@ -29,6 +29,7 @@ pub mod icp;
 pub mod links;
 pub mod multiview;
 pub mod pipe;
+pub mod priors;
 pub mod scale;
 pub mod scanset;
 pub mod se3;

@@ -42,7 +42,8 @@ use crate::icp::correspondences::Partners;
 use crate::icp::degeneracy::{Observability, centroid_and_lever_arm};
 use crate::icp::solve::align_from;
 use crate::icp::{IcpConfig, IcpResult};
-use crate::multiview::{GATE_CHI2, MultiviewConfig, Prepared, check, in_scan, prepare};
+use crate::multiview::{MultiviewConfig, Prepared, check, in_scan, prepare};
+use crate::priors::GATE_CHI2;
 use crate::se3::{Prior, adjoint, left_difference};
 
 /// The link graph's settings (documented defaults).

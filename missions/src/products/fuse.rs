@@ -9,7 +9,7 @@
 //!   covariance and the cross-covariances the leapfrog chain creates between
 //!   stations, and the tilt sensor's σ: [`fusion::graph::JointPrior::cps`])
 //!   and ICP between overlapping scans as relative measurements, adjusted
-//!   together ([`fusion::multiview::register_with_priors`]).
+//!   together ([`fusion::priors::register_with_priors`]).
 //!
 //! A run's scans ([`ScanView`]) come from the runner as it goes, or from a
 //! run directory's journal ([`crate::products::load::load`]).
@@ -303,7 +303,7 @@ pub fn fuse(
         }
         FusionMode::CpsIcp => {
             let prior = joint_prior(views, &base)?;
-            let r = fusion::multiview::register_with_priors(
+            let r = fusion::priors::register_with_priors(
                 &scans,
                 &prior,
                 &traced(multiview_config(plan, Strategy::Pairwise, scanner_in_body)),

@@ -24,6 +24,7 @@
 mod crs;
 mod e57;
 mod las;
+mod las_read;
 mod pcd;
 mod ply;
 mod stream;
@@ -286,7 +287,7 @@ pub fn read(path: &Path) -> Result<PointCloud> {
         Format::Ply(_) => ply::read(path),
         Format::Xyz => text::read_xyz(path),
         Format::Pcd(_) => pcd::read(path),
-        Format::Las | Format::Laz | Format::Copc => las::read(path),
+        Format::Las | Format::Laz | Format::Copc => las_read::read(path),
         Format::E57 => e57::read(path),
     }
 }
