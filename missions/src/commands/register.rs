@@ -148,8 +148,7 @@ fn load(path: &Path, min_m: f64, max_m: f64) -> anyhow::Result<Vec<Point3<f32>>>
 
 fn report(r: &IcpResult, seconds: f64) -> RegisterReport {
     let m = r.target_from_source.to_homogeneous();
-    let covariance =
-        r.covariance().map_or_else(Vec::new, |c| (0..6).map(|i| std::array::from_fn(|j| c[(i, j)])).collect());
+    let covariance = r.covariance().map_or_else(Vec::new, |c| crate::documents::records::rows(&c).to_vec());
     RegisterReport {
         target_from_source: crate::documents::records::rows(&m),
         converged: r.converged,
