@@ -203,10 +203,10 @@ impl Team {
             .drives
             .iter()
             .map(|drive| {
-                let (believed, truth) = drive.poses().unwrap_or((self.parent_believed, self.parent_believed));
+                let poses = drive.poses();
                 DriveState {
-                    believed: pose(believed),
-                    truth: Some(pose(truth)),
+                    believed: pose(poses.map_or(self.parent_believed, |(believed, _)| believed)),
+                    truth: poses.map(|(_, truth)| pose(truth)),
                     noise: drive.noise().map(|n| n.to_string()),
                 }
             })
