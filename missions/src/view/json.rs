@@ -34,9 +34,7 @@ fn adjusted_json(mission: &Mission, planned: &Planned) -> Option<AdjustedJson> {
                 covariance: rows(&s.covariance),
                 sigma_xy_m: s.sigma_xy_m(),
                 filter_sigma_xy_m: planned.filter_covariance(s.index).map(|c| cps::sigma_xy2(&c).sqrt()),
-                ellipse_95_m: ErrorEllipse::from_covariance(&s.covariance.fixed_view::<2, 2>(0, 0).into_owned())
-                    .scaled(CHI2_2D_95_SQRT)
-                    .into(),
+                ellipse_95_m: Ellipse::of_95(&s.covariance.fixed_view::<2, 2>(0, 0).into_owned()),
                 control: planned.control_sighted_at(s.index).into_iter().map(String::from).collect(),
             }
         })

@@ -161,8 +161,8 @@ impl Team {
     /// Measures a prism with the total station; a planted blunder
     /// (`--sim-fault total-station:blunder…`) strikes its measurement.
     pub fn measure(&mut self, target: &Target) -> scanner::Result<TsMeasurement> {
-        let name = self.devices.total_station.as_ref().map_or("total station", |t| t.name()).to_string();
-        self.faults.command(DeviceKind::TotalStation, &name)?;
+        let name = self.devices.total_station.as_ref().map_or("total station", |t| t.name());
+        self.faults.command(DeviceKind::TotalStation, name)?;
         let Some(ts) = &mut self.devices.total_station else {
             return Err(ScannerError::Device {
                 device: "total station".into(),
