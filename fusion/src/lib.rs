@@ -23,6 +23,7 @@ mod agreement;
 mod candidates;
 pub mod direct;
 pub mod error;
+pub mod free_space;
 pub mod global;
 pub mod graph;
 pub mod icp;

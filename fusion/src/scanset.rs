@@ -55,6 +55,11 @@ pub struct SetConfig {
     /// step σ of the start and the link gate. The voxels and distances are
     /// the stages'.
     pub link: LinkConfig,
+    /// Each scan's scanner position in its own frame, where the input
+    /// states it (`None`, or a missing entry: not known); the verification
+    /// tests the free space those scanners saw ([`crate::free_space`]).
+    /// Default: none known.
+    pub viewpoints: Vec<Option<Point3<f64>>>,
 }
 
 impl Default for SetConfig {
@@ -80,6 +85,7 @@ impl Default for SetConfig {
                     ..link
                 }
             },
+            viewpoints: Vec::new(),
         }
     }
 }
@@ -239,7 +245,7 @@ fn verify_set<S: AsRef<[Point3<f32>]> + Sync>(
     config: &SetConfig,
 ) -> Result<Vec<PairCheck>> {
     let Some((finest, link)) = finest_link(config) else { return Ok(Vec::new()) };
-    crate::verify::check_pairs(scans, poses, &link, finest.voxel_m)
+    crate::verify::check_pairs(scans, poses, &config.viewpoints, &link, finest.voxel_m)
 }
 
 /// The registration from the starts without the schedule's first stage,

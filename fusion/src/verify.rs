@@ -33,6 +33,7 @@ use nalgebra::{Isometry3, Point3};
 use rayon::prelude::*;
 
 use crate::error::Result;
+use crate::free_space::{FreeSpace, MAX_VIOLATION_SHARE, View};
 use crate::icp::degeneracy::{Observability, centroid_and_lever_arm};
 use crate::links::{LinkConfig, pair_links};
 use crate::multiview::{check, prepare};
@@ -86,8 +87,14 @@ pub struct PairCheck {
     /// Whether the pair agrees with the final poses: the match moved the
     /// points by at most the tolerance, or along what it sees well by at
     /// most [`MAX_RELATIVE_MOTION`] of their radius and turned them by at
-    /// most [`MAX_TURN_RAD`].
+    /// most [`MAX_TURN_RAD`] — and no scanner's free space
+    /// ([`crate::free_space`]) holds more than
+    /// [`MAX_VIOLATION_SHARE`](crate::free_space::MAX_VIOLATION_SHARE) of
+    /// the other scan's points.
     pub consistent: bool,
+    /// The free-space test from the pair's scanner whose view the other
+    /// scan violates most; `None` when neither scanner's position is known.
+    pub free_space: Option<FreeSpace>,
 }
 
 /// Matches every pair of `scans` that overlaps at `poses` (their final
@@ -95,10 +102,13 @@ pub struct PairCheck {
 /// stage's), and judges each: consistent when its match moved the points
 /// by at most `tolerance_m` (the finest voxel), or along what it sees well
 /// ([`SEEN_RATIO`]) by at most [`MAX_RELATIVE_MOTION`] of their radius and
-/// turned them by at most [`MAX_TURN_RAD`].
+/// turned them by at most [`MAX_TURN_RAD`]; and, where `viewpoints` gives
+/// a scanner's position in its scan's frame, by the free space it saw
+/// (margin: the finest correspondence distance).
 pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
     scans: &[S],
     poses: &[Isometry3<f64>],
+    viewpoints: &[Option<Point3<f64>>],
     config: &LinkConfig,
     tolerance_m: f64,
 ) -> Result<Vec<PairCheck>> {
@@ -108,10 +118,29 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
     let links = pair_links(&prepared, poses, config, &mut |_, _| ());
     let shape: Vec<(Point3<f64>, f64)> = prepared.iter().map(|p| centroid_and_lever_arm(&p.source)).collect();
     let floors: Vec<f64> = scans.par_iter().map(|s| noise_floor(s.as_ref(), config)).collect();
+    let views: Vec<Option<View>> = prepared
+        .par_iter()
+        .enumerate()
+        .map(|(i, p)| viewpoints.get(i).copied().flatten().and_then(|v| View::new(&p.local, v).ok()))
+        .collect();
+    let margin_m = config.multiview.icp.max_correspondence_m;
+    // The pair's worse side: the other scan against each known view.
+    let free_space = |target: usize, source: usize| -> Option<FreeSpace> {
+        let target_from_source = poses[target].inverse() * poses[source];
+        let seen = |from: usize, other: usize, from_other: &Isometry3<f64>| {
+            views[from].as_ref().map(|v| v.test(&prepared[other].local, from_other, margin_m, from))
+        };
+        [seen(target, source, &target_from_source), seen(source, target, &target_from_source.inverse())]
+            .into_iter()
+            .flatten()
+            .max_by(|a, b| a.share().total_cmp(&b.share()))
+    };
     Ok(links
         .into_iter()
         .map(|l| {
             let (c, radius) = shape[l.source];
+            let free_space = free_space(l.target, l.source);
+            let free = free_space.is_none_or(|f| f.share() <= MAX_VIOLATION_SHARE);
             let at = poses[l.target].inverse() * poses[l.source];
             let motion = l.result.as_ref().map(|r| {
                 // δ: what the match did to the final relative pose, in the
@@ -139,9 +168,11 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
                 noise_m: (0.5 * (floors[l.source].powi(2) + floors[l.target].powi(2))).sqrt(),
                 // (A match still creeping at its cap but a few millimetres
                 // from the poses agrees with them: the motion judges.)
-                consistent: motion.is_some_and(|(moved, angle, _, _, seen)| {
-                    moved <= tolerance_m || (seen <= MAX_RELATIVE_MOTION * radius && angle <= MAX_TURN_RAD)
-                }),
+                consistent: free
+                    && motion.is_some_and(|(moved, angle, _, _, seen)| {
+                        moved <= tolerance_m || (seen <= MAX_RELATIVE_MOTION * radius && angle <= MAX_TURN_RAD)
+                    }),
+                free_space,
             }
         })
         .collect())
@@ -175,14 +206,39 @@ pub fn noise_floor(points: &[Point3<f32>], config: &LinkConfig) -> f64 {
     floor().unwrap_or(0.0)
 }
 
-/// The scans of a set of `n` that an inconsistent pair names: each scan of
-/// such a pair but scan 0, which holds the frame (the pose in doubt is its
-/// partner's). A pair whose match failed names none.
+/// The scans of a set of `n` that the inconsistent pairs name: a pair is
+/// inconsistent when its match moved from the final poses, or a scanner's
+/// free space holds the other scan (a pair whose match failed and whose
+/// free space is not violated names none). Scan 0 holds the frame and is
+/// never named. The scan in the most inconsistent pairs is named first and
+/// its pairs set aside, while some scan is in two or more; the scans of
+/// each pair left are all named (a pair alone cannot tell which of its two
+/// is wrong). So a hall scan placed among two room scans names the hall
+/// scan, not the room scan it disagrees with too.
 pub fn untrusted(n: usize, checks: &[PairCheck]) -> Vec<usize> {
+    let mut open: Vec<[usize; 2]> = checks
+        .iter()
+        .filter(|c| {
+            let violated = c.free_space.is_some_and(|f| f.share() > MAX_VIOLATION_SHARE);
+            !c.consistent && (c.moved_m.is_some() || violated)
+        })
+        .map(|c| [c.source, c.target])
+        .collect();
     let mut named = vec![false; n];
-    for c in checks.iter().filter(|c| !c.consistent && c.moved_m.is_some()) {
-        named[c.source] = true;
-        named[c.target] = true;
+    while !open.is_empty() {
+        let mut count = vec![0usize; n];
+        for &i in open.iter().flatten() {
+            count[i] += 1;
+        }
+        let Some(worst) = (1..n).max_by_key(|&i| count[i]) else { break };
+        if count[worst] < 2 {
+            for &i in open.iter().flatten() {
+                named[i] = true;
+            }
+            break;
+        }
+        named[worst] = true;
+        open.retain(|pair| !pair.contains(&worst));
     }
     (1..n).filter(|&i| named[i]).collect()
 }

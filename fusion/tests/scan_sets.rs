@@ -174,6 +174,7 @@ fn overlapping_wedges_of_a_real_room_scan_come_back_together() {
             },
             ..SetConfig::default().link
         },
+        viewpoints: Vec::new(),
     };
     let r = register_set(&wedges, &starts, &plain, &mut |_, _, _, _| ()).expect("registers");
     let worst = (1..3).map(|k| error(&r.world_from_scan[k], &truth[k]).0).fold(0.0, f64::max);

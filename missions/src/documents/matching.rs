@@ -82,8 +82,29 @@ pub struct CheckReport {
     pub noise_m: f64,
     /// The match moved the points by at most the finest stage's voxel, or
     /// along what it sees well by at most 5 % of their RMS radius and
-    /// turned them by at most 5°.
+    /// turned them by at most 5°; and no scanner's free space holds more
+    /// than 12 % of the other scan's points (`free_space`).
     pub consistent: bool,
+    /// The free-space test from the pair's scanner whose view the other
+    /// scan violates most; null when neither scanner's position is known
+    /// (PLY, XYZ, LAS inputs).
+    pub free_space: Option<FreeSpaceReport>,
+}
+
+/// One scan's points against the free space another scan's scanner saw.
+#[derive(Debug, Clone, Serialize, schemars::JsonSchema)]
+pub struct FreeSpaceReport {
+    /// The scan whose scanner's view judges (index into `scans`).
+    pub seen_from: usize,
+    /// The other scan's points in that scanner's free space: in front of
+    /// every surface it saw their way by more than the finest
+    /// correspondence distance.
+    pub violations: usize,
+    /// The other scan's points on a surface it saw their way.
+    pub agreements: usize,
+    /// violations / (violations + agreements); above 0.12 the pair is
+    /// inconsistent.
+    pub share: f64,
 }
 
 /// One stage of the schedule as it ran.

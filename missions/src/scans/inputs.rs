@@ -31,6 +31,11 @@ pub struct InputScan {
     /// Its points' times, when the input has them, and what they count
     /// from.
     pub time: Option<(Vec<f64>, scanner::io::TimeBase)>,
+    /// Where its scanner stood in its frame, when the input says: a 3DTK
+    /// scan, an E57 `data3D` and a ROS 2 cloud are in their scanner's
+    /// frame (the origin), a PCD states its VIEWPOINT; PLY, XYZ and LAS do
+    /// not say. The verification's free-space test needs it.
+    pub viewpoint: Option<Point3<f64>>,
 }
 
 impl InputScan {
@@ -46,6 +51,7 @@ impl InputScan {
             gps_time_s: None,
             color: None,
             time: None,
+            viewpoint: None,
         }
     }
 }
@@ -79,6 +85,7 @@ pub fn read(
                 gps_time_s: Some(c.gps_time_s),
                 color: None,
                 time: c.time.map(|t| (t, scanner::io::TimeBase::Gps)),
+                viewpoint: Some(Point3::origin()),
             }));
         } else if input.is_dir() {
             scans.extend(threedtk_directory(input)?);
@@ -96,9 +103,15 @@ pub fn read(
                 gps_time_s: s.gps_time_s,
                 color: s.color,
                 time: s.time.map(|t| (t, s.time_base)),
+                viewpoint: s.posed.then(Point3::origin),
             }));
         } else {
             let cloud = scanner::io::read(input)?;
+            let viewpoint = match scanner::io::Format::from_path(input).ok() {
+                Some(scanner::io::Format::ThreeDtk) => Some(Point3::origin()),
+                Some(scanner::io::Format::Pcd(_)) => Some(scanner::io::pcd_viewpoint(input)?),
+                _ => None,
+            };
             if cloud.origin != nalgebra::Vector3::zeros() {
                 bail!("{}: a georeferenced cloud: expected a scan in its own frame", input.display());
             }
@@ -115,6 +128,7 @@ pub fn read(
                 gps_time_s,
                 color: cloud.color,
                 time: cloud.time.map(|t| (t, cloud.time_base)),
+                viewpoint,
             });
         }
     }
@@ -199,6 +213,7 @@ fn threedtk_directory(dir: &Path) -> Result<Vec<InputScan>> {
                 gps_time_s: None,
                 color: None,
                 time: None,
+                viewpoint: Some(Point3::origin()),
             })
         })
         .collect()

@@ -167,6 +167,10 @@ pub struct E57Scan {
     pub name: String,
     /// Its pose (identity when the file gives none).
     pub world_from_scan: Isometry3<f64>,
+    /// Whether the file gives its pose: a posed `data3D` is a scan in its
+    /// scanner's frame (a scanner's own; the cloud of points in no scan
+    /// this crate writes has none).
+    pub posed: bool,
     /// Its valid Cartesian points in its own frame.
     pub points: Vec<Point3<f32>>,
     /// Their intensities as recorded (not normalised), when every point
@@ -222,6 +226,7 @@ pub fn read_e57_scans(path: &Path) -> Result<Vec<E57Scan>> {
         scans.push(E57Scan {
             name,
             world_from_scan,
+            posed: pc.transform.is_some(),
             points: read.points,
             intensity: read.intensity,
             color: read.color,

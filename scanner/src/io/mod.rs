@@ -40,7 +40,7 @@ use nalgebra::{Isometry3, Point3, Vector3};
 
 pub use crs::{Crs, is_bidi_control};
 pub use e57::{E57Scan, read_e57_crs, read_e57_scans};
-pub use pcd::PcdData;
+pub use pcd::{PcdData, viewpoint as pcd_viewpoint};
 pub use ply::PlyEncoding;
 pub use stream::CloudWriter;
 pub use text::{

@@ -96,6 +96,8 @@ struct Header {
     data: PcdData,
     /// Byte offset of the data.
     offset: usize,
+    /// VIEWPOINT's translation: where the points were seen from.
+    viewpoint: [f64; 3],
 }
 
 fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header> {
@@ -105,6 +107,7 @@ fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header> {
     let (mut names, mut sizes, mut kinds, mut counts) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut points = None;
     let (mut width, mut height) = (None, None);
+    let mut viewpoint = [0.0; 3];
     loop {
         let end =
             bytes[pos..].iter().position(|&b| b == b'\n').map(|e| pos + e).ok_or_else(|| {
@@ -127,7 +130,17 @@ fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header> {
                 .collect()
         };
         match key.as_str() {
-            "VERSION" | "VIEWPOINT" => {}
+            "VERSION" => {}
+            "VIEWPOINT" => {
+                let v: Vec<f64> = rest.iter().filter_map(|t| t.parse().ok()).filter(|v: &f64| v.is_finite()).collect();
+                if v.len() != 7 {
+                    return Err(err(
+                        line_no,
+                        format!("VIEWPOINT '{}': expected 7 finite numbers (tx ty tz qw qx qy qz)", rest.join(" ")),
+                    ));
+                }
+                viewpoint = [v[0], v[1], v[2]];
+            }
             "FIELDS" => names = rest.iter().map(|s| s.to_string()).collect(),
             "SIZE" => sizes = usize_list("SIZE")?,
             "TYPE" => {
@@ -191,12 +204,27 @@ fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header> {
                     })?,
                     _ => return Err(err(line_no, "no POINTS (or WIDTH and HEIGHT) before DATA".into())),
                 };
-                return Ok(Header { fields, points, data, offset: pos });
+                return Ok(Header { fields, points, data, offset: pos, viewpoint });
             }
             other => return Err(err(line_no, format!("unknown header key '{other}'"))),
         }
     }
 }
+
+/// Where the points of the PCD at `path` were seen from: its header's
+/// VIEWPOINT translation (PCL's "acquisition viewpoint"; the origin when
+/// the header has none).
+pub fn viewpoint(path: &Path) -> Result<Point3<f64>> {
+    use std::io::Read;
+    let mut head = Vec::new();
+    std::fs::File::open(path)
+        .and_then(|f| f.take(HEADER_LIMIT).read_to_end(&mut head))
+        .map_err(|e| ScannerError::file(path, Location::File, e.to_string()))?;
+    Ok(Point3::from(parse_header(path, &head)?.viewpoint))
+}
+
+/// The longest header [`viewpoint`] reads.
+const HEADER_LIMIT: u64 = 1 << 16;
 
 pub(super) fn read(path: &Path) -> Result<PointCloud> {
     let bytes = read_bytes(path)?;
@@ -613,5 +641,25 @@ mod tests {
         assert_eq!(u1.value(&[200]), Some(200.0));
         let f8 = Field { name: "f".into(), size: 8, kind: b'F', count: 1 };
         assert_eq!(f8.value(&1.25f64.to_le_bytes()), Some(1.25));
+    }
+
+    #[test]
+    fn the_viewpoint_is_read_from_the_header_and_a_malformed_one_is_named() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let file = |name: &str, viewpoint: &str| {
+            let path = dir.path().join(name);
+            let text = format!(
+                "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1\nHEIGHT 1\n{viewpoint}POINTS 1\nDATA ascii\n1 2 3\n"
+            );
+            std::fs::write(&path, text).expect("write");
+            path
+        };
+        let at = viewpoint(&file("at.pcd", "VIEWPOINT 1.5 -2 0.25 1 0 0 0\n")).expect("viewpoint");
+        assert_eq!(at, Point3::new(1.5, -2.0, 0.25));
+        assert_eq!(viewpoint(&file("none.pcd", "")).expect("no VIEWPOINT"), Point3::origin());
+        let bad = file("bad.pcd", "VIEWPOINT 1 2 nan 1 0 0 0\n");
+        let e = viewpoint(&bad).expect_err("a NaN viewpoint").to_string();
+        assert!(e.contains("bad.pcd") && e.contains("VIEWPOINT '1 2 nan 1 0 0 0'") && e.contains("line 8"), "{e}");
+        assert!(super::read(&bad).is_err(), "the whole file's read refuses it too");
     }
 }

@@ -92,6 +92,12 @@ pub(super) fn report(
                 rmse_m: c.rmse_m,
                 noise_m: c.noise_m,
                 consistent: c.consistent,
+                free_space: c.free_space.map(|f| FreeSpaceReport {
+                    seen_from: f.seen_from,
+                    violations: f.violations,
+                    agreements: f.agreements,
+                    share: f.share(),
+                }),
             })
             .collect(),
         check_seconds: r.check_seconds,

@@ -2,7 +2,11 @@
 
 use std::io::Write;
 
-use crate::documents::matching::{MatchReport, StageReport};
+use crate::documents::matching::{CheckReport, MatchReport, StageReport};
+
+/// Above this share of free-space violations a pair disagrees
+/// ([`fusion::free_space::MAX_VIOLATION_SHARE`]).
+const FREE_SPACE_SHARE: f64 = fusion::free_space::MAX_VIOLATION_SHARE;
 use crate::scans::inputs::InputScan;
 
 pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &MatchReport) -> std::io::Result<()> {
@@ -81,22 +85,44 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
     }
     let tolerance = report.stages.last().map_or(0.0, |s| s.voxel_m);
     for &i in &report.untrusted {
-        let against: Vec<String> = report
-            .checks
-            .iter()
-            .filter(|c| !c.consistent && (c.source == i || c.target == i))
+        let disagreeing = || report.checks.iter().filter(|c| !c.consistent && (c.source == i || c.target == i));
+        let other = |c: &CheckReport| if c.source == i { c.target } else { c.source };
+        let moved: Vec<String> = disagreeing()
+            .filter(|c| c.free_space.as_ref().is_none_or(|f| f.share <= FREE_SPACE_SHARE))
             .filter_map(|c| {
-                let other = if c.source == i { c.target } else { c.source };
-                Some(format!("{} ({:.3} m, {:.2}°)", scans[other].name, c.moved_m?, c.angle_deg.unwrap_or_default()))
+                Some(format!("{} ({:.3} m, {:.2}°)", scans[other(c)].name, c.moved_m?, c.angle_deg.unwrap_or_default()))
             })
             .collect();
-        writeln!(
-            out,
-            "  not trusted: {}: matched again from the final poses it moves beyond {tolerance:.3} m and 5 % of its \
-             radius against {}: the poses are not where the data agree (a symmetric fit from rough starts?)",
-            scans[i].name,
-            against.join(", ")
-        )?;
+        if !moved.is_empty() {
+            writeln!(
+                out,
+                "  not trusted: {}: matched again from the final poses it moves beyond {tolerance:.3} m and 5 % of its \
+                 radius against {}: the poses are not where the data agree (a symmetric fit from rough starts?)",
+                scans[i].name,
+                moved.join(", ")
+            )?;
+        }
+        let seen: Vec<String> = disagreeing()
+            .filter_map(|c| {
+                let f = c.free_space.as_ref().filter(|f| f.share > FREE_SPACE_SHARE)?;
+                let (from, of) = (f.seen_from, if f.seen_from == c.source { c.target } else { c.source });
+                Some(format!(
+                    "{:.0} % of {}'s points where {}'s scanner saw through",
+                    100.0 * f.share,
+                    scans[of].name,
+                    scans[from].name
+                ))
+            })
+            .collect();
+        if !seen.is_empty() {
+            writeln!(
+                out,
+                "  not trusted: {}: placed in another scan's free space ({}): a scan of another place, or a fit \
+                 that is not where the scans meet",
+                scans[i].name,
+                seen.join("; ")
+            )?;
+        }
     }
     for l in report.links.iter().filter(|l| !l.accepted) {
         let targets: Vec<&str> = l.targets.iter().map(|&t| scans[t].name.as_str()).collect();
