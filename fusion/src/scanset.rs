@@ -159,10 +159,31 @@ pub struct Restart {
     pub error: Option<String>,
     /// True when the restart's registration is the result.
     pub kept: bool,
+    /// What set it off.
+    pub trigger: Trigger,
+    /// The scans the verification names at the first registration's poses
+    /// ([`crate::verify::untrusted`]; `None` when it failed) and at the
+    /// restart's (`None` when the restart failed).
+    pub untrusted: (Option<Vec<usize>>, Option<Vec<usize>>),
 }
 
-/// The restart is kept when the first registration's disagreement is more
-/// than this many times the restart's. Measured: registrations a coarse
+/// What sets a [`Restart`] off.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Trigger {
+    /// The schedule moved a scan beyond the second stage's reach of its
+    /// start.
+    Moved,
+    /// The schedule failed.
+    Failed,
+    /// The schedule's result put points in another scanner's free space
+    /// (and moved no scan beyond the second stage's reach).
+    Untrusted,
+}
+
+/// The restart is kept when the first registration's poses put points in
+/// another scanner's free space and the verification names none of the
+/// restart's; otherwise when the first registration's disagreement is
+/// more than this many times the restart's. Measured: registrations a coarse
 /// stage dragged into a wrong fit disagree 2.2–3.1× as much as the right
 /// ones (the street wedges; the room's wedges from 1 m / 10°: 2.9×); two
 /// wrong fits differ by up to 1.12× (the room's wedges in simultaneous
@@ -222,8 +243,8 @@ pub fn register_set<S: AsRef<[Point3<f32>]> + Sync>(
     let local: Vec<Isometry3<f64>> = std::iter::once(Isometry3::identity())
         .chain(starts[1..].iter().map(|s| world_from_first.inverse() * s))
         .collect();
-    let mut r = match register_in_first_frame(scans, &local, config, progress) {
-        Ok(r) => restart_if_dragged(scans, &local, config, r, progress)?,
+    let r = match register_in_first_frame(scans, &local, config, progress) {
+        Ok(r) => restart_if_dragged(scans, &local, config, verified(scans, r, config)?, progress)?,
         // A stage moved two scans apart, or a match lost its partner: the
         // restart without the first stage may not. (Where the starts
         // themselves do not overlap, or the input is at fault, the restart
@@ -231,10 +252,15 @@ pub fn register_set<S: AsRef<[Point3<f32>]> + Sync>(
         Err(e) if config.stages.len() > 1 => restart_after_failure(scans, &local, config, e, progress)?,
         Err(e) => return Err(e),
     };
+    Ok(into_world(r, &world_from_first, config.mode == Mode::Graph))
+}
+
+/// `r` with its verification ([`verify_set`]) and the time it took.
+fn verified<S: AsRef<[Point3<f32>]> + Sync>(scans: &[S], mut r: SetResult, config: &SetConfig) -> Result<SetResult> {
     let started = std::time::Instant::now();
     r.checks = verify_set(scans, &r.world_from_scan, config)?;
     r.check_seconds = started.elapsed().as_secs_f64();
-    Ok(into_world(r, &world_from_first, config.mode == Mode::Graph))
+    Ok(r)
 }
 
 /// The set's final poses checked against its data at the finest stage,
@@ -263,7 +289,8 @@ fn restart_after_failure<S: AsRef<[Point3<f32>]> + Sync>(
         FusionError::NoOverlap { scan, .. } | FusionError::InScan { scan, .. } => Some(*scan),
         _ => None,
     };
-    let Ok(mut r) = without_first_stage(scans, starts, config, progress) else { return Err(failure) };
+    let Ok(r) = without_first_stage(scans, starts, config, progress) else { return Err(failure) };
+    let mut r = verified(scans, r, config)?;
     let after = finest_link(config).and_then(|(finest, link)| {
         let prepared = crate::multiview::prepare(scans, &link.multiview).ok()?;
         Some(crate::agreement::disagreement(&prepared, &r.world_from_scan, finest.max_correspondence_m))
@@ -276,6 +303,8 @@ fn restart_after_failure<S: AsRef<[Point3<f32>]> + Sync>(
         disagreement_m2: (None, after),
         error: None,
         kept: true,
+        trigger: Trigger::Failed,
+        untrusted: (None, Some(crate::verify::untrusted(scans.len(), &r.checks))),
     });
     Ok(r)
 }
@@ -308,10 +337,12 @@ fn finest_link(config: &SetConfig) -> Option<(Stage, LinkConfig)> {
     Some((finest, link))
 }
 
-/// `first`, or — when it moved a scan from its start (`starts`, the first
-/// scan's frame) beyond the second stage's correspondence distance — the
-/// registration from the starts without the schedule's first stage if the
-/// scans agree better there ([`Restart`]).
+/// `first` (verified), or — when it moved a scan from its start
+/// (`starts`, the first scan's frame) beyond the second stage's
+/// correspondence distance, or put points in another scanner's free
+/// space — the registration from the starts without the schedule's first
+/// stage, if `first` is impossible and the verification names nothing of
+/// it, or the scans agree clearly better there ([`Restart`]).
 fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     scans: &[S],
     starts: &[Isometry3<f64>],
@@ -328,22 +359,44 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     let Some((scan, moved_m)) = (1..scans.len()).map(|i| (i, moved(i))).max_by(|a, b| a.1.total_cmp(&b.1)) else {
         return Ok(first);
     };
+    let named = crate::verify::untrusted(scans.len(), &first.checks);
+    // Points in another scanner's free space: the schedule's poses are
+    // physically impossible, not merely in doubt.
+    let impossible = first.checks.iter().any(crate::verify::PairCheck::violates_free_space);
     // Within the second stage's reach of its start, the restart would
-    // begin where the schedule's first stage had no say.
-    if moved_m <= config.stages[1].max_correspondence_m {
+    // begin where the schedule's first stage had no say — unless the
+    // result is impossible: then the restart may land where the first
+    // stage would not let it.
+    let trigger = if moved_m > config.stages[1].max_correspondence_m {
+        Trigger::Moved
+    } else if impossible {
+        Trigger::Untrusted
+    } else {
         return Ok(first);
-    }
+    };
     let prepared = crate::multiview::prepare(scans, &link.multiview)?;
     let tau = finest.max_correspondence_m;
     let before = crate::agreement::disagreement(&prepared, &first.world_from_scan, tau);
     let (mut second, error) = match without_first_stage(scans, starts, config, progress) {
-        Ok(r) => (Some(r), None),
+        Ok(r) => (Some(verified(scans, r, config)?), None),
         Err(e) => (None, Some(e.to_string())),
     };
     let after = second.as_ref().map(|r| crate::agreement::disagreement(&prepared, &r.world_from_scan, tau));
-    let kept = after.is_some_and(|a| before > RESTART_RATIO * a);
+    let named_after = second.as_ref().map(|r| crate::verify::untrusted(scans.len(), &r.checks));
+    // An impossible result gives way to one the verification names
+    // nothing of (the disagreement may prefer the impossible: a slide
+    // lays floors and walls on each other); else the disagreement decides.
+    // (Only free space, not a doubt: the room's wedges trapped 90° off
+    // were named by their motion, and a restart that landed them in
+    // another wrong fit, 41° off, was named by nothing.)
+    let kept = match (&named_after, after) {
+        (Some(n), Some(_)) if impossible && n.is_empty() => true,
+        (Some(_), Some(a)) => before > RESTART_RATIO * a,
+        _ => false,
+    };
     let stages = second.as_ref().map_or_else(Vec::new, |r| r.stages.clone());
     let matches = first.matches + second.as_ref().map_or(0, |r| r.matches);
+    let check_seconds = first.check_seconds + second.as_ref().map_or(0.0, |r| r.check_seconds);
     let restart = Restart {
         scan: Some(scan),
         moved_m: Some(moved_m),
@@ -352,12 +405,15 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
         disagreement_m2: (Some(before), after),
         error,
         kept,
+        trigger,
+        untrusted: (Some(named), named_after),
     };
     let mut r = match second.take() {
         Some(s) if kept => SetResult { stages: first.stages, ..s },
         _ => first,
     };
     r.matches = matches;
+    r.check_seconds = check_seconds;
     r.restart = Some(restart);
     Ok(r)
 }

@@ -97,6 +97,14 @@ pub struct PairCheck {
     pub free_space: Option<FreeSpace>,
 }
 
+impl PairCheck {
+    /// Whether a scanner's free space holds more than
+    /// [`MAX_VIOLATION_SHARE`] of the other scan's points.
+    pub fn violates_free_space(&self) -> bool {
+        self.free_space.is_some_and(|f| f.share() > MAX_VIOLATION_SHARE)
+    }
+}
+
 /// Matches every pair of `scans` that overlaps at `poses` (their final
 /// `world_from_scan`) once more from those poses with `config` (the finest
 /// stage's), and judges each: consistent when its match moved the points
@@ -218,10 +226,7 @@ pub fn noise_floor(points: &[Point3<f32>], config: &LinkConfig) -> f64 {
 pub fn untrusted(n: usize, checks: &[PairCheck]) -> Vec<usize> {
     let mut open: Vec<[usize; 2]> = checks
         .iter()
-        .filter(|c| {
-            let violated = c.free_space.is_some_and(|f| f.share() > MAX_VIOLATION_SHARE);
-            !c.consistent && (c.moved_m.is_some() || violated)
-        })
+        .filter(|c| !c.consistent && (c.moved_m.is_some() || c.violates_free_space()))
         .map(|c| [c.source, c.target])
         .collect();
     let mut named = vec![false; n];

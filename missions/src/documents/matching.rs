@@ -149,9 +149,21 @@ pub struct RestartReport {
     pub restart_disagreement_m2: Option<f64>,
     /// Why the restart failed.
     pub error: Option<String>,
-    /// True when the restart's poses are the result: the schedule's
-    /// disagreement is more than 1.5 times the restart's.
+    /// True when the restart's poses are the result: the schedule's put
+    /// points in another scanner's free space and the verification names
+    /// nothing of the restart's, or the schedule's disagreement is more
+    /// than 1.5 times the restart's.
     pub kept: bool,
+    /// What set it off: "moved" (the schedule moved `scan` beyond the
+    /// second stage's reach of its start), "failed" (`schedule_error`) or
+    /// "untrusted" (the schedule's result put points in another scanner's
+    /// free space).
+    pub trigger: String,
+    /// The scans the verification names at the schedule's poses (indices
+    /// into `scans`); null when the schedule failed.
+    pub schedule_untrusted: Option<Vec<usize>>,
+    /// The same at the restart's poses; null when the restart failed.
+    pub restart_untrusted: Option<Vec<usize>>,
 }
 
 /// What the scans measured and the settings they were matched with.

@@ -314,8 +314,7 @@ fn match_writes_the_crs_it_was_given_or_the_e57s() {
 
 /// `match` keeps what came in: each scan's own number (3DTK `scanNNN`; the
 /// set's scan001 and scan002, numbered 1 and 2 where the input order
-/// would say 0 and 1 — scan000 and scan002 alone do not register, see
-/// `a_scan_placed_where_another_scanner_saw_through_is_named_with_exit_1`) in
+/// would say 0 and 1) in
 /// LAS `point_source_id` and `poses.json`, its name in E57 and the frames
 /// files — also when its E57 is matched again — and the inputs'
 /// intensities (the small_gicp frames' 0–215; they came out 0).
@@ -1215,9 +1214,13 @@ fn a_links_blind_directions_are_in_the_worlds_axes_in_every_mode() {
 /// The free-space test (issue 38, "a scan of another place entirely"):
 /// where a scanner saw through, another scan's points are placed wrongly.
 /// A 3DTK hall scan given with the two PCL room scans was placed 3.3 m
-/// from the room with exit 0; and scan000 and scan002 of the 3DTK set alone
-/// (3.4 m apart by the references, their odometry a good start) slid onto
-/// each other down the hall, exit 0. Both are named now, and only they.
+/// from the room with exit 0: it is named now, and only it. And scan000
+/// and scan002 of the 3DTK set alone (3.4 m apart by the references,
+/// their odometry a good start) slid onto each other down the hall, exit
+/// 0 — the coarse stage dragged scan002 3.5 m; the restart without it
+/// landed right, but its scans disagreed more, so the slide was kept.
+/// The free space names the slide; the restart is kept as the
+/// verification names fewer scans there, and the pair lands.
 #[test]
 fn a_scan_placed_where_another_scanner_saw_through_is_named_with_exit_1() {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -1238,32 +1241,41 @@ fn a_scan_placed_where_another_scanner_saw_through_is_named_with_exit_1() {
         assert_eq!(share(&c) > 0.12, hall, "{c}");
         assert_eq!(c["consistent"].as_bool(), Some(!hall), "{c}");
     }
+    // The restart could not place it either (there is no right place).
+    assert!(v["restart"].is_null() || v["restart"]["restart_untrusted"] != serde_json::json!([]), "{}", v["restart"]);
 
-    // A slide: scan002 lands on scan000, where scan000's scanner saw the
-    // hall go on.
+    // The slide: scan002 dragged onto scan000 by the coarse stage, where
+    // scan000's scanner saw the hall go on; the restart lands it.
     let set = dir.path().join("set");
     std::fs::create_dir_all(&set).expect("set");
     for name in ["scan000.3d", "scan000.pose", "scan002.3d", "scan002.pose"] {
         std::fs::copy(workspace().join("data/3dtk_dat").join(name), set.join(name)).expect("copy");
     }
     let (r, v) = run(&[set.into_os_string()], &dir.path().join("slide"));
-    assert_eq!(r.code, 1, "{}", r.stderr);
+    assert_eq!(r.code, 0, "{}", r.stderr);
     let v = v.expect("JSON");
+    let restart = &v["restart"];
+    assert_eq!(restart["schedule_untrusted"], serde_json::json!([1]), "{restart}");
+    assert_eq!(restart["restart_untrusted"], serde_json::json!([]), "{restart}");
+    assert_eq!(restart["kept"], true, "{restart}");
+    assert!(
+        restart["schedule_disagreement_m2"].as_f64() < restart["restart_disagreement_m2"].as_f64(),
+        "the disagreement alone would keep the slide: {restart}"
+    );
     let poses: Vec<Isometry3<f64>> =
         v["scans"].as_array().expect("scans").iter().map(|s| pose(&s["world_from_scan"])).collect();
-    let apart = (poses[0].inverse() * poses[1]).translation.vector.norm();
-    let reference = rigid(&matrix_file("3dtk_dat/reference_T_scan000_scan001.txt"))
-        * rigid(&matrix_file("3dtk_dat/reference_T_scan001_scan002.txt"));
-    assert!(apart < 1.0 && reference.translation.vector.norm() > 3.0, "{apart} m apart: not the slide this tests");
-    assert_eq!(v["untrusted"], serde_json::json!([1]));
-    let c = &checks(&v)[0];
-    assert!(share(c) > 0.12 && c["free_space"]["seen_from"] == 0, "{c}");
-    // Matched again from the final poses the pair does not move: only the
-    // free space sees it.
-    assert!(c["moved_m"].as_f64().expect("moved") < 0.01, "{c}");
+    let reference = scanner::io::from_3dtk_axes(&matrix_file("3dtk_dat/reference_T_scan000_scan001.txt"))
+        * scanner::io::from_3dtk_axes(&matrix_file("3dtk_dat/reference_T_scan001_scan002.txt"));
+    // 1.37° / 0.10 m off the references composed (each good to about
+    // ±0.3° / 1.5 cm): two scans 3.4 m apart in a sparse hall, where
+    // 3DTK's slam6D lands consecutive pairs 0.85–1.08° / 6–9 cm off — not
+    // the 3.4 m slide.
+    let (deg, m) = error(&(poses[0].inverse() * poses[1]), &reference);
+    assert!(deg < 2.0 && m < 0.15, "0←2: {deg}° {m} m off the references");
+    assert!(share(&checks(&v)[0]) < 0.12, "{}", v["checks"]);
 
-    // The same two scans with scan001 between them land, every pair's free
-    // space respected (the 3DTK set's worst 7.7 %).
+    // The three scans land, every pair's free space respected (the 3DTK
+    // set's worst 7.7 %).
     let (r, v) = run(&[data("3dtk_dat")], &dir.path().join("set3"));
     assert_eq!(r.code, 0, "{}", r.stderr);
     let v = v.expect("JSON");

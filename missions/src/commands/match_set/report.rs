@@ -76,6 +76,14 @@ pub(super) fn report(
             restart_disagreement_m2: x.disagreement_m2.1,
             error: x.error.clone(),
             kept: x.kept,
+            trigger: match x.trigger {
+                fusion::scanset::Trigger::Moved => "moved",
+                fusion::scanset::Trigger::Failed => "failed",
+                fusion::scanset::Trigger::Untrusted => "untrusted",
+            }
+            .into(),
+            schedule_untrusted: x.untrusted.0.clone(),
+            restart_untrusted: x.untrusted.1.clone(),
         }),
         checks: r
             .checks

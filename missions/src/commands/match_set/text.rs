@@ -51,14 +51,36 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
     };
     writeln!(out, "stages: {}", stages(&report.stages))?;
     if let Some(r) = &report.restart {
-        let why = match (r.moved_m, &r.schedule_error) {
-            (Some(m), _) => format!(
+        let names = |list: &[usize]| -> String {
+            if list.is_empty() {
+                "none".into()
+            } else {
+                list.iter().map(|&i| scans[i].name.as_str()).collect::<Vec<_>>().join(", ")
+            }
+        };
+        let why = match (r.trigger.as_str(), r.moved_m, &r.schedule_error) {
+            ("untrusted", ..) => format!(
+                "the schedule's poses put points in another scanner's free space (named: {})",
+                names(r.schedule_untrusted.as_deref().unwrap_or_default())
+            ),
+            (_, Some(m), _) => format!(
                 "the schedule moved {} {m:.3} m from its start",
                 r.scan.map_or("a scan", |i| scans[i].name.as_str())
             ),
-            (None, e) => format!("the schedule failed ({})", e.as_deref().unwrap_or("")),
+            (_, None, e) => format!("the schedule failed ({})", e.as_deref().unwrap_or("")),
+        };
+        let named = match (&r.schedule_untrusted, &r.restart_untrusted) {
+            (Some(before), Some(after)) if before.len() != after.len() => format!(
+                "the verification names {} there against {} at the schedule's poses",
+                names(after),
+                names(before)
+            ),
+            _ => String::new(),
         };
         let outcome = match (r.restart_disagreement_m2, r.schedule_disagreement_m2, &r.error) {
+            _ if !named.is_empty() => {
+                format!("{named}: {}", if r.kept { "its poses kept" } else { "the schedule's poses kept" })
+            }
             (Some(after), Some(before), _) => format!(
                 "the scans disagree {after:.3e} m² a point there against {before:.3e} at the schedule's poses: {}",
                 if r.kept { "its poses kept" } else { "the schedule's poses kept" }
