@@ -78,6 +78,12 @@ pub struct MatchArgs {
     /// reported (0: off).
     #[arg(long, default_value_t = fusion::links::DEFAULT_DEGENERACY_RATIO)]
     pub degeneracy_ratio: f64,
+    /// Every scan's frame has its scanner at the origin (PLY, XYZ and LAS
+    /// say nothing of where the scanner stood; 3DTK, E57 scans with a
+    /// pose, PCD and ROS 2 clouds do): the verification then tests every
+    /// scan's free space.
+    #[arg(long)]
+    pub scanner_at_origin: bool,
     /// Drop points nearer than this to their scan's origin, metres.
     #[arg(long, default_value_t = 0.0)]
     pub min_range: f64,
