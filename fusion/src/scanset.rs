@@ -163,7 +163,8 @@ pub struct Restart {
     pub trigger: Trigger,
     /// The scans the verification names at the first registration's poses
     /// ([`crate::verify::untrusted`]; `None` when it failed) and at the
-    /// restart's (`None` when the restart failed).
+    /// restart's (`None` when the restart failed, or was neither kept nor
+    /// needed verifying: the first registration was possible).
     pub untrusted: (Option<Vec<usize>>, Option<Vec<usize>>),
 }
 
@@ -377,12 +378,17 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     let prepared = crate::multiview::prepare(scans, &link.multiview)?;
     let tau = finest.max_correspondence_m;
     let before = crate::agreement::disagreement(&prepared, &first.world_from_scan, tau);
+    // The restart is verified where its verdict decides (an impossible
+    // first result) or where it is kept: a verification of a large set
+    // costs as much as its last stage.
     let (mut second, error) = match without_first_stage(scans, starts, config, progress) {
-        Ok(r) => (Some(verified(scans, r, config)?), None),
+        Ok(r) if impossible => (Some(verified(scans, r, config)?), None),
+        Ok(r) => (Some(r), None),
         Err(e) => (None, Some(e.to_string())),
     };
     let after = second.as_ref().map(|r| crate::agreement::disagreement(&prepared, &r.world_from_scan, tau));
-    let named_after = second.as_ref().map(|r| crate::verify::untrusted(scans.len(), &r.checks));
+    let mut named_after =
+        second.as_ref().filter(|_| impossible).map(|r| crate::verify::untrusted(scans.len(), &r.checks));
     // An impossible result gives way to one the verification names
     // nothing of (the disagreement may prefer the impossible: a slide
     // lays floors and walls on each other); else the disagreement decides.
@@ -394,6 +400,10 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
         (Some(_), Some(a)) => before > RESTART_RATIO * a,
         _ => false,
     };
+    if kept && !impossible {
+        second = second.map(|r| verified(scans, r, config)).transpose()?;
+        named_after = second.as_ref().map(|r| crate::verify::untrusted(scans.len(), &r.checks));
+    }
     let stages = second.as_ref().map_or_else(Vec::new, |r| r.stages.clone());
     let matches = first.matches + second.as_ref().map_or(0, |r| r.matches);
     let check_seconds = first.check_seconds + second.as_ref().map_or(0.0, |r| r.check_seconds);

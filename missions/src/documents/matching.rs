@@ -145,7 +145,9 @@ pub struct RestartReport {
     /// point with no partner pays its square), m²; null when the schedule
     /// failed.
     pub schedule_disagreement_m2: Option<f64>,
-    /// The same at the restart's poses; null when the restart failed.
+    /// The same at the restart's poses; null when the restart failed, or
+    /// was not kept and not verified (only a restart from an impossible
+    /// schedule's result, or a kept one, is).
     pub restart_disagreement_m2: Option<f64>,
     /// Why the restart failed.
     pub error: Option<String>,
@@ -162,7 +164,9 @@ pub struct RestartReport {
     /// The scans the verification names at the schedule's poses (indices
     /// into `scans`); null when the schedule failed.
     pub schedule_untrusted: Option<Vec<usize>>,
-    /// The same at the restart's poses; null when the restart failed.
+    /// The same at the restart's poses; null when the restart failed, or
+    /// was not kept and not verified (only a restart from an impossible
+    /// schedule's result, or a kept one, is).
     pub restart_untrusted: Option<Vec<usize>>,
 }
 
