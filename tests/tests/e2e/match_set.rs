@@ -1291,18 +1291,23 @@ fn a_scan_placed_where_another_scanner_saw_through_is_named_with_exit_1() {
 #[test]
 fn scanner_at_origin_tests_the_free_space_of_scans_that_do_not_say() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let inputs: Vec<OsString> = ["pcl_room_scans/room_scan1.pcd", "pcl_room_scans/room_scan2.pcd", "3dtk_dat/scan000.3d"]
-        .iter()
-        .map(|rel| {
-            let cloud = scanner::io::read(Path::new(&data(rel))).expect("scan");
-            let name = Path::new(rel).file_stem().expect("stem").to_string_lossy().into_owned();
-            let path = dir.path().join(format!("{name}.ply"));
-            let plain = scanner::io::PointCloud::from_points(cloud.points);
-            scanner::io::write(&path, &plain, scanner::io::Format::Ply(scanner::io::PlyEncoding::BinaryLittleEndian))
+    let inputs: Vec<OsString> =
+        ["pcl_room_scans/room_scan1.pcd", "pcl_room_scans/room_scan2.pcd", "3dtk_dat/scan000.3d"]
+            .iter()
+            .map(|rel| {
+                let cloud = scanner::io::read(Path::new(&data(rel))).expect("scan");
+                let name = Path::new(rel).file_stem().expect("stem").to_string_lossy().into_owned();
+                let path = dir.path().join(format!("{name}.ply"));
+                let plain = scanner::io::PointCloud::from_points(cloud.points);
+                scanner::io::write(
+                    &path,
+                    &plain,
+                    scanner::io::Format::Ply(scanner::io::PlyEncoding::BinaryLittleEndian),
+                )
                 .expect("PLY");
-            path.into_os_string()
-        })
-        .collect();
+                path.into_os_string()
+            })
+            .collect();
     let (r, v) = run(&inputs, &dir.path().join("silent"));
     let v = v.expect("JSON");
     assert_eq!(r.code, 0, "{}", v["checks"]);

@@ -87,10 +87,8 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
         bail!("{}: one scan: expected at least two to match", scans[0].file);
     }
     let points: Vec<&[nalgebra::Point3<f32>]> = scans.iter().map(|s| s.points.as_slice()).collect();
-    config.viewpoints = scans
-        .iter()
-        .map(|s| s.viewpoint.or(args.scanner_at_origin.then(nalgebra::Point3::origin)))
-        .collect();
+    config.viewpoints =
+        scans.iter().map(|s| s.viewpoint.or(args.scanner_at_origin.then(nalgebra::Point3::origin))).collect();
     let mut settings = scale_settings(args, given, &scans, &points, &mut config)?;
     let starts: Vec<Isometry3<f64>> = match args.init {
         None => scans.iter().map(|s| s.start).collect(),
