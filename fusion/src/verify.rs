@@ -148,7 +148,6 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
         .map(|l| {
             let (c, radius) = shape[l.source];
             let free_space = free_space(l.target, l.source);
-            let free = free_space.is_none_or(|f| f.share() <= MAX_VIOLATION_SHARE);
             let at = poses[l.target].inverse() * poses[l.source];
             let motion = l.result.as_ref().map(|r| {
                 // δ: what the match did to the final relative pose, in the
@@ -163,7 +162,7 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
                 let seen = Observability::about(&r.information, &(at * c), radius, 0.0).seen_motion(&e, SEEN_RATIO);
                 (moved, angle, chi2, moved / radius, seen)
             });
-            PairCheck {
+            let mut check = PairCheck {
                 target: l.target,
                 source: l.source,
                 overlap: l.overlap,
@@ -176,12 +175,13 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
                 noise_m: (0.5 * (floors[l.source].powi(2) + floors[l.target].powi(2))).sqrt(),
                 // (A match still creeping at its cap but a few millimetres
                 // from the poses agrees with them: the motion judges.)
-                consistent: free
-                    && motion.is_some_and(|(moved, angle, _, _, seen)| {
-                        moved <= tolerance_m || (seen <= MAX_RELATIVE_MOTION * radius && angle <= MAX_TURN_RAD)
-                    }),
+                consistent: motion.is_some_and(|(moved, angle, _, _, seen)| {
+                    moved <= tolerance_m || (seen <= MAX_RELATIVE_MOTION * radius && angle <= MAX_TURN_RAD)
+                }),
                 free_space,
-            }
+            };
+            check.consistent &= !check.violates_free_space();
+            check
         })
         .collect())
 }
