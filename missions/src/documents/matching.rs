@@ -107,6 +107,14 @@ pub struct FreeSpaceReport {
     pub share: f64,
 }
 
+impl FreeSpaceReport {
+    /// Whether the share makes the pair inconsistent (as
+    /// `fusion::verify::PairCheck::violates_free_space` judged it).
+    pub fn violated(&self) -> bool {
+        self.share > fusion::free_space::MAX_VIOLATION_SHARE
+    }
+}
+
 /// One stage of the schedule as it ran.
 #[derive(Debug, Clone, Serialize, schemars::JsonSchema)]
 pub struct StageReport {

@@ -3,10 +3,6 @@
 use std::io::Write;
 
 use crate::documents::matching::{CheckReport, MatchReport, StageReport};
-
-/// Above this share of free-space violations a pair disagrees
-/// ([`fusion::free_space::MAX_VIOLATION_SHARE`]).
-const FREE_SPACE_SHARE: f64 = fusion::free_space::MAX_VIOLATION_SHARE;
 use crate::scans::inputs::InputScan;
 
 pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &MatchReport) -> std::io::Result<()> {
@@ -110,7 +106,7 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
         let disagreeing = || report.checks.iter().filter(|c| !c.consistent && (c.source == i || c.target == i));
         let other = |c: &CheckReport| if c.source == i { c.target } else { c.source };
         let moved: Vec<String> = disagreeing()
-            .filter(|c| c.free_space.as_ref().is_none_or(|f| f.share <= FREE_SPACE_SHARE))
+            .filter(|c| !c.free_space.as_ref().is_some_and(|f| f.violated()))
             .filter_map(|c| {
                 Some(format!("{} ({:.3} m, {:.2}°)", scans[other(c)].name, c.moved_m?, c.angle_deg.unwrap_or_default()))
             })
@@ -126,7 +122,7 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
         }
         let seen: Vec<String> = disagreeing()
             .filter_map(|c| {
-                let f = c.free_space.as_ref().filter(|f| f.share > FREE_SPACE_SHARE)?;
+                let f = c.free_space.as_ref().filter(|f| f.violated())?;
                 let (from, of) = (f.seen_from, if f.seen_from == c.source { c.target } else { c.source });
                 Some(format!(
                     "{:.0} % of {}'s points where {}'s scanner saw through",
