@@ -60,6 +60,10 @@ pub struct SetConfig {
     /// tests the free space those scanners saw ([`crate::free_space`]).
     /// Default: none known.
     pub viewpoints: Vec<Option<Point3<f64>>>,
+    /// At the finest stage, leave out pairs whose source point lies beyond
+    /// what the target sampled around its partner
+    /// ([`crate::icp::IcpConfig::only_covered`]). Default true.
+    pub only_covered: bool,
 }
 
 impl Default for SetConfig {
@@ -86,6 +90,7 @@ impl Default for SetConfig {
                 }
             },
             viewpoints: Vec::new(),
+            only_covered: true,
         }
     }
 }
@@ -120,7 +125,8 @@ pub struct SetResult {
     pub check_seconds: f64,
     /// The registration from the starts again without the schedule's
     /// first stage, when a scan moved beyond the second stage's reach of
-    /// its start or the schedule failed ([`Restart`]).
+    /// its start, the schedule failed, put points in another scanner's
+    /// free space or left links that disagree ([`Restart`]).
     pub restart: Option<Restart>,
 }
 
@@ -131,7 +137,9 @@ pub struct SetResult {
 /// when the scans agree clearly better there ([`crate::agreement`]); or
 /// run when the schedule failed (a stage moved two scans apart that
 /// overlapped at their starts, a match lost every correspondence), and
-/// kept when it succeeds. On narrow overlaps a
+/// kept when it succeeds; or run when the first registration's links
+/// disagree more than their covariances allow ([`Trigger::Disagreeing`]),
+/// and kept as after a move. On narrow overlaps a
 /// coarse stage can drag good starts away: small_gicp's outdoor frame cut
 /// into 150° wedges, from starts 0.1 m / 2° off, ended 1–77° and 1.1–10 m
 /// off in 5 of 10 trials with the auto schedule (first cell 0.7 m, a
@@ -179,7 +187,22 @@ pub enum Trigger {
     /// The schedule's result put points in another scanner's free space
     /// (and moved no scan beyond the second stage's reach).
     Untrusted,
+    /// The schedule's links disagree with one another more than their own
+    /// covariances allow (the graph's variance factor above
+    /// [`RESTART_VARIANCE_FACTOR`]), and nothing above set it off.
+    Disagreeing,
 }
+
+/// A graph whose variance factor σ̂₀² is above this sets off a restart
+/// ([`Trigger::Disagreeing`]): its links disagree more than they should,
+/// as when the first stage dragged scans into a wrong fit within the
+/// second stage's reach (small_gicp's street cut into wedges: three wedges
+/// 3.2° off together, 0.45 m of motion, σ̂₀² = 64; without the first stage
+/// 0.001° off, σ̂₀² = 0.18). Right registrations of parts of one scan give
+/// 0.01–0.57; real sets of different viewpoints may give more (the 3DTK
+/// set 114), where the restart costs its finer stages once more and is
+/// kept only by the disagreement rule ([`RESTART_RATIO`]).
+pub const RESTART_VARIANCE_FACTOR: f64 = 1.0;
 
 /// The restart is kept when the first registration's poses put points in
 /// another scanner's free space and the verification names none of the
@@ -238,7 +261,9 @@ pub struct SetLink {
     pub result: Option<IcpResult>,
     /// Why it is not used; `None` when it is.
     pub rejected: Option<String>,
-    /// The cycle of used links a rejected link contradicts (graph mode).
+    /// The cycle of used links a link disagreeing with the others closes
+    /// (graph mode; [`crate::links::Link::cycle`]): rejected, or kept when
+    /// the set cannot tell which of the cycle's links is wrong.
     pub cycle: Option<crate::links::Cycle>,
 }
 
@@ -345,7 +370,11 @@ fn finest_link(config: &SetConfig) -> Option<(Stage, LinkConfig)> {
         multiview: MultiviewConfig {
             source_voxel_m: finest.voxel_m,
             target_voxel_m: finest.voxel_m,
-            icp: crate::icp::IcpConfig { max_correspondence_m: finest.max_correspondence_m, ..multiview.icp },
+            icp: crate::icp::IcpConfig {
+                max_correspondence_m: finest.max_correspondence_m,
+                only_covered: config.only_covered,
+                ..multiview.icp
+            },
             ..*multiview
         },
         ..config.link
@@ -355,8 +384,9 @@ fn finest_link(config: &SetConfig) -> Option<(Stage, LinkConfig)> {
 
 /// `first` (verified), or — when it moved a scan from its start
 /// (`starts`, the first scan's frame) beyond the second stage's
-/// correspondence distance, or put points in another scanner's free
-/// space — the registration from the starts without the schedule's first
+/// correspondence distance, put points in another scanner's free space,
+/// or its links disagree more than their covariances allow — the
+/// registration from the starts without the schedule's first
 /// stage, if `first` is impossible and the verification names nothing of
 /// it, or the scans agree clearly better there ([`Restart`]).
 fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
@@ -387,6 +417,8 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
         Trigger::Moved
     } else if impossible {
         Trigger::Untrusted
+    } else if first.variance_factor.is_some_and(|f| f > RESTART_VARIANCE_FACTOR) {
+        Trigger::Disagreeing
     } else {
         return Ok(first);
     };
@@ -482,11 +514,16 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
         Mode::Graph => Strategy::Pairwise,
     };
     let finest = config.stages.last().map_or(1.0, |s| s.voxel_m);
-    let stage_config = |s: &Stage| MultiviewConfig {
+    let finest_stage = config.stages.len() - 1;
+    let stage_config = |k: usize, s: &Stage| MultiviewConfig {
         strategy,
         source_voxel_m: s.voxel_m,
         target_voxel_m: s.voxel_m,
-        icp: crate::icp::IcpConfig { max_correspondence_m: s.max_correspondence_m, ..config.link.multiview.icp },
+        icp: crate::icp::IcpConfig {
+            max_correspondence_m: s.max_correspondence_m,
+            only_covered: config.only_covered && k == finest_stage,
+            ..config.link.multiview.icp
+        },
         // Fewer reduced points at a coarse stage give fewer pairs: the
         // overlap threshold scales with the cell's area.
         min_pairs: scaled_min_pairs(config.link.multiview.min_pairs, s.voxel_m, finest),
@@ -502,7 +539,7 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
     let mut runs = Vec::with_capacity(stages);
     for (k, stage) in multiview_stages.iter().enumerate() {
         let started = std::time::Instant::now();
-        let r = register_views(scans, &poses, &stage_config(stage), &mut |done, total| {
+        let r = register_views(scans, &poses, &stage_config(k, stage), &mut |done, total| {
             progress(k + 1, stages, done, total)
         })
         .map_err(|e| match e {
@@ -524,7 +561,7 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
         last = Some(r);
     }
     if config.mode == Mode::Graph {
-        let link = LinkConfig { multiview: stage_config(config.stages.last().expect("a stage")), ..config.link };
+        let link = LinkConfig { multiview: stage_config(finest_stage, &config.stages[finest_stage]), ..config.link };
         // The coarse stages' poses hold what no link sees: along a blind
         // direction the (degeneracy-aware) coarse matches left each scan
         // where the start put it, and a scan no fine link reaches keeps

@@ -36,24 +36,14 @@ use crate::error::Result;
 use crate::free_space::{FreeSpace, MAX_VIOLATION_SHARE, View};
 use crate::icp::degeneracy::{Observability, centroid_and_lever_arm};
 use crate::links::{LinkConfig, pair_links};
+pub use crate::links::{MAX_RELATIVE_MOTION, MAX_TURN_RAD};
 use crate::multiview::{check, prepare};
-
-/// The largest motion of a pair matched again from the final poses, as a
-/// fraction of the source points' RMS radius, that is still agreement.
-pub const MAX_RELATIVE_MOTION: f64 = 0.05;
 
 /// Directions whose eigenvalue of the match's information (about the
 /// source's centroid, rotation scaled by the radius) is below this
 /// fraction of the largest are weak: a pair matched alone may slide along
 /// them where the set's other links hold it.
 pub const SEEN_RATIO: f64 = 0.05;
-
-/// The largest turn of a pair matched again that is still agreement,
-/// radians (5°): however weakly a pair sees a turn, a room's wedges
-/// trapped 90° off turned 12° when matched again, where right real sets
-/// turn at most 2.5° (the 3DTK set's weakest pair in the single-strategy
-/// modes; 1.2° in graph mode) and the corridor's pairs 0.7°.
-pub const MAX_TURN_RAD: f64 = 5.0 * std::f64::consts::PI / 180.0;
 
 /// One overlapping pair matched again from the final poses.
 #[derive(Debug, Clone, PartialEq)]

@@ -51,6 +51,12 @@ pub struct IcpConfig {
     /// [`IcpResult::unobservable`](super::IcpResult::unobservable). Default
     /// none: a singular normal matrix is an error.
     pub degeneracy_ratio: Option<f64>,
+    /// Point-to-plane: leave out a pair whose source point lies beyond the
+    /// part of the surface the target sampled around its partner — where a
+    /// partial overlap ends, at an occlusion — matched to the last sample
+    /// at the edge: its residual is the edge's, and all such pairs lean the
+    /// same way. Default false.
+    pub only_covered: bool,
 }
 
 /// A robust kernel, applied by iteratively reweighted least squares: each
@@ -93,6 +99,7 @@ impl Default for IcpConfig {
             reject_back_faces: false,
             source_viewpoint: Point3::origin(),
             degeneracy_ratio: None,
+            only_covered: false,
         }
     }
 }

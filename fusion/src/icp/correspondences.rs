@@ -7,7 +7,7 @@ use rayon::prelude::*;
 
 use super::config::{IcpConfig, Method};
 use super::target::{Target, point};
-use crate::se3::skew;
+use crate::se3::{adjoint, skew};
 
 /// Sums over the correspondences of one iteration.
 #[derive(Clone, Copy, Default)]
@@ -36,6 +36,24 @@ impl Sums {
         self.spq += o.spq;
         self.spp += o.spp;
         self
+    }
+
+    /// A symmetric match's sums: these (the source's points into the
+    /// target) and `back`'s (the target's points into the source, summed at
+    /// `target_from_source⁻¹`), in this match's ξ. The reverse pass's ξ′
+    /// (left, on `source_from_target`) is −Ad(T⁻¹)·ξ, so its H′ and b′ enter
+    /// as AᵀH′A and Aᵀb′. H and b are the two ways' mean — each pair is seen
+    /// about twice, once from either scan, and is one measurement, not two —
+    /// the residuals' count and squares their sum (σ̂² per residual).
+    pub(crate) fn both_ways(self, back: &Sums, target_from_source: &Isometry3<f64>) -> Sums {
+        let a = -adjoint(&target_from_source.inverse());
+        Sums {
+            n: self.n + back.n,
+            sq: self.sq + back.sq,
+            h: 0.5 * (self.h + a.transpose() * back.h * a),
+            b: 0.5 * (self.b + a.transpose() * back.b),
+            ..self
+        }
     }
 
     /// Σ w JᵀJ of the pairs, with J = [−[p]×, I] for point-to-point (derived
@@ -165,11 +183,14 @@ pub(crate) fn accumulate(
                 {
                     continue;
                 }
-                s.n += 1;
                 match config.method {
                     Method::PointToPlane => {
                         let n = target.normal(i);
                         let res = n.dot(&(pt - q));
+                        if config.only_covered && target.beyond(i, &(pt - q - res * n)) {
+                            continue;
+                        }
+                        s.n += 1;
                         let w = config.kernel.weight(res);
                         // r = nᵀ(T̂p + ω × T̂p + v − q): ∂r/∂ω = T̂p × n, ∂r/∂v = n.
                         let c = pt.cross(&n);
@@ -179,6 +200,7 @@ pub(crate) fn accumulate(
                         s.sq += res * res;
                     }
                     Method::PointToPoint => {
+                        s.n += 1;
                         let e2 = (pt - q).norm_squared();
                         let w = config.kernel.weight(e2.sqrt());
                         s.sq += e2;

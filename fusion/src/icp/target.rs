@@ -213,6 +213,28 @@ impl Target {
         if self.normal_neighbours > 0 { self.local(i).normal } else { self.given[i] }
     }
 
+    /// Whether `offset` (a source point's offset from target point `i`
+    /// along the surface, metres) takes it beyond what the target sampled
+    /// there: farther than half the way to `i`'s nearest neighbour, and
+    /// farther in its direction than any of `i`'s neighbours lie — where a
+    /// partial overlap ends or an occlusion begins, `i` is the last sample
+    /// at the edge and the source point has no partner in the target.
+    pub(crate) fn beyond(&self, i: usize, offset: &Vector3<f64>) -> bool {
+        let hood = &self.local(i).hood;
+        let q = point(&self.points[i]);
+        let length = offset.norm();
+        let mut nearest_sq = f64::INFINITY;
+        for &k in &hood.points[..usize::from(hood.len)] {
+            let d = point(&self.points[k as usize]) - q;
+            // A neighbour at least as far along the offset: covered.
+            if d.dot(offset) >= length * length {
+                return false;
+            }
+            nearest_sq = nearest_sq.min(d.norm_squared());
+        }
+        length * length > nearest_sq / 4.0
+    }
+
     /// Point `j`'s surroundings, queried the first time they are needed.
     fn local(&self, j: usize) -> &Local {
         self.local[j].get_or_init(|| {
@@ -327,7 +349,29 @@ mod tests {
     use super::*;
     use crate::icp::IcpConfig;
 
-    /// on random covariances, from isotropic to nearly planar and linear.
+    /// A source point's offset from a sample of a grid (0.1 m) is covered
+    /// inside the grid and along or into it from its edge, and within half
+    /// a spacing beyond the edge sample; beyond that it is beyond.
+    #[test]
+    fn a_point_beyond_the_sampled_surface_is_beyond() {
+        let grid: Vec<Point3<f32>> =
+            (0..20).flat_map(|i| (0..20).map(move |j| Point3::new(i as f32 * 0.1, j as f32 * 0.1, 0.0))).collect();
+        let target = Target::new(&grid, 10).expect("target");
+        let at = |i: usize, j: usize| i * 20 + j;
+        assert!(!target.beyond(at(10, 10), &Vector3::new(0.04, 0.03, 0.0)));
+        assert!(!target.beyond(at(10, 10), &Vector3::new(-0.05, 0.0, 0.0)));
+        // The edge x = 1.9: outward within half a spacing, along, inward.
+        assert!(!target.beyond(at(19, 10), &Vector3::new(0.04, 0.0, 0.0)));
+        assert!(!target.beyond(at(19, 10), &Vector3::new(0.0, 0.08, 0.0)));
+        assert!(!target.beyond(at(19, 10), &Vector3::new(-0.08, 0.0, 0.0)));
+        // Outward past half a spacing, and out of a corner.
+        assert!(target.beyond(at(19, 10), &Vector3::new(0.08, 0.0, 0.0)));
+        assert!(target.beyond(at(19, 10), &Vector3::new(0.3, 0.1, 0.0)));
+        assert!(target.beyond(at(19, 19), &Vector3::new(0.05, 0.05, 0.0)));
+    }
+
+    /// `smallest_eigenvector` agrees with nalgebra's `SymmetricEigen` on
+    /// random covariances, from isotropic to nearly planar and linear.
     #[test]
     fn smallest_eigenvector_matches_symmetric_eigen() {
         let mut rng = ChaCha8Rng::seed_from_u64(3);

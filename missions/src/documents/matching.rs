@@ -165,9 +165,11 @@ pub struct RestartReport {
     /// than 1.5 times the restart's.
     pub kept: bool,
     /// What set it off: "moved" (the schedule moved `scan` beyond the
-    /// second stage's reach of its start), "failed" (`schedule_error`) or
+    /// second stage's reach of its start), "failed" (`schedule_error`),
     /// "untrusted" (the schedule's result put points in another scanner's
-    /// free space).
+    /// free space) or "disagreeing" (the schedule's links disagree more
+    /// than their covariances allow: the graph's `variance_factor` above
+    /// 1).
     pub trigger: String,
     /// The scans the verification names at the schedule's poses (indices
     /// into `scans`); null when the schedule failed.

@@ -104,13 +104,16 @@ pub struct Link {
     /// test: a run's `direct` and `cps-icp`).
     #[serde(default)]
     pub degenerate_directions: Vec<[f64; 6]>,
-    /// For a link rejected as disagreeing with the others (`match`'s graph
-    /// mode): the shortest cycle of used links it contradicts.
+    /// For a link that disagrees with the others (`match`'s graph mode):
+    /// the shortest cycle of used links it closes — rejected (`reason`),
+    /// or accepted when no other cycle can tell which of the cycle's links
+    /// is wrong and the cycle does not miss grossly (over 5° or 5 % of the
+    /// scan's radius): the variance factor then carries the miss.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cycle: Option<Cycle>,
 }
 
-/// A cycle of used links a rejected link contradicts.
+/// A cycle of used links that a link disagreeing with the others closes.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct Cycle {
     /// The scans from the link's target round to its source along used

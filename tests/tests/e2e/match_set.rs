@@ -82,10 +82,18 @@ fn the_3dtk_set_lands_on_the_references_from_its_odometry() {
     // (within 2.3 % of the scans' radius; issue 38).
     assert_eq!(v["untrusted"], serde_json::json!([]), "{}", v["checks"]);
     assert_eq!(v["checks"].as_array().map(Vec::len), Some(3), "{}", v["checks"]);
-    // Each stage as it ran: its runs add up to the matches.
+    // Each stage as it ran: its runs, and the restart's, add up to the
+    // matches. (The set's three links disagree more than their covariances
+    // allow — the variance factor is about 100 —, which sets off the
+    // restart without the first stage; it lands in a nearby fit the scans
+    // agree with no better, and the schedule's poses stay.)
     let stages = v["stages"].as_array().expect("stages");
     assert_eq!(stages.len(), 4, "{stages:?}");
-    let runs: u64 = stages.iter().map(|s| s["matches"].as_u64().expect("runs")).sum();
+    assert_eq!(v["restart"]["trigger"], "disagreeing", "{}", v["restart"]);
+    assert_eq!(v["restart"]["kept"], false, "{}", v["restart"]);
+    let restart = v["restart"]["stages"].as_array().expect("the restart's stages");
+    assert_eq!(restart.len(), 3, "{restart:?}");
+    let runs: u64 = stages.iter().chain(restart).map(|s| s["matches"].as_u64().expect("runs")).sum();
     assert_eq!(Some(runs), v["matches"].as_u64());
     assert!(stages.iter().all(|s| s["seconds"].as_f64().is_some_and(|t| t > 0.0) && s["settled"] == true));
     let links = v["links"].as_array().expect("links");
@@ -876,7 +884,10 @@ fn wedges_from_rough_starts_land_or_are_named_with_exit_1() {
                 }
             } else {
                 assert_eq!(r.code, 1, "{m} m {mode}: {errors:?}");
-                assert!(errors.iter().any(|(d, _)| *d > 45.0), "the trap this test is about: {errors:?}");
+                // The trap this test is about: a wedge in the room's other
+                // symmetric fit (90° off; 10.8° in one mode since the pairs
+                // are matched both ways).
+                assert!(errors.iter().any(|(d, _)| *d > 5.0), "the trap this test is about: {errors:?}");
                 assert!(!untrusted.is_empty(), "{m} m {mode}: {}", v["checks"]);
                 for &k in &untrusted {
                     assert!(errors[k].0 > 1.0, "{m} m {mode}: wedge {k} named but right: {errors:?}");
@@ -946,15 +957,19 @@ fn init_global_registers_scans_that_come_with_no_guess() {
     let p = poses(&v);
     let reference = rigid(&matrix_file("pcl_room_scans/reference_T_scan1_scan2.txt"));
     let (deg, m) = error(&(p[0].inverse() * p[1]), &reference);
-    assert!(deg < 0.1 && m < 0.01, "room: {deg}° {m} m off the reference");
+    // The reference (small_gicp's GICP) and Open3D's point-to-plane agree
+    // to 0.05°; our one-way match landed 0.05° or 0.11° from it by which
+    // scan was the source, matched both ways 0.12° / 0.8 mm in either order.
+    assert!(deg < 0.15 && m < 0.01, "room: {deg}° {m} m off the reference");
     // small_gicp's pair.
     let v = global(vec![data("small_gicp_pair/target.ply"), data("small_gicp_pair/source.ply")], "sg");
     let p = poses(&v);
     let reference = rigid(&matrix_file("small_gicp_pair/T_target_source.txt"));
     let (deg, m) = error(&(p[0].inverse() * p[1]), &reference);
     // (Where `match` lands from the identity, which is near: 0.14°, 10 mm
-    // from small_gicp's own GICP result.)
-    assert!(deg < 0.2 && m < 0.015, "small_gicp: {deg}° {m} m off the reference");
+    // from small_gicp's own GICP result matched one way, 0.21° / 11 mm
+    // matched both ways; the reference is good to about 0.2°.)
+    assert!(deg < 0.25 && m < 0.015, "small_gicp: {deg}° {m} m off the reference");
     // The 3DTK set, its odometry not used.
     let v = global(vec![data("3dtk_dat")], "3dtk");
     let p = poses(&v);
@@ -1284,10 +1299,12 @@ fn a_scan_placed_where_another_scanner_saw_through_is_named_with_exit_1() {
 }
 
 /// `--scanner-at-origin`: PLY says nothing of where its scanner stood, so
-/// the hall scan among the room scans, all three as PLY in their scanners'
-/// frames, is placed 3.3 m from the room with exit 0 and no free space
-/// tested; told that every scanner stood at its scan's origin, `match`
-/// tests it and names the hall scan.
+/// for the hall scan among the room scans, all three as PLY in their
+/// scanners' frames, no free space is tested (it was placed 3.3 m from the
+/// room with exit 0 before the pairs were matched both ways; now the
+/// pairs' motion names it); told that every scanner stood at its scan's
+/// origin, `match` tests the free space, which the hall scan violates,
+/// and names it.
 #[test]
 fn scanner_at_origin_tests_the_free_space_of_scans_that_do_not_say() {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -1308,9 +1325,8 @@ fn scanner_at_origin_tests_the_free_space_of_scans_that_do_not_say() {
                 path.into_os_string()
             })
             .collect();
-    let (r, v) = run(&inputs, &dir.path().join("silent"));
+    let (_, v) = run(&inputs, &dir.path().join("silent"));
     let v = v.expect("JSON");
-    assert_eq!(r.code, 0, "{}", v["checks"]);
     assert!(v["checks"].as_array().expect("checks").iter().all(|c| c["free_space"].is_null()), "{}", v["checks"]);
     let mut told = inputs.clone();
     told.push("--scanner-at-origin".into());
@@ -1318,5 +1334,12 @@ fn scanner_at_origin_tests_the_free_space_of_scans_that_do_not_say() {
     let v = v.expect("JSON");
     assert_eq!(r.code, 1, "{}", r.stderr);
     assert_eq!(v["untrusted"], serde_json::json!([2]), "{}", v["checks"]);
-    assert!(v["checks"].as_array().expect("checks").iter().all(|c| !c["free_space"].is_null()), "{}", v["checks"]);
+    let checks = v["checks"].as_array().expect("checks");
+    assert!(checks.iter().all(|c| !c["free_space"].is_null()), "{}", v["checks"]);
+    // The hall scan's pairs put points in a room scanner's free space.
+    assert!(
+        checks.iter().filter(|c| c["source"] == 2).all(|c| c["free_space"]["share"].as_f64().expect("share") > 0.12),
+        "{}",
+        v["checks"]
+    );
 }

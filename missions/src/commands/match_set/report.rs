@@ -80,6 +80,7 @@ pub(super) fn report(
                 fusion::scanset::Trigger::Moved => "moved",
                 fusion::scanset::Trigger::Failed => "failed",
                 fusion::scanset::Trigger::Untrusted => "untrusted",
+                fusion::scanset::Trigger::Disagreeing => "disagreeing",
             }
             .into(),
             schedule_untrusted: x.untrusted.0.clone(),

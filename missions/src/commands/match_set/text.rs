@@ -55,6 +55,9 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
             }
         };
         let why = match (r.trigger.as_str(), r.moved_m, &r.schedule_error) {
+            ("disagreeing", ..) => {
+                "the schedule's links disagree more than their covariances allow (variance factor above 1)".into()
+            }
             ("untrusted", ..) => format!(
                 "the schedule's poses put points in another scanner's free space (named: {})",
                 names(r.schedule_untrusted.as_deref().unwrap_or_default())
@@ -142,12 +145,12 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
             )?;
         }
     }
-    for l in report.links.iter().filter(|l| !l.accepted) {
+    for l in report.links.iter().filter(|l| !l.accepted || l.cycle.is_some()) {
         let targets: Vec<&str> = l.targets.iter().map(|&t| scans[t].name.as_str()).collect();
         let cycle = l.cycle.as_ref().map_or_else(String::new, |c| {
             let names: Vec<&str> = c.scans.iter().map(|&i| scans[i].name.as_str()).collect();
             format!(
-                "; it contradicts the cycle {} → {} (the used links from {} to {} and this one disagree by {:.3}°, {:.3} m)",
+                "the cycle {} → {} (the used links from {} to {} and this one disagree by {:.3}°, {:.3} m)",
                 names.join(" → "),
                 names.first().copied().unwrap_or_default(),
                 names.first().copied().unwrap_or_default(),
@@ -156,13 +159,21 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
                 c.translation_m
             )
         });
-        writeln!(
-            out,
-            "  rejected {} → {}: {}{cycle}",
-            scans[l.source].name,
-            targets.join(", "),
-            l.reason.as_deref().unwrap_or("")
-        )?;
+        let (source, targets) = (&scans[l.source].name, targets.join(", "));
+        if l.accepted {
+            writeln!(
+                out,
+                "  kept {source} → {targets}: it disagrees with {cycle}, but no other cycle tells which of its links is wrong: the variance factor carries it"
+            )?;
+        } else if cycle.is_empty() {
+            writeln!(out, "  rejected {source} → {targets}: {}", l.reason.as_deref().unwrap_or(""))?;
+        } else {
+            writeln!(
+                out,
+                "  rejected {source} → {targets}: {}; it contradicts {cycle}",
+                l.reason.as_deref().unwrap_or("")
+            )?;
+        }
     }
     Ok(())
 }
