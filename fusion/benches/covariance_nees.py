@@ -21,7 +21,8 @@ the median, the RMS errors, and the parts off by more than 1° or 0.1 m
 while the exit was 0 (a silent failure). Environment: NEES_ONLY=NAME runs one
 source, NEES_VERBOSE=1 prints every part, NEES_CHECKS=1 every verified
 pair (its RMS residual against the noise floor, and its true error),
-NEES_KEEP=DIR keeps each trial's inputs.
+NEES_KEEP=DIR keeps each trial's inputs, NEES_ARGS="--only-covered" adds
+arguments to every `match`.
 """
 import json
 import math
@@ -100,7 +101,8 @@ def run(tool, d, parts, truths, starts, mode):
     with open(os.path.join(d, "init.json"), "w") as out:
         json.dump([{"file": os.path.basename(f), "world_from_scan": s.tolist()} for f, s in zip(files, starts)], out)
     r = subprocess.run([tool, "match", *files, "--init-poses", os.path.join(d, "init.json"), "--mode", mode,
-                        "--out", os.path.join(d, "out"), "--json"], capture_output=True, text=True)
+                        "--out", os.path.join(d, "out"), "--json", *os.environ.get("NEES_ARGS", "").split()],
+                       capture_output=True, text=True)
     try:
         return r.returncode, json.loads(r.stdout)
     except json.JSONDecodeError:

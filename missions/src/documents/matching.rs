@@ -205,6 +205,9 @@ pub struct SettingsReport {
     /// `simultaneous`: a match that moves its scan by more than this
     /// (metres, 0.2 × the last voxel) or 0.05° re-queues its neighbours.
     pub moved_translation_m: f64,
+    /// `--only-covered`: pairs beyond what the other scan sampled around
+    /// their partner left out at the finest stage.
+    pub only_covered: bool,
     /// With `--init global`: how the starts were found.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub global: Option<GlobalReport>,

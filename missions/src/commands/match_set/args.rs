@@ -84,6 +84,13 @@ pub struct MatchArgs {
     /// scan's free space.
     #[arg(long)]
     pub scanner_at_origin: bool,
+    /// At the finest stage, leave out pairs whose point lies beyond what
+    /// the other scan sampled around its partner (where a wedge or sector
+    /// of a scan ends): scans cut by their field of view register several
+    /// times closer, but a corridor's scans, held along its axis by a few
+    /// edges, farther (docs/match.md).
+    #[arg(long)]
+    pub only_covered: bool,
     /// Drop points nearer than this to their scan's origin, metres.
     #[arg(long, default_value_t = 0.0)]
     pub min_range: f64,

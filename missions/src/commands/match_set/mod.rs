@@ -89,6 +89,7 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
     let points: Vec<&[nalgebra::Point3<f32>]> = scans.iter().map(|s| s.points.as_slice()).collect();
     config.viewpoints =
         scans.iter().map(|s| s.viewpoint.or(args.scanner_at_origin.then(nalgebra::Point3::origin))).collect();
+    config.only_covered = args.only_covered;
     let mut settings = scale_settings(args, given, &scans, &points, &mut config)?;
     let starts: Vec<Isometry3<f64>> = match args.init {
         None => scans.iter().map(|s| s.start).collect(),
@@ -242,6 +243,7 @@ fn scale_settings(
         step_sigma_m: scaled.step_sigma_m,
         translation_tolerance_m: scaled.translation_tolerance_m,
         moved_translation_m: scaled.moved_translation_m,
+        only_covered: config.only_covered,
         global: None,
     })
 }
