@@ -367,21 +367,20 @@ fn cycle(links: &[Link], used: &[usize], k: usize) -> Option<Cycle> {
 /// still without it and any one other link (no link is in series with
 /// it).
 fn identifiable(links: &[Link], used: &[usize], k: usize) -> bool {
+    // Each scan's used links other than k: (link, the scan at its other end).
+    let mut around: std::collections::HashMap<usize, Vec<(usize, usize)>> = std::collections::HashMap::new();
+    for &m in used.iter().filter(|&&m| m != k) {
+        let (a, b) = (links[m].target, links[m].source);
+        around.entry(a).or_default().push((m, b));
+        around.entry(b).or_default().push((m, a));
+    }
     let joined = |without: Option<usize>| {
         let (from, to) = (links[k].target, links[k].source);
         let mut seen = std::collections::HashSet::from([from]);
         let mut queue = std::collections::VecDeque::from([from]);
         while let Some(s) = queue.pop_front() {
-            for &m in used.iter().filter(|&&m| m != k && Some(m) != without) {
-                let (a, b) = (links[m].target, links[m].source);
-                let next = if a == s {
-                    b
-                } else if b == s {
-                    a
-                } else {
-                    continue;
-                };
-                if seen.insert(next) {
+            for &(m, next) in around.get(&s).map_or(&[][..], Vec::as_slice) {
+                if Some(m) != without && seen.insert(next) {
                     queue.push_back(next);
                 }
             }
@@ -435,22 +434,32 @@ fn solve(
             })
             .collect();
         let variance_factor = if g.redundancy > 0 { g.chi2 / g.redundancy as f64 } else { 1.0 };
-        // The worst link, judged by the variance factor of the rest.
+        // Each scan's used links: one that is its scan's only link is never
+        // left out.
         let mut degree = vec![0usize; n];
         for &k in &used {
             degree[links[k].target] += 1;
             degree[links[k].source] += 1;
         }
-        let worst = used
+        // The links beyond the gate, the worst first, each judged by the
+        // variance factor of the rest.
+        let mut beyond: Vec<(usize, f64)> = used
             .iter()
             .zip(&chi2)
             .filter(|(k, _)| degree[links[**k].target] > 1 && degree[links[**k].source] > 1)
-            .max_by(|a, b| a.1.total_cmp(b.1));
-        if let Some((&k, &c)) = worst
-            && g.redundancy > 6
-        {
+            .map(|(&k, &c)| (k, c))
+            .collect();
+        beyond.sort_by(|a, b| b.1.total_cmp(&a.1));
+        // A cycle named on a kept link is this solution's.
+        for &k in &used {
+            links[k].cycle = None;
+        }
+        let mut left_out = false;
+        for (k, c) in beyond.into_iter().take_while(|_| g.redundancy > 6) {
             let rest = ((g.chi2 - c) / (g.redundancy - 6) as f64).max(1.0);
-            let found = cycle(&links, &used, k);
+            if c / rest <= config.gate_chi2 {
+                break;
+            }
             // Which link of a cycle is wrong only other cycles can tell: a
             // link in series with another (every cycle through one runs
             // through the other: a triangle's, a ring's) is left out only
@@ -458,21 +467,25 @@ fn solve(
             // somewhere and the verification names where. A statistical
             // miss there is the links' common error, which the variance
             // factor carries (the 3DTK triangle's long link, 22.9 > 22.5,
-            // left out moved the other two 0.4°).
+            // left out moved the other two 0.4°): it is kept, its cycle
+            // named, and the next link beyond the gate is judged.
+            let found = cycle(&links, &used, k);
             let gross = found.as_ref().is_some_and(|f| {
                 f.angle_rad > MAX_TURN_RAD || f.translation_m > MAX_RELATIVE_MOTION * shape[links[k].source].1
             });
-            if c / rest > config.gate_chi2 {
-                links[k].cycle = found;
-                if gross || identifiable(&links, &used, k) {
-                    links[k].rejected = Some(format!(
-                        "disagrees with the other links (χ² = {:.1} > {:.1} after the variance factor {rest:.3})",
-                        c / rest,
-                        config.gate_chi2
-                    ));
-                    continue;
-                }
+            links[k].cycle = found;
+            if gross || identifiable(&links, &used, k) {
+                links[k].rejected = Some(format!(
+                    "disagrees with the other links (χ² = {:.1} > {:.1} after the variance factor {rest:.3})",
+                    c / rest,
+                    config.gate_chi2
+                ));
+                left_out = true;
+                break;
             }
+        }
+        if left_out {
+            continue;
         }
         // Each scan's information from its links, in its own frame, analysed
         // about its points' centroid (frame-free) — only when blind
