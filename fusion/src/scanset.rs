@@ -63,7 +63,7 @@ pub struct SetConfig {
     /// At the finest stage, leave out pairs whose source point lies beyond
     /// what the target sampled around its partner
     /// ([`crate::icp::IcpConfig::only_covered`]). Default false: on the
-    /// room's 150° wedges it brings the error from 1.1 mm to 0.4 mm, but
+    /// room's 150° wedges it brings the error from 1.2 mm to 0.4 mm, but
     /// it left the simulated corridor's 77 scans 11.6 mm RMS from the
     /// truth along the axis, against 6.6 mm without it (BENCHMARKS,
     /// "Matching both ways, and where the overlap ends").
@@ -204,8 +204,8 @@ pub enum Trigger {
 /// 3.2° off together, 0.45 m of motion, σ̂₀² = 64; without the first stage
 /// 0.001° off, σ̂₀² = 0.18). Right registrations of parts of one scan give
 /// 0.01–0.57; real sets of different viewpoints may give more (the 3DTK
-/// set 114), where the restart costs its finer stages once more and is
-/// kept only by the disagreement rule ([`RESTART_RATIO`]).
+/// set about 100), where the restart costs its finer stages once more and
+/// is kept only by the disagreement rule ([`RESTART_RATIO`]).
 pub const RESTART_VARIANCE_FACTOR: f64 = 1.0;
 
 /// The restart is kept when the first registration's poses put points in
@@ -222,9 +222,9 @@ pub const RESTART_VARIANCE_FACTOR: f64 = 1.0;
 /// uncertainty, disagreeing 1.02× less — a nearby minimum, not a rescue.
 pub const RESTART_RATIO: f64 = 1.5;
 
-/// Whether a restart after a schedule that moved a scan beyond the
-/// second stage's reach, or put points in free space (`impossible`), is
-/// the result: when the schedule's result was impossible and the
+/// Whether a restart set off by the schedule's result ([`Trigger`]:
+/// moved, impossible — points in free space —, or disagreeing) is the
+/// result: when the schedule's result was impossible and the
 /// verification names nothing of the restart's (`named_after`, verified
 /// only then), or when the schedule's disagreement (`before`, m² a point)
 /// is more than [`RESTART_RATIO`] times the restart's (`after`; `None`
