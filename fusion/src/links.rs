@@ -455,7 +455,10 @@ fn solve(
             links[k].cycle = None;
         }
         let mut left_out = false;
-        for (k, c) in beyond.into_iter().take_while(|_| g.redundancy > 6) {
+        if g.redundancy <= 6 {
+            beyond.clear();
+        }
+        for (k, c) in beyond {
             let rest = ((g.chi2 - c) / (g.redundancy - 6) as f64).max(1.0);
             if c / rest <= config.gate_chi2 {
                 break;

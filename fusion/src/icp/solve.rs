@@ -277,16 +277,9 @@ fn align_impl(
         };
         let last = estimate;
         estimate = update * estimate;
-        // T_new·p − T_last·p = (R_new − R_last)·p + (t_new − t_last).
-        let step = estimate * last.inverse();
-        moved = Some((step.rotation.angle(), (estimate.translation.vector - last.translation.vector).norm()));
+        moved = Some(motion(&estimate, &last));
         if reverse.is_some() {
-            let (inverse, last_inverse) = (estimate.inverse(), last.inverse());
-            let back_step = inverse * last_inverse.inverse();
-            back_moved = Some((
-                back_step.rotation.angle(),
-                (inverse.translation.vector - last_inverse.translation.vector).norm(),
-            ));
+            back_moved = Some(motion(&estimate.inverse(), &last.inverse()));
         }
         iterations += 1;
         if config.trace {
@@ -321,6 +314,14 @@ fn align_impl(
         trace,
         unobservable,
     })
+}
+
+/// How `now` moved from `last` (both `target_from_source`), as a pass's
+/// distance bounds need it: (the turn of `now · last⁻¹`, the translations'
+/// difference) — T_now·p − T_last·p = (R_now − R_last)·p + (t_now − t_last),
+/// so a point p moved by at most turn·|p| + difference.
+fn motion(now: &Isometry3<f64>, last: &Isometry3<f64>) -> (f64, f64) {
+    ((now * last.inverse()).rotation.angle(), (now.translation.vector - last.translation.vector).norm())
 }
 
 /// σ̂² per scalar residual: point-to-plane has one per pair, point-to-point three.

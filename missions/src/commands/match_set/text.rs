@@ -55,9 +55,10 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
             }
         };
         let why = match (r.trigger.as_str(), r.moved_m, &r.schedule_error) {
-            ("disagreeing", ..) => {
-                "the schedule's links disagree more than their covariances allow (variance factor above 1)".into()
-            }
+            ("disagreeing", ..) => format!(
+                "the schedule's links disagree more than their covariances allow (variance factor above {})",
+                fusion::scanset::RESTART_VARIANCE_FACTOR
+            ),
             ("untrusted", ..) => format!(
                 "the schedule's poses put points in another scanner's free space (named: {})",
                 names(r.schedule_untrusted.as_deref().unwrap_or_default())
