@@ -30,8 +30,10 @@
 //!   solved again, while each of its scans keeps another link.
 //! - **Variance factor.** ICP's covariance treats point errors as
 //!   independent, and is optimistic; the adjustment's σ̂₀² = χ²/redundancy
-//!   (when there is redundancy and it exceeds 1) scales every pose's
-//!   covariance.
+//!   of the links (when there is redundancy and it exceeds 1) scales
+//!   their covariance — not the start's steps', which hold only what no
+//!   link sees. The redundancy is the links' own: 6 per link less 6 per
+//!   scan they place.
 
 use nalgebra::{Isometry3, Matrix6, Point3, Vector6};
 use rayon::prelude::*;
@@ -155,7 +157,10 @@ pub struct Cycle {
     /// The turn between the path's `target_from_source` and the link's,
     /// radians.
     pub angle_rad: f64,
-    /// Their translations' difference, metres.
+    /// How far their difference moves the source's points: the
+    /// displacement of the points' centroid, metres — frame-free, as the
+    /// verification's motion ([`crate::verify`]): at the scan's origin a
+    /// scan seen from 60 m turned a 2° miss into half a metre.
     pub translation_m: f64,
 }
 
@@ -165,8 +170,9 @@ pub struct LinkGraph {
     /// Every scan's adjusted `world_from_scan`; scan 0 stays at its pose.
     pub world_from_scan: Vec<Isometry3<f64>>,
     /// Each pose's 6×6 covariance (ξ = (ω, v), left perturbation, world
-    /// frame) relative to scan 0 (zero: it is the frame), scaled by the
-    /// variance factor when it exceeds 1.
+    /// frame) relative to scan 0 (zero: it is the frame), the links'
+    /// information scaled down by the variance factor when it exceeds 1
+    /// (the start's steps, which hold what no link sees, are not).
     pub covariance: Vec<Matrix6<f64>>,
     /// Every candidate pair, used or not, in order of (source, target).
     pub links: Vec<Link>,
@@ -174,9 +180,11 @@ pub struct LinkGraph {
     /// frame), by the ICP settings' `degeneracy_ratio` (none without it):
     /// held by the start's increments.
     pub unobservable: Vec<Vec<Vector6<f64>>>,
-    /// σ̂₀² = χ² / redundancy of the final adjustment (1 without redundancy).
+    /// σ̂₀² = χ² / redundancy of the used links in the final adjustment
+    /// (1 without redundancy).
     pub variance_factor: f64,
-    /// Redundancy of the final adjustment.
+    /// The used links' redundancy: 6 per link less 6 per scan they place
+    /// (the start's steps take no part).
     pub redundancy: usize,
 }
 
@@ -320,8 +328,9 @@ pub(crate) fn pair_links(
 
 /// The shortest path of `used` links other than `k` from link `k`'s target
 /// to its source (breadth first), and how its composed transform and the
-/// link's disagree; `None` when no such path exists.
-fn cycle(links: &[Link], used: &[usize], k: usize) -> Option<Cycle> {
+/// link's disagree at `centroid` (of the source's points, in its frame);
+/// `None` when no such path exists.
+fn cycle(links: &[Link], used: &[usize], k: usize, centroid: &Point3<f64>) -> Option<Cycle> {
     let (from, to) = (links[k].target, links[k].source);
     // Each scan reached: (the scan it was reached from, target_from_this).
     let mut reached: std::collections::HashMap<usize, (usize, Isometry3<f64>)> = std::collections::HashMap::new();
@@ -359,7 +368,7 @@ fn cycle(links: &[Link], used: &[usize], k: usize) -> Option<Cycle> {
     scans.reverse();
     let link = links[k].result.as_ref()?.target_from_source;
     let d = path_pose.inverse() * link;
-    Some(Cycle { scans, angle_rad: d.rotation.angle(), translation_m: d.translation.vector.norm() })
+    Some(Cycle { scans, angle_rad: d.rotation.angle(), translation_m: (d * centroid - centroid).norm() })
 }
 
 /// Whether the `used` links other than `k` tell whether link `k` is the
@@ -390,14 +399,14 @@ fn identifiable(links: &[Link], used: &[usize], k: usize) -> bool {
     joined(None) && used.iter().filter(|&&m| m != k).all(|&m| joined(Some(m)))
 }
 
-/// Adjusts the accepted links, leaving out outliers one at a time.
-fn solve(
+/// What holds a graph of `poses`' scans besides its links: scan 0's
+/// prior at its pose (1 µm / 1 µrad: it holds the frame), and consecutive
+/// scans tied by the increments of `starts` with the step information.
+fn frame_and_steps(
     poses: &[Isometry3<f64>],
     starts: &[Isometry3<f64>],
-    mut links: Vec<Link>,
-    shape: &[(Point3<f64>, f64)],
     config: &LinkConfig,
-) -> Result<LinkGraph> {
+) -> (Vec<Option<Prior>>, Vec<Edge>) {
     let n = poses.len();
     let step_information = config.step_information();
     let steps: Vec<Edge> = (1..n)
@@ -408,9 +417,76 @@ fn solve(
             information: step_information,
         })
         .collect();
-    // Scan 0 holds the frame: a prior of 1 µm / 1 µrad.
     let mut priors = vec![None; n];
-    priors[0] = Some(Prior { target_from_source: poses[0], information: Matrix6::identity() * 1e12 });
+    if let Some(first) = poses.first() {
+        priors[0] = Some(Prior { target_from_source: *first, information: Matrix6::identity() * 1e12 });
+    }
+    (priors, steps)
+}
+
+/// The variance factor σ̂₀² = χ²/redundancy (1 without redundancy) of
+/// `edges` — relative measurements between the scans at `poses`, e.g. the
+/// verification's matches ([`crate::verify::PairCheck::edge`]) — adjusted
+/// from `poses` as [`adjust`] adjusts its links, the poses' own increments
+/// holding what no edge sees: how much more the measurements disagree
+/// with one another than their information allows, whichever strategy
+/// placed the scans.
+pub fn variance_factor(poses: &[Isometry3<f64>], edges: &[Edge], config: &LinkConfig) -> Result<f64> {
+    let (priors, mut all) = frame_and_steps(poses, poses, config);
+    all.extend_from_slice(edges);
+    let g = crate::graph::optimize(poses, &priors, &all, 20)?;
+    let chi2: f64 = edges.iter().map(|e| edge_chi2(&g.world_from_scan, e)).sum();
+    let redundancy = link_redundancy(poses.len(), edges.iter().map(|e| (e.target, e.source)));
+    Ok(if redundancy > 0 { chi2 / redundancy as f64 } else { 1.0 })
+}
+
+/// An edge's χ² at `poses`: eᵀ·I·e, e its measurement's departure from
+/// the poses' relative pose.
+fn edge_chi2(poses: &[Isometry3<f64>], e: &Edge) -> f64 {
+    let predicted = poses[e.target].inverse() * poses[e.source];
+    let d = left_difference(&predicted, &e.target_from_source);
+    (d.transpose() * e.information * d)[(0, 0)]
+}
+
+/// The redundancy of links between `n` scans (`pairs`: each link's two
+/// scans): 6 per link less 6 per scan they place — all but one scan of
+/// each set of scans the links join. The start's steps, which hold only
+/// what no link sees, are no part of it: counted as observations (6 per
+/// step, with χ² near 0: a step's σ is far wider than the poses move) they
+/// made the variance factor of a triangle of links a third of their χ²
+/// per degree of freedom, and of a chain with no cycle a small number
+/// where there is nothing to judge.
+fn link_redundancy(n: usize, pairs: impl Iterator<Item = (usize, usize)>) -> usize {
+    let mut part: Vec<usize> = (0..n).collect();
+    fn root(part: &mut [usize], mut i: usize) -> usize {
+        while part[i] != i {
+            part[i] = part[part[i]];
+            i = part[i];
+        }
+        i
+    }
+    let (mut links, mut placed) = (0, 0);
+    for (a, b) in pairs {
+        links += 1;
+        let (ra, rb) = (root(&mut part, a), root(&mut part, b));
+        if ra != rb {
+            part[ra] = rb;
+            placed += 1;
+        }
+    }
+    6 * (links - placed)
+}
+
+/// Adjusts the accepted links, leaving out outliers one at a time.
+fn solve(
+    poses: &[Isometry3<f64>],
+    starts: &[Isometry3<f64>],
+    mut links: Vec<Link>,
+    shape: &[(Point3<f64>, f64)],
+    config: &LinkConfig,
+) -> Result<LinkGraph> {
+    let n = poses.len();
+    let (priors, steps) = frame_and_steps(poses, starts, config);
     loop {
         let used: Vec<usize> = (0..links.len()).filter(|&k| links[k].rejected.is_none()).collect();
         let mut edges = steps.clone();
@@ -424,16 +500,10 @@ fn solve(
             }
         }));
         let g = crate::graph::optimize(poses, &priors, &edges, 20)?;
-        let chi2: Vec<f64> = used
-            .iter()
-            .map(|&k| {
-                let (l, r) = (&links[k], links[k].result.as_ref().expect("accepted"));
-                let predicted = g.world_from_scan[l.target].inverse() * g.world_from_scan[l.source];
-                let e = left_difference(&predicted, &r.target_from_source);
-                (e.transpose() * r.information * e)[(0, 0)]
-            })
-            .collect();
-        let variance_factor = if g.redundancy > 0 { g.chi2 / g.redundancy as f64 } else { 1.0 };
+        let chi2: Vec<f64> = edges[steps.len()..].iter().map(|e| edge_chi2(&g.world_from_scan, e)).collect();
+        let total: f64 = chi2.iter().sum();
+        let redundancy = link_redundancy(n, used.iter().map(|&k| (links[k].target, links[k].source)));
+        let variance_factor = if redundancy > 0 { total / redundancy as f64 } else { 1.0 };
         // Each scan's used links: one that is its scan's only link is never
         // left out.
         let mut degree = vec![0usize; n];
@@ -455,13 +525,24 @@ fn solve(
             links[k].cycle = None;
         }
         let mut left_out = false;
-        if g.redundancy <= 6 {
+        // Without a cycle there is nothing to judge; with one alone, only
+        // a gross miss (below).
+        if redundancy < 6 {
             beyond.clear();
         }
+        // The scan pairs along the cycles kept links have named: a link in
+        // series on one of them misses by that same cycle, named once.
+        let mut named: Vec<[usize; 2]> = Vec::new();
+        let pair = |a: usize, b: usize| [a.min(b), a.max(b)];
         for (k, c) in beyond {
-            let rest = ((g.chi2 - c) / (g.redundancy - 6) as f64).max(1.0);
+            let rest = if redundancy > 6 { ((total - c) / (redundancy - 6) as f64).max(1.0) } else { 1.0 };
             if c / rest <= config.gate_chi2 {
                 break;
+            }
+            let (target, source) = (links[k].target, links[k].source);
+            let told = identifiable(&links, &used, k);
+            if !told && named.contains(&pair(target, source)) {
+                continue;
             }
             // Which link of a cycle is wrong only other cycles can tell: a
             // link in series with another (every cycle through one runs
@@ -472,12 +553,16 @@ fn solve(
             // factor carries (the 3DTK triangle's long link, 22.9 > 22.5,
             // left out moved the other two 0.4°): it is kept, its cycle
             // named, and the next link beyond the gate is judged.
-            let found = cycle(&links, &used, k);
-            let gross = found.as_ref().is_some_and(|f| {
-                f.angle_rad > MAX_TURN_RAD || f.translation_m > MAX_RELATIVE_MOTION * shape[links[k].source].1
-            });
+            let found = cycle(&links, &used, k, &shape[source].0);
+            let gross = found
+                .as_ref()
+                .is_some_and(|f| f.angle_rad > MAX_TURN_RAD || f.translation_m > MAX_RELATIVE_MOTION * shape[source].1);
+            if let Some(f) = &found {
+                named.extend(f.scans.windows(2).map(|w| pair(w[0], w[1])));
+                named.push(pair(target, source));
+            }
             links[k].cycle = found;
-            if gross || identifiable(&links, &used, k) {
+            if gross || told {
                 links[k].rejected = Some(format!(
                     "disagrees with the other links (χ² = {:.1} > {:.1} after the variance factor {rest:.3})",
                     c / rest,
@@ -519,22 +604,31 @@ fn solve(
                 })
                 .collect(),
         };
-        let scale = variance_factor.max(1.0);
+        // σ̂₀² above 1 scales the links' information, not the start's
+        // steps: along what no link sees the σ stays the start's.
+        let covariance = if variance_factor > 1.0 {
+            let mut scaled = steps.clone();
+            scaled.extend(
+                edges[steps.len()..].iter().map(|e| Edge { information: e.information / variance_factor, ..*e }),
+            );
+            crate::graph::optimize(&g.world_from_scan, &priors, &scaled, 1)?.covariance
+        } else {
+            g.covariance
+        };
         // Scan 0's prior leaves it within 1e-20 m of its pose: put it there.
         let shift = poses[0] * g.world_from_scan[0].inverse();
         return Ok(LinkGraph {
             world_from_scan: g.world_from_scan.iter().map(|p| shift * p).collect(),
             // Scan 0 is the frame: the others' covariances are relative to it.
-            covariance: g
-                .covariance
+            covariance: covariance
                 .into_iter()
                 .enumerate()
-                .map(|(i, c)| if i == 0 { Matrix6::zeros() } else { c * scale })
+                .map(|(i, c)| if i == 0 { Matrix6::zeros() } else { c })
                 .collect(),
             links,
             unobservable,
             variance_factor,
-            redundancy: g.redundancy,
+            redundancy,
         });
     }
 }
@@ -567,5 +661,63 @@ mod tests {
         assert!(!identifiable(&all, &[0, 2, 3, 5], 0));
         let bridged = links(&[(0, 1), (1, 2), (0, 2), (2, 3)]);
         assert!(!identifiable(&bridged, &[0, 1, 2, 3], 3));
+    }
+
+    /// Links measured with exactly the noise their information states give
+    /// a variance factor whose mean is 1 (Monte Carlo): the redundancy is
+    /// the links' — counting the start's steps as observations halved it
+    /// on four fully linked scans. A tree of links has none: its factor is
+    /// 1 whatever the measurements.
+    #[test]
+    fn the_variance_factor_of_honest_links_is_one_on_average() {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, StandardNormal};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(38);
+        let truth: Vec<Isometry3<f64>> = (0..4)
+            .map(|i| {
+                let i = f64::from(i);
+                crate::se3::exp(&Vector6::new(0.1 * i, -0.05 * i, 0.3 * i, 2.0 * i, 0.5 * i, -0.2 * i))
+            })
+            .collect();
+        // Each link's covariance: σ 1 mrad and 2–4 mm, correlated.
+        let sigma = |k: usize| {
+            let k = k as f64;
+            let mut l = nalgebra::Matrix6::from_diagonal(&Vector6::new(1e-3, 1e-3, 1e-3, 2e-3 + 4e-4 * k, 3e-3, 4e-3));
+            l[(4, 0)] = 1e-3;
+            l[(5, 1)] = -5e-4;
+            l
+        };
+        let pairs = [(0, 1), (0, 2), (1, 2), (0, 3), (1, 3), (2, 3)];
+        assert_eq!(link_redundancy(4, pairs.iter().copied()), 18);
+        assert_eq!(link_redundancy(4, pairs[..3].iter().copied()), 6);
+        assert_eq!(link_redundancy(5, pairs[..2].iter().chain(&[(3, 4)]).copied()), 0);
+        let config = LinkConfig::default();
+        let measured = |rng: &mut rand_chacha::ChaCha8Rng, pairs: &[(usize, usize)]| -> Vec<Edge> {
+            pairs
+                .iter()
+                .enumerate()
+                .map(|(k, &(t, s))| {
+                    let l = sigma(k);
+                    let z = Vector6::from_fn(|_, _| StandardNormal.sample(rng));
+                    let exact = truth[t].inverse() * truth[s];
+                    Edge {
+                        target: t,
+                        source: s,
+                        target_from_source: crate::se3::exp(&(l * z)) * exact,
+                        information: (l * l.transpose()).try_inverse().expect("positive definite"),
+                    }
+                })
+                .collect()
+        };
+        let trials = 400;
+        let mean = (0..trials)
+            .map(|_| variance_factor(&truth, &measured(&mut rng, &pairs), &config).expect("adjusted"))
+            .sum::<f64>()
+            / f64::from(trials);
+        // σ of the mean: √(2/18/400) = 0.017.
+        assert!((mean - 1.0).abs() < 0.06, "mean variance factor {mean}");
+        let tree = [(0, 1), (1, 2), (1, 3)];
+        let f = variance_factor(&truth, &measured(&mut rng, &tree), &config).expect("adjusted");
+        assert_eq!(f, 1.0);
     }
 }

@@ -107,7 +107,9 @@ pub struct SetResult {
     /// Each pose's 6×6 covariance (ξ = (ω, v), left perturbation, world
     /// frame): the link graph's, or for the other modes the last match's
     /// (its partners held) with the start's step σ along what it cannot
-    /// see, plus its partners' (their mean); zero for the first scan.
+    /// see, plus its partners' (their mean); the matches' information
+    /// scaled down by the variance factor when above 1; zero for the first
+    /// scan.
     pub covariance: Vec<Matrix6<f64>>,
     /// Each scan's directions the matches do not see (unit ξ, world frame).
     pub unobservable: Vec<Vec<Vector6<f64>>>,
@@ -118,7 +120,11 @@ pub struct SetResult {
     pub matches: usize,
     /// False when a simultaneous queue was abandoned at its cap.
     pub settled: bool,
-    /// The link graph's variance factor (graph mode).
+    /// The set's variance factor σ̂₀²: the link graph's, or in the other
+    /// modes that of the verification's matches adjusted together from the
+    /// final poses ([`crate::links::variance_factor`]); above 1 it has
+    /// scaled the covariances. `None` before the verification (other
+    /// modes) or without a pair to verify.
     pub variance_factor: Option<f64>,
     /// Each stage of the schedule: its matches and time.
     pub stages: Vec<StageRun>,
@@ -192,20 +198,22 @@ pub enum Trigger {
     /// (and moved no scan beyond the second stage's reach).
     Untrusted,
     /// The schedule's links disagree with one another more than their own
-    /// covariances allow (the graph's variance factor above
+    /// covariances allow (the set's variance factor — the link graph's, or
+    /// the verification's matches' in the other modes — above
     /// [`RESTART_VARIANCE_FACTOR`]), and nothing above set it off.
     Disagreeing,
 }
 
-/// A graph whose variance factor σ̂₀² is above this sets off a restart
+/// A set whose variance factor σ̂₀² is above this sets off a restart
 /// ([`Trigger::Disagreeing`]): its links disagree more than they should,
 /// as when the first stage dragged scans into a wrong fit within the
 /// second stage's reach (small_gicp's street cut into wedges: three wedges
-/// 3.2° off together, 0.45 m of motion, σ̂₀² = 64; without the first stage
-/// 0.001° off, σ̂₀² = 0.18). Right registrations of parts of one scan give
-/// 0.01–0.57; real sets of different viewpoints may give more (the 3DTK
-/// set about 100), where the restart costs its finer stages once more and
-/// is kept only by the disagreement rule ([`RESTART_RATIO`]).
+/// 3.1–3.2° off together, 0.45–0.71 m of motion, in graph and in pairwise
+/// mode; without the first stage 0.001–0.04° off). Right registrations of
+/// parts of one scan give 0.03–0.8 on shares and up to 5.7 on wedges;
+/// real sets of different viewpoints more (the 3DTK set about 370), where
+/// the restart costs its finer stages once more and is kept only by the
+/// disagreement rule ([`RESTART_RATIO`]).
 pub const RESTART_VARIANCE_FACTOR: f64 = 1.0;
 
 /// The restart is kept when the first registration's poses put points in
@@ -300,10 +308,21 @@ pub fn register_set<S: AsRef<[Point3<f32>]> + Sync>(
     Ok(into_world(r, &world_from_first, config.mode == Mode::Graph))
 }
 
-/// `r` with its verification ([`verify_set`]) and the time it took.
+/// `r` with its verification ([`verify_set`]) and the time it took; in
+/// the modes without a link graph also with the variance factor of the
+/// verification's matches ([`crate::links::variance_factor`]), which
+/// scales the covariances when above 1, as the link graph's does.
 fn verified<S: AsRef<[Point3<f32>]> + Sync>(scans: &[S], mut r: SetResult, config: &SetConfig) -> Result<SetResult> {
     let started = std::time::Instant::now();
     r.checks = verify_set(scans, &r.world_from_scan, config)?;
+    if config.mode != Mode::Graph && !r.checks.is_empty() {
+        let edges: Vec<crate::graph::Edge> = r.checks.iter().filter_map(|c| c.edge).collect();
+        let f = crate::links::variance_factor(&r.world_from_scan, &edges, &config.link)?;
+        r.variance_factor = Some(f);
+        if f > 1.0 {
+            r.covariance = placed_covariances(scans.len(), &r.links, &config.link.step_information(), f);
+        }
+    }
     r.check_seconds = started.elapsed().as_secs_f64();
     Ok(r)
 }
@@ -585,30 +604,8 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
         return Ok(from_graph(g, matches, settled, runs));
     }
     let last = last.expect("at least one stage");
-    let step = config.link.step_information();
     let n = scans.len();
-    let mut covariance: Vec<Matrix6<f64>> = (0..n)
-        .map(|i| match &last.last_match[i] {
-            None => Matrix6::zeros(),
-            Some(m) => m.covariance_held(&step),
-        })
-        .collect();
-    // A scan is placed on its partners, which are uncertain themselves: to
-    // first order (independent errors, world-frame left perturbations) a
-    // partner's error moves the scan with it, so its covariance adds to
-    // the match's — the mean over several partners (a metascan's), in
-    // scan order (a later partner, in simultaneous mode, with its own
-    // match's alone). The match's alone made the single-strategy modes'
-    // covariances 10–100× optimistic on chains of partial overlaps (mean
-    // NEES 86–1,100 on wedges, BENCHMARKS).
-    for i in 1..n {
-        let partners = &last.partners[i];
-        if last.last_match[i].is_some() && !partners.is_empty() {
-            let inherited = partners.iter().map(|&p| covariance[p]).sum::<Matrix6<f64>>() / partners.len() as f64;
-            covariance[i] += inherited;
-        }
-    }
-    let links = (0..n)
+    let links: Vec<SetLink> = (0..n)
         .filter_map(|i| {
             last.last_match[i].as_ref().map(|m| SetLink {
                 source: i,
@@ -620,6 +617,7 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
             })
         })
         .collect();
+    let covariance = placed_covariances(n, &links, &config.link.step_information(), 1.0);
     Ok(SetResult {
         world_from_scan: poses,
         covariance,
@@ -637,6 +635,36 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
         check_seconds: 0.0,
         restart: None,
     })
+}
+
+/// The covariances of `n` scans each placed by its last match (`links`:
+/// the modes without a link graph), its information scaled down by
+/// `factor` (a variance factor, 1 for none) and the start's step
+/// information `step` holding what it cannot see, plus its partners'. A
+/// scan is placed on its partners, which are uncertain themselves: to
+/// first order (independent errors, world-frame left perturbations) a
+/// partner's error moves the scan with it, so its covariance adds to the
+/// match's — the mean over several partners (a metascan's), in scan order
+/// (a later partner, in simultaneous mode, with its own match's alone).
+/// The match's alone made the single-strategy modes' covariances 10–100×
+/// optimistic on chains of partial overlaps (mean NEES 86–1,100 on
+/// wedges, BENCHMARKS).
+fn placed_covariances(n: usize, links: &[SetLink], step: &Matrix6<f64>, factor: f64) -> Vec<Matrix6<f64>> {
+    let mut covariance = vec![Matrix6::zeros(); n];
+    // (I/f + held)⁻¹ = f·(I + f·held)⁻¹ along the directions the match
+    // sees and the start's step σ along those it cannot.
+    let held = step * factor;
+    for l in links {
+        if let Some(m) = &l.result {
+            covariance[l.source] = m.covariance_held(&held) * factor;
+        }
+    }
+    // Scan 0 holds the frame: it inherits nothing.
+    for l in links.iter().filter(|l| l.source > 0 && l.result.is_some() && !l.targets.is_empty()) {
+        let inherited = l.targets.iter().map(|&p| covariance[p]).sum::<Matrix6<f64>>() / l.targets.len() as f64;
+        covariance[l.source] += inherited;
+    }
+    covariance
 }
 
 fn from_graph(g: LinkGraph, matches: usize, settled: bool, stages: Vec<StageRun>) -> SetResult {

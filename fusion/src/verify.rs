@@ -34,6 +34,7 @@ use rayon::prelude::*;
 
 use crate::error::Result;
 use crate::free_space::{FreeSpace, MAX_VIOLATION_SHARE, View};
+use crate::graph::Edge;
 use crate::icp::degeneracy::{Observability, centroid_and_lever_arm};
 use crate::links::{LinkConfig, pair_links};
 pub use crate::links::{MAX_RELATIVE_MOTION, MAX_TURN_RAD};
@@ -85,6 +86,12 @@ pub struct PairCheck {
     /// The free-space test from the pair's scanner whose view the other
     /// scan violates most; `None` when neither scanner's position is known.
     pub free_space: Option<FreeSpace>,
+    /// The match as a relative measurement (its `target_from_source` and
+    /// information), when it is one a link graph would use: it converged
+    /// with more than `min_pairs` correspondences. The set's variance
+    /// factor in the modes without a link graph is theirs
+    /// ([`crate::links::variance_factor`]).
+    pub edge: Option<Edge>,
 }
 
 impl PairCheck {
@@ -174,6 +181,12 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
                     moved <= tolerance_m || (seen <= MAX_RELATIVE_MOTION * radius && angle <= MAX_TURN_RAD)
                 }),
                 free_space,
+                edge: l.result.as_ref().filter(|_| l.rejected.is_none()).map(|r| Edge {
+                    target: l.target,
+                    source: l.source,
+                    target_from_source: r.target_from_source,
+                    information: r.information,
+                }),
             };
             check.consistent &= !check.violates_free_space();
             check

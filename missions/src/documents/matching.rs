@@ -20,7 +20,12 @@ pub struct MatchReport {
     pub links: Vec<Link>,
     /// ICP runs in all.
     pub matches: usize,
-    /// The link graph's variance factor σ̂₀² (graph mode).
+    /// The variance factor σ̂₀² = χ²/redundancy of the final links: the
+    /// link graph's in graph mode; in the other modes that of the
+    /// verification's matches (`checks`) adjusted together from the final
+    /// poses. The redundancy is the links' own: 6 per link less 6 per scan
+    /// they place. Above 1 it scales every covariance. Null when no pair
+    /// was verified (one scan, or no stage).
     pub variance_factor: Option<f64>,
     /// Registration time, seconds (reading the scans and writing excluded).
     pub seconds: f64,
@@ -168,8 +173,7 @@ pub struct RestartReport {
     /// second stage's reach of its start), "failed" (`schedule_error`),
     /// "untrusted" (the schedule's result put points in another scanner's
     /// free space) or "disagreeing" (the schedule's links disagree more
-    /// than their covariances allow: the graph's `variance_factor` above
-    /// 1).
+    /// than their covariances allow: `variance_factor` above 1).
     pub trigger: String,
     /// The scans the verification names at the schedule's poses (indices
     /// into `scans`); null when the schedule failed.

@@ -121,7 +121,8 @@ pub struct Cycle {
     pub scans: Vec<usize>,
     /// How far the path and the link disagree: the turn, degrees.
     pub angle_deg: f64,
-    /// … and the translation, metres.
+    /// … and how far that moves the source's points (their centroid's
+    /// displacement), metres.
     pub translation_m: f64,
 }
 
