@@ -24,8 +24,9 @@ pub struct MatchReport {
     /// link graph's in graph mode; in the other modes that of the
     /// verification's matches (`checks`) adjusted together from the final
     /// poses. The redundancy is the links' own: 6 per link less 6 per scan
-    /// they place. Above 1 it scales every covariance. Null when no pair
-    /// was verified (one scan, or no stage).
+    /// they place. Above 1 it scales the matches' information in every
+    /// covariance (not the start's steps, which hold what no match sees).
+    /// In the other modes null when no pair was verified (a single scan).
     pub variance_factor: Option<f64>,
     /// Registration time, seconds (reading the scans and writing excluded).
     pub seconds: f64,
