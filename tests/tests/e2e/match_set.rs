@@ -1272,11 +1272,11 @@ fn pairwise_wedges_dragged_together_land_by_the_disagreeing_restart() {
     let mut entries = Vec::new();
     for (k, (truth, start)) in truths.iter().zip(&starts).enumerate() {
         let name = format!("part{k}.ply");
-        // The bench's cut to the last point (which wedge holds the frame's
-        // 497 points at the scanner, (−0, 0, 0), decides whether the first
-        // stage drags them): azimuth within 75° of the centre, in double
-        // precision, signed zeros as NumPy's dot products leave them (+0:
-        // azimuth 0, not 180°).
+        // The bench's cut to the last point (the frame holds 5,032 points
+        // at the scanner, (±0, ±0, 0), 497 with x = −0: which wedge holds
+        // those decides whether the first stage drags them): azimuth within
+        // 75° of the centre, in double precision, signed zeros as NumPy's
+        // dot products leave them (+0: azimuth 0, not ±180°).
         let centre = (78.035_497_933_699_5 + 90.0 * k as f64).to_radians();
         let wedge: Vec<Point3<f32>> = street
             .points
