@@ -435,17 +435,35 @@ pub fn variance_factor(poses: &[Isometry3<f64>], edges: &[Edge], config: &LinkCo
     let (priors, mut all) = frame_and_steps(poses, poses, config);
     all.extend_from_slice(edges);
     let g = crate::graph::optimize(poses, &priors, &all, 20)?;
-    let chi2: f64 = edges.iter().map(|e| edge_chi2(&g.world_from_scan, e)).sum();
-    let redundancy = link_redundancy(poses.len(), edges.iter().map(|e| (e.target, e.source)));
-    Ok(if redundancy > 0 { chi2 / redundancy as f64 } else { 1.0 })
+    Ok(judged(&g.world_from_scan, edges).variance_factor)
 }
 
-/// An edge's χ² at `poses`: eᵀ·I·e, e its measurement's departure from
-/// the poses' relative pose.
-fn edge_chi2(poses: &[Isometry3<f64>], e: &Edge) -> f64 {
-    let predicted = poses[e.target].inverse() * poses[e.source];
-    let d = left_difference(&predicted, &e.target_from_source);
-    (d.transpose() * e.information * d)[(0, 0)]
+/// Links (as graph edges) judged at their adjusted `poses`.
+struct Judged {
+    /// Each link's χ²: eᵀ·I·e, e its measurement's departure from the
+    /// poses' relative pose.
+    chi2: Vec<f64>,
+    /// Their sum.
+    total: f64,
+    /// The links' redundancy ([`link_redundancy`]).
+    redundancy: usize,
+    /// σ̂₀² = total / redundancy; 1 without redundancy.
+    variance_factor: f64,
+}
+
+fn judged(poses: &[Isometry3<f64>], links: &[Edge]) -> Judged {
+    let chi2: Vec<f64> = links
+        .iter()
+        .map(|e| {
+            let predicted = poses[e.target].inverse() * poses[e.source];
+            let d = left_difference(&predicted, &e.target_from_source);
+            (d.transpose() * e.information * d)[(0, 0)]
+        })
+        .collect();
+    let total: f64 = chi2.iter().sum();
+    let redundancy = link_redundancy(poses.len(), links.iter().map(|e| (e.target, e.source)));
+    let variance_factor = if redundancy > 0 { total / redundancy as f64 } else { 1.0 };
+    Judged { chi2, total, redundancy, variance_factor }
 }
 
 /// The redundancy of links between `n` scans (`pairs`: each link's two
@@ -500,10 +518,7 @@ fn solve(
             }
         }));
         let g = crate::graph::optimize(poses, &priors, &edges, 20)?;
-        let chi2: Vec<f64> = edges[steps.len()..].iter().map(|e| edge_chi2(&g.world_from_scan, e)).collect();
-        let total: f64 = chi2.iter().sum();
-        let redundancy = link_redundancy(n, used.iter().map(|&k| (links[k].target, links[k].source)));
-        let variance_factor = if redundancy > 0 { total / redundancy as f64 } else { 1.0 };
+        let Judged { chi2, total, redundancy, variance_factor } = judged(&g.world_from_scan, &edges[steps.len()..]);
         // Each scan's used links: one that is its scan's only link is never
         // left out.
         let mut degree = vec![0usize; n];

@@ -39,9 +39,8 @@ fn matrix_file(rel: &str) -> Matrix4<f64> {
 /// written into `dir`.
 fn room_odometry(dir: &Path) -> std::path::PathBuf {
     let odometry = matrix_file("pcl_room_scans/odometry_T_scan1_scan2.txt");
-    let rows: Vec<Vec<f64>> = (0..4).map(|r| (0..4).map(|c| odometry[(r, c)]).collect()).collect();
     let init = dir.join("init.json");
-    std::fs::write(&init, serde_json::json!([{ "file": "room_scan2.pcd", "world_from_scan": rows }]).to_string())
+    std::fs::write(&init, serde_json::json!([init_entry("room_scan2.pcd", &odometry)]).to_string())
         .expect("init poses");
     init
 }
@@ -416,9 +415,8 @@ fn three_dtk_copy(set: &Path, factor: f64, shift: nalgebra::Vector3<f64>) -> Vec
             .expect("PLY");
         let mut pose = scanner::io::read_3dtk_pose(Path::new(&data(&format!("3dtk_dat/{name}.pose")))).expect("pose");
         pose.translation.vector *= factor;
-        let m = (pose * nalgebra::Translation3::from(-shift)).to_homogeneous();
-        let rows: Vec<Vec<f64>> = (0..4).map(|r| (0..4).map(|c| m[(r, c)]).collect()).collect();
-        entries.push(serde_json::json!({ "file": format!("{name}.ply"), "world_from_scan": rows }));
+        entries
+            .push(init_entry(&format!("{name}.ply"), &(pose * nalgebra::Translation3::from(-shift)).to_homogeneous()));
         inputs.push(path.into_os_string());
     }
     let init = set.join("init.json");
@@ -644,9 +642,7 @@ fn a_set_at_national_grid_coordinates_reports_the_sigma_it_has_at_the_origin() {
         .map(|k| {
             let pose =
                 scanner::io::read_3dtk_pose(Path::new(&data(&format!("3dtk_dat/scan{k:03}.pose")))).expect("pose");
-            let m = (offset * pose).to_homogeneous();
-            let rows: Vec<Vec<f64>> = (0..4).map(|r| (0..4).map(|c| m[(r, c)]).collect()).collect();
-            serde_json::json!({ "file": format!("scan{k:03}.3d"), "world_from_scan": rows })
+            init_entry(&format!("scan{k:03}.3d"), &(offset * pose).to_homogeneous())
         })
         .collect();
     std::fs::write(&init, serde_json::to_string(&entries).expect("JSON")).expect("init poses");
@@ -799,10 +795,6 @@ fn match_writes_only_into_a_directory_of_its_own_and_leaves_nothing_stale() {
     assert_eq!(frames, ["room_scan1.frames", "room_scan2.frames"]);
 }
 
-/// Four 150° wedges of the PCL room scan, each overlapping the next by 60°
-/// (truth: one frame), written as PLY with starts `offset_m` and
-/// `offset_deg` off per wedge (deterministic directions); returns the
-/// inputs and the `--init-poses` file.
 /// The points of `cloud` whose azimuth about z lies within `width_deg`
 /// from `from_deg`, in the frame of `world_from_wedge` (`cloud` holds
 /// world coordinates), written as binary PLY to `path`.
@@ -814,21 +806,37 @@ fn write_wedge(
     world_from_wedge: &Isometry3<f64>,
 ) -> OsString {
     let (from, width) = (from_deg.to_radians(), width_deg.to_radians());
-    let wedge: Vec<Point3<f32>> = cloud
-        .points
-        .iter()
-        .filter(|p| (p.y.atan2(p.x) - from).rem_euclid(std::f32::consts::TAU) < width)
-        .map(|p| (world_from_wedge.inverse() * p.cast::<f64>()).cast::<f32>())
-        .collect();
+    let wedge = cloud.points.iter().filter(|p| (p.y.atan2(p.x) - from).rem_euclid(std::f32::consts::TAU) < width);
+    write_part(path, wedge, world_from_wedge)
+}
+
+/// `points` (world coordinates) in the frame of `world_from_part`, written
+/// as binary PLY to `path`.
+fn write_part<'a>(
+    path: &Path,
+    points: impl Iterator<Item = &'a Point3<f32>>,
+    world_from_part: &Isometry3<f64>,
+) -> OsString {
+    let part: Vec<Point3<f32>> = points.map(|p| (world_from_part.inverse() * p.cast::<f64>()).cast::<f32>()).collect();
     scanner::io::write(
         path,
-        &scanner::io::PointCloud::from_points(wedge),
+        &scanner::io::PointCloud::from_points(part),
         scanner::io::Format::Ply(scanner::io::PlyEncoding::BinaryLittleEndian),
     )
     .expect("PLY");
     path.as_os_str().to_owned()
 }
 
+/// One entry of an `--init-poses` file: `file` at `world_from_scan` (4×4).
+fn init_entry(file: &str, world_from_scan: &Matrix4<f64>) -> Value {
+    let rows: Vec<Vec<f64>> = (0..4).map(|r| (0..4).map(|c| world_from_scan[(r, c)]).collect()).collect();
+    serde_json::json!({ "file": file, "world_from_scan": rows })
+}
+
+/// Four 150° wedges of the PCL room scan, each overlapping the next by 60°
+/// (truth: one frame), written as PLY with starts `offset_m` and
+/// `offset_deg` off per wedge (deterministic directions); returns the
+/// inputs and the `--init-poses` file.
 fn room_wedges(dir: &Path, offset_m: f64, offset_deg: f64) -> Vec<OsString> {
     let room = scanner::io::read(Path::new(&data("pcl_room_scans/room_scan1.pcd"))).expect("room");
     std::fs::create_dir_all(dir).expect("dir");
@@ -849,9 +857,7 @@ fn room_wedges(dir: &Path, offset_m: f64, offset_deg: f64) -> Vec<OsString> {
                 ),
             )
         };
-        let m = start.to_homogeneous();
-        let rows: Vec<Vec<f64>> = (0..4).map(|r| (0..4).map(|c| m[(r, c)]).collect()).collect();
-        entries.push(serde_json::json!({ "file": name, "world_from_scan": rows }));
+        entries.push(init_entry(&name, &start.to_homogeneous()));
     }
     let init = dir.join("init.json");
     std::fs::write(&init, serde_json::to_string(&entries).expect("JSON")).expect("init");
@@ -1173,9 +1179,7 @@ fn street_wedges_that_the_coarse_stage_dragged_land_by_the_restart() {
                 ),
             );
             let start = if k == 0 { *truth } else { off * truth };
-            let m = start.to_homogeneous();
-            let rows: Vec<Vec<f64>> = (0..4).map(|r| (0..4).map(|c| m[(r, c)]).collect()).collect();
-            entries.push(serde_json::json!({ "file": name, "world_from_scan": rows }));
+            entries.push(init_entry(&name, &start.to_homogeneous()));
         }
         let init = set.join("init.json");
         std::fs::write(&init, serde_json::to_string(&entries).expect("JSON")).expect("init");
@@ -1278,23 +1282,12 @@ fn pairwise_wedges_dragged_together_land_by_the_disagreeing_restart() {
         // 75° of the centre, in double precision, signed zeros as NumPy's
         // dot products leave them (+0: azimuth 0, not ±180°).
         let centre = (78.035_497_933_699_5 + 90.0 * k as f64).to_radians();
-        let wedge: Vec<Point3<f32>> = street
-            .points
-            .iter()
-            .map(|p| p.cast::<f64>())
-            .filter(|p| {
-                let d = (p.y + 0.0).atan2(p.x + 0.0) - centre;
-                d.sin().atan2(d.cos()).abs() <= 75f64.to_radians()
-            })
-            .map(|p| (truth.inverse() * p).cast::<f32>())
-            .collect();
-        let path = dir.path().join(&name);
-        let ply = scanner::io::Format::Ply(scanner::io::PlyEncoding::BinaryLittleEndian);
-        scanner::io::write(&path, &scanner::io::PointCloud::from_points(wedge), ply).expect("PLY");
-        inputs.push(path.into_os_string());
-        let m = start.to_homogeneous();
-        let rows: Vec<Vec<f64>> = (0..4).map(|r| (0..4).map(|c| m[(r, c)]).collect()).collect();
-        entries.push(serde_json::json!({ "file": name, "world_from_scan": rows }));
+        let wedge = street.points.iter().filter(|p| {
+            let d = (f64::from(p.y) + 0.0).atan2(f64::from(p.x) + 0.0) - centre;
+            d.sin().atan2(d.cos()).abs() <= 75f64.to_radians()
+        });
+        inputs.push(write_part(&dir.path().join(&name), wedge, truth));
+        entries.push(init_entry(&name, &start.to_homogeneous()));
     }
     let init = dir.path().join("init.json");
     std::fs::write(&init, serde_json::to_string(&entries).expect("JSON")).expect("init");
@@ -1354,9 +1347,7 @@ fn a_links_blind_directions_are_in_the_worlds_axes_in_every_mode() {
         scanner::io::write(&path, &cloud, scanner::io::Format::Ply(scanner::io::PlyEncoding::BinaryLittleEndian))
             .expect("PLY");
         let pose = scanner::io::read_3dtk_pose(&scan.with_extension("pose")).expect("pose");
-        let m = (pose * turn.inverse()).to_homogeneous();
-        let rows: Vec<Vec<f64>> = (0..4).map(|r| (0..4).map(|c| m[(r, c)]).collect()).collect();
-        entries.push(serde_json::json!({ "file": format!("scan{k:03}.ply"), "world_from_scan": rows }));
+        entries.push(init_entry(&format!("scan{k:03}.ply"), &(pose * turn.inverse()).to_homogeneous()));
         inputs.push(path.into_os_string());
     }
     assert!(inputs.len() >= 5, "the sewer's scans: {}", inputs.len());
