@@ -4,7 +4,9 @@ A reference that is exact on real data: a real scan is cut into parts —
 its points dealt at random into disjoint shares (no point is in two
 parts, so each keeps its own noise), or wedges by azimuth (the first at a
 random azimuth each trial: fixed cuts gave the same parts every trial) that
-overlap their neighbours — and each part is put in a frame of its own
+overlap their neighbours, each point of an overlap dealt to one of its
+wedges (NEES_WEDGES=shared keeps it in both, as before session 29) — and
+each part is put in a frame of its own
 under a known random transform (turned up to ±45° about the vertical and
 ±2° about the others, moved up to 0.5 m). The starts are off by 0.1 m and
 2°. `match` registers the parts; for every part but the first (it holds
@@ -73,12 +75,25 @@ def wedges(xyz, up, k, width_deg, first_deg=0.0):
     e1 /= np.linalg.norm(e1)
     e2 = np.cross(up, e1)
     azimuth = np.arctan2(xyz @ e2, xyz @ e1)
-    parts = []
+    inside = []
     for j in range(k):
         d = azimuth - 2 * math.pi * j / k - math.radians(first_deg)
         d = np.arctan2(np.sin(d), np.cos(d))
-        parts.append(xyz[np.abs(d) <= math.radians(width_deg / 2)])
-    return parts
+        inside.append(np.abs(d) <= math.radians(width_deg / 2))
+    inside = np.array(inside)
+    if os.environ.get("NEES_WEDGES") == "shared":
+        return [xyz[inside[j]] for j in range(k)]
+    # A point where wedges overlap goes to one of them, picked by a hash of
+    # its index (a test can cut the same): two real scans never share a
+    # point (shared, the overlap's points were the same samples with the
+    # same noise in both wedges). Not the index modulo their number: the
+    # street's LiDAR stores its beams interleaved, and one wedge got the
+    # low beams of the overlap, the other the high — no common surface.
+    count = inside.sum(axis=0).astype(np.uint64)
+    h = (np.arange(len(xyz), dtype=np.uint64) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(32)
+    pick = ((h * np.maximum(count, np.uint64(1))) >> np.uint64(32)).astype(np.int64)
+    owner = inside & (np.cumsum(inside, axis=0) - 1 == pick)
+    return [xyz[owner[j]] for j in range(k)]
 
 
 def xi(estimate, truth):

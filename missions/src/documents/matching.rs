@@ -183,6 +183,24 @@ pub struct RestartReport {
     /// was not kept and not verified (only a restart from an impossible
     /// schedule's result, or a kept one, is).
     pub restart_untrusted: Option<Vec<usize>>,
+    /// The scans the schedule's and the restart's registrations place
+    /// apart (by more than 5 % of the scan's radius or 5°) when the scans'
+    /// disagreement prefers neither by 1.5×: the data cannot tell which is
+    /// right, so they are in `untrusted` (exit 1), and the registration the
+    /// scans agree with better is the result. Empty otherwise.
+    pub undecided: Vec<UndecidedReport>,
+}
+
+/// A scan two registrations of the set place apart ([`RestartReport::undecided`]).
+#[derive(Debug, Clone, Serialize, schemars::JsonSchema)]
+pub struct UndecidedReport {
+    /// Index into `scans`.
+    pub scan: usize,
+    /// How far apart: the displacement of its points' centroid plus the
+    /// turn times their RMS radius, metres.
+    pub apart_m: f64,
+    /// The turn between the two poses, degrees.
+    pub apart_deg: f64,
 }
 
 /// What the scans measured and the settings they were matched with.

@@ -85,6 +85,11 @@ pub(super) fn report(
             .into(),
             schedule_untrusted: x.untrusted.0.clone(),
             restart_untrusted: x.untrusted.1.clone(),
+            undecided: x
+                .undecided
+                .iter()
+                .map(|&(scan, apart_m, angle)| UndecidedReport { scan, apart_m, apart_deg: angle.to_degrees() })
+                .collect(),
         }),
         checks: r
             .checks
@@ -110,7 +115,15 @@ pub(super) fn report(
             })
             .collect(),
         check_seconds: r.check_seconds,
-        untrusted: fusion::verify::untrusted(scans.len(), &r.checks),
+        untrusted: {
+            // The verification's, and the scans two registrations place
+            // apart with nothing to choose between them.
+            let mut named = fusion::verify::untrusted(scans.len(), &r.checks);
+            named.extend(r.restart.iter().flat_map(|x| x.undecided.iter().map(|u| u.0)));
+            named.sort_unstable();
+            named.dedup();
+            named
+        },
         blind_without_start: Vec::new(),
     }
 }

@@ -105,6 +105,14 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
             report.scans[i].degenerate_directions.len()
         )?;
     }
+    for u in report.restart.iter().flat_map(|r| &r.undecided) {
+        writeln!(
+            out,
+            "  not trusted: {}: the schedule's and the restart's registrations place it {:.3} m, {:.2}° apart, and \
+             the scans agree with neither clearly better (1.5×): the data do not tell which is right",
+            scans[u.scan].name, u.apart_m, u.apart_deg
+        )?;
+    }
     let tolerance = report.stages.last().map_or(0.0, |s| s.voxel_m);
     for &i in &report.untrusted {
         let disagreeing = || report.checks.iter().filter(|c| !c.consistent && (c.source == i || c.target == i));
