@@ -187,8 +187,7 @@ pub struct Restart {
     /// The scans the schedule's and the restart's registrations place
     /// apart — by more than the verification lets a pair move
     /// ([`MAX_RELATIVE_MOTION`](crate::verify::MAX_RELATIVE_MOTION) of
-    /// the scan's radius, or [`MAX_TURN_RAD`](crate::verify::MAX_TURN_RAD))
-    /// — when the scans' disagreement prefers neither by
+    /// the scan's radius) — when the scans' disagreement prefers neither by
     /// [`RESTART_RATIO`]: (scan, how far apart in metres — the centroid's
     /// displacement plus the turn times the radius —, the turn in
     /// radians). The data cannot tell which registration is right, so
@@ -542,8 +541,9 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
 /// place apart by more than the verification lets a pair move: the
 /// points' centroid displaced plus the turn times their RMS radius beyond
 /// [`MAX_RELATIVE_MOTION`](crate::verify::MAX_RELATIVE_MOTION) of the
-/// radius, or a turn beyond [`MAX_TURN_RAD`](crate::verify::MAX_TURN_RAD);
-/// each with that motion (metres) and turn (radians).
+/// radius (a turn alone beyond 0.05 rad, within the verification's
+/// [`MAX_TURN_RAD`](crate::verify::MAX_TURN_RAD)); each with that motion
+/// (metres) and turn (radians).
 fn apart<S: AsRef<[Point3<f32>]> + Sync>(
     scans: &[S],
     a: &[Isometry3<f64>],
@@ -555,8 +555,7 @@ fn apart<S: AsRef<[Point3<f32>]> + Sync>(
             let delta = a[i].inverse() * b[i];
             let angle = delta.rotation.angle();
             let moved = (delta * c - c).norm() + angle * radius;
-            (moved > crate::verify::MAX_RELATIVE_MOTION * radius || angle > crate::verify::MAX_TURN_RAD)
-                .then_some((i, moved, angle))
+            (moved > crate::verify::MAX_RELATIVE_MOTION * radius).then_some((i, moved, angle))
         })
         .collect()
 }
@@ -789,5 +788,39 @@ mod tests {
         assert!(keeps_restart(true, Some(&[2]), 2.2e-2, Some(1.0e-2)));
         assert!(!keeps_restart(false, None, 1.0, None));
         assert!(!keeps_restart(true, Some(&[]), 1.0, None));
+    }
+
+    /// Two registrations place a scan apart when they move its points (the
+    /// centroid's displacement plus the turn times their RMS radius) by
+    /// more than 5 % of that radius — a turn alone beyond 0.05 rad; scan
+    /// 0, the frame, never.
+    #[test]
+    fn registrations_are_apart_beyond_what_a_reverified_pair_may_move() {
+        // A ring of radius 2 m about (10, 0, 0): RMS radius 2 m, 5 % = 0.1 m.
+        let ring: Vec<Point3<f32>> = (0..360)
+            .map(|k| {
+                let a = (k as f32).to_radians();
+                Point3::new(10.0 + 2.0 * a.cos(), 2.0 * a.sin(), 0.0)
+            })
+            .collect();
+        let scans = vec![ring.clone(), ring.clone(), ring.clone(), ring];
+        let a = vec![Isometry3::identity(); 4];
+        let shift = |m: f64| Isometry3::translation(m, 0.0, 0.0);
+        // A turn about the scan's origin, 10 m from its points: 1° moves
+        // the centroid 0.175 m.
+        let turn = |deg: f64| Isometry3::rotation(nalgebra::Vector3::z() * deg.to_radians());
+        let b = vec![shift(5.0), shift(0.09), shift(0.11), turn(1.0)];
+        let far = apart(&scans, &a, &b);
+        let named: Vec<usize> = far.iter().map(|f| f.0).collect();
+        assert_eq!(named, [2, 3]);
+        assert!((far[0].1 - 0.11).abs() < 1e-6, "{far:?}");
+        let one = 1f64.to_radians();
+        assert!((far[1].1 - (10.0 * 2.0 * (one / 2.0).sin() + 2.0 * one)).abs() < 1e-5, "{far:?}");
+        assert!((far[1].2 - one).abs() < 1e-9, "{far:?}");
+        // A turn about the centroid itself: apart beyond 0.05 rad (2.9°).
+        let about =
+            |deg: f64| Isometry3::translation(10.0, 0.0, 0.0) * turn(deg) * Isometry3::translation(-10.0, 0.0, 0.0);
+        let c = apart(&scans, &a, &[Isometry3::identity(), about(2.8), about(-3.0), about(2.0)]);
+        assert_eq!(c.iter().map(|f| f.0).collect::<Vec<_>>(), [2]);
     }
 }

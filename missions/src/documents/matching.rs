@@ -184,7 +184,9 @@ pub struct RestartReport {
     /// schedule's result, or a kept one, is).
     pub restart_untrusted: Option<Vec<usize>>,
     /// The scans the schedule's and the restart's registrations place
-    /// apart (by more than 5 % of the scan's radius or 5°) when the scans'
+    /// apart (their points moved by more than 5 % of the scan's RMS radius:
+    /// the centroid's displacement plus the turn times the radius) when the
+    /// scans'
     /// disagreement prefers neither by 1.5×: the data cannot tell which is
     /// right, so they are in `untrusted` (exit 1), and the registration the
     /// scans agree with better is the result. Empty otherwise.
