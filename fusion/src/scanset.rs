@@ -182,7 +182,8 @@ pub struct Restart {
     /// The scans the verification names at the first registration's poses
     /// ([`crate::verify::untrusted`]; `None` when it failed) and at the
     /// restart's (`None` when the restart failed, or was neither kept nor
-    /// needed verifying: the first registration was possible).
+    /// needed verifying: the first registration was possible, and no scan
+    /// was [`undecided`](Self::undecided) between them).
     pub untrusted: (Option<Vec<usize>>, Option<Vec<usize>>),
     /// The scans the schedule's and the restart's registrations place
     /// apart — by more than the verification lets a pair move

@@ -159,16 +159,15 @@ pub struct RestartReport {
     /// point with no partner pays its square), m²; null when the schedule
     /// failed.
     pub schedule_disagreement_m2: Option<f64>,
-    /// The same at the restart's poses; null when the restart failed, or
-    /// was not kept and not verified (only a restart from an impossible
-    /// schedule's result, or a kept one, is).
+    /// The same at the restart's poses; null when the restart failed.
     pub restart_disagreement_m2: Option<f64>,
     /// Why the restart failed.
     pub error: Option<String>,
     /// True when the restart's poses are the result: the schedule's put
     /// points in another scanner's free space and the verification names
     /// nothing of the restart's, or the schedule's disagreement is more
-    /// than 1.5 times the restart's.
+    /// than 1.5 times the restart's, or — with `undecided` scans — more
+    /// than the restart's at all.
     pub kept: bool,
     /// What set it off: "moved" (the schedule moved `scan` beyond the
     /// second stage's reach of its start), "failed" (`schedule_error`),
@@ -181,15 +180,16 @@ pub struct RestartReport {
     pub schedule_untrusted: Option<Vec<usize>>,
     /// The same at the restart's poses; null when the restart failed, or
     /// was not kept and not verified (only a restart from an impossible
-    /// schedule's result, or a kept one, is).
+    /// schedule's result, a kept one, or one that places a scan apart from
+    /// the schedule's while neither agrees clearly better, is).
     pub restart_untrusted: Option<Vec<usize>>,
     /// The scans the schedule's and the restart's registrations place
     /// apart (their points moved by more than 5 % of the scan's RMS radius:
     /// the centroid's displacement plus the turn times the radius) when the
-    /// scans'
-    /// disagreement prefers neither by 1.5×: the data cannot tell which is
-    /// right, so they are in `untrusted` (exit 1), and the registration the
-    /// scans agree with better is the result. Empty otherwise.
+    /// scans' disagreement prefers neither by 1.5× and the verification
+    /// names nothing of either: the data cannot tell which is right, so
+    /// they are in `untrusted` (exit 1), and the registration the scans
+    /// agree with better is the result. Empty otherwise.
     pub undecided: Vec<UndecidedReport>,
 }
 
