@@ -23,7 +23,8 @@ the median, the RMS errors, and the parts off by more than 1° or 0.1 m
 while the exit was 0 (a silent failure). Environment: NEES_ONLY=NAME runs one
 source, NEES_VERBOSE=1 prints every part, NEES_CHECKS=1 every verified
 pair (its RMS residual against the noise floor, and its true error),
-NEES_KEEP=DIR keeps each trial's inputs, NEES_ARGS="--only-covered" adds
+NEES_KEEP=DIR keeps each trial's inputs, NEES_PARTS=K deals the shares
+into K parts (4; 2 is one link alone), NEES_ARGS="--only-covered" adds
 arguments to every `match`.
 """
 import json
@@ -133,7 +134,8 @@ def main():
     for name, xyz, up in sources():
         if only and only not in name:
             continue
-        scenarios.append((f"{name} shares", lambda rng, xyz=xyz: shares(rng, xyz, 4), up))
+        k = int(os.environ.get("NEES_PARTS", "4"))
+        scenarios.append((f"{name} shares", lambda rng, xyz=xyz, k=k: shares(rng, xyz, k), up))
         if name != "3dtk-scan001":  # its scans leave out the quarter behind the robot
             scenarios.append((f"{name} wedges", lambda rng, xyz=xyz, up=up: wedges(xyz, up, 4, 150.0, rng.uniform(0, 360)), up))
     with tempfile.TemporaryDirectory() as d:
