@@ -140,6 +140,20 @@ pub struct SetResult {
     pub restart: Option<Restart>,
 }
 
+impl SetResult {
+    /// The scans not to trust, in order: those the verification names at
+    /// the final poses ([`crate::verify::untrusted`]) and those the
+    /// schedule's and the restart's registrations place apart with nothing
+    /// in the data to choose between them ([`Restart::undecided`]).
+    pub fn untrusted(&self) -> Vec<usize> {
+        let mut named = crate::verify::untrusted(self.world_from_scan.len(), &self.checks);
+        named.extend(self.restart.iter().flat_map(|x| x.undecided.iter().map(|u| u.0)));
+        named.sort_unstable();
+        named.dedup();
+        named
+    }
+}
+
 /// A second registration from the starts: the schedule without its first
 /// (coarsest) stage, run when the first registration moved a scan further
 /// from its start than the second stage's correspondence distance (out of

@@ -115,15 +115,7 @@ pub(super) fn report(
             })
             .collect(),
         check_seconds: r.check_seconds,
-        untrusted: {
-            // The verification's, and the scans two registrations place
-            // apart with nothing to choose between them.
-            let mut named = fusion::verify::untrusted(scans.len(), &r.checks);
-            named.extend(r.restart.iter().flat_map(|x| x.undecided.iter().map(|u| u.0)));
-            named.sort_unstable();
-            named.dedup();
-            named
-        },
+        untrusted: r.untrusted(),
         blind_without_start: Vec::new(),
     }
 }
