@@ -9,6 +9,8 @@
 //!   scans ([`multiview::register_views`]);
 //! - [`links`]: a scan set adjusted over all its overlapping pairs, blind
 //!   directions held by the start ([`links::adjust`]);
+//! - [`noise`]: the covariance model calibrated on the data, by matching
+//!   random halves of each scan ([`noise::calibrate`]);
 //! - [`scanset`]: a user's scan set registered coarse to fine by a
 //!   strategy or the link graph ([`scanset::register_set`]);
 //! - [`graph`]: scan poses adjusted to absolute priors (the CPS poses) and
@@ -29,6 +31,7 @@ pub mod graph;
 pub mod icp;
 pub mod links;
 pub mod multiview;
+pub mod noise;
 pub mod pipe;
 pub mod priors;
 pub mod scale;

@@ -620,13 +620,22 @@ fn solve(
                 .collect(),
         };
         // σ̂₀² above 1 scales the links' information, not the start's
-        // steps: along what no link sees the σ stays the start's.
+        // steps: along what no link sees the σ stays the start's. Below 1
+        // the links agree better than their covariances say: the share of
+        // their noise that is each scan's own, in every one of its links,
+        // closes the cycles ([`shared_noise`]).
         let covariance = if variance_factor > 1.0 {
             let mut scaled = steps.clone();
             scaled.extend(
                 edges[steps.len()..].iter().map(|e| Edge { information: e.information / variance_factor, ..*e }),
             );
             crate::graph::optimize(&g.world_from_scan, &priors, &scaled, 1)?.covariance
+        } else if redundancy > 0 && variance_factor < 1.0 {
+            let f = variance_factor.max(MIN_INDEPENDENT_SHARE);
+            let mut scaled = steps.clone();
+            scaled.extend(edges[steps.len()..].iter().map(|e| Edge { information: e.information / f, ..*e }));
+            let independent = crate::graph::optimize(&g.world_from_scan, &priors, &scaled, 1)?.covariance;
+            shared_noise(&g.world_from_scan, independent, &edges[steps.len()..], f)
         } else {
             g.covariance
         };
@@ -648,9 +657,123 @@ fn solve(
     }
 }
 
+/// The least share of the links' noise taken as independent ([`shared_noise`]).
+const MIN_INDEPENDENT_SHARE: f64 = 0.05;
+
+/// The covariances of a graph whose links agree better than their
+/// covariances say (σ̂₀² = `independent_share` < 1). A link's error is
+/// partly each of its two scans' own — a scan's noise and sampling move
+/// it the same way against every partner (on random shares of one real
+/// scan, almost wholly so) — and partly the pair's. The graph takes its
+/// links as independent, so the scans' shares close every cycle and only
+/// the pairs' show in σ̂₀²: of each link's covariance C, the share σ̂₀² is
+/// the pair's and 1 − σ̂₀² the scans', half each. `independent` is the
+/// graph's covariance with the links' information divided by σ̂₀² (the
+/// pairs' share, which the adjustment averages down); a scan's own share
+/// S_k — the mean over its links of ½(1 − σ̂₀²)·C, in world axes — passes
+/// through it whole, as does the first scan's, against which every pose
+/// is: P_k = independent_k + S_k + S_0. Four parts of one scan, all
+/// linked, were up to 2× optimistic without it (BENCHMARKS.md).
+fn shared_noise(
+    poses: &[Isometry3<f64>],
+    independent: Vec<Matrix6<f64>>,
+    links: &[Edge],
+    independent_share: f64,
+) -> Vec<Matrix6<f64>> {
+    let n = poses.len();
+    let mut own = vec![Matrix6::zeros(); n];
+    let mut count = vec![0usize; n];
+    for e in links {
+        // The link's covariance (nothing along what it cannot see), its ξ
+        // in the target's frame carried to the world's axes.
+        let a = adjoint(&poses[e.target]);
+        let c = a * pseudo_inverse(&e.information) * a.transpose() * (0.5 * (1.0 - independent_share));
+        for k in [e.source, e.target] {
+            own[k] += c;
+            count[k] += 1;
+        }
+    }
+    for (s, &c) in own.iter_mut().zip(&count) {
+        *s /= c.max(1) as f64;
+    }
+    independent.into_iter().enumerate().map(|(k, p)| if k == 0 { p } else { p + own[k] + own[0] }).collect()
+}
+
+/// The inverse of a symmetric positive semi-definite 6×6 on its range
+/// (eigenvalues below 1e-12 of the largest: none).
+fn pseudo_inverse(m: &Matrix6<f64>) -> Matrix6<f64> {
+    let e = (0.5 * (m + m.transpose())).symmetric_eigen();
+    let max = e.eigenvalues.max();
+    let mut out = Matrix6::zeros();
+    for i in 0..6 {
+        let v = e.eigenvalues[i];
+        if max > 0.0 && v > 1e-12 * max {
+            let u = e.eigenvectors.column(i);
+            out += u * u.transpose() / v;
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Monte Carlo: four scans all linked, each link's error the two
+    /// scans' own shifts (σ 1 mrad / 1 mm each, the same in all of a
+    /// scan's links) plus the pair's own (σ 0.5): the graph that takes the
+    /// links as independent is 2× optimistic, the covariance with the
+    /// scans' shared noise what 4,000 draws scatter.
+    #[test]
+    fn the_scans_shared_noise_is_what_monte_carlo_scatters() {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, Normal};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(30);
+        let (own, pair) = (Normal::new(0.0, 1e-3).expect("σ"), Normal::new(0.0, 0.5e-3).expect("σ"));
+        let n = 4;
+        let pairs: Vec<(usize, usize)> = (0..n).flat_map(|j| (j + 1..n).map(move |i| (j, i))).collect();
+        // A link's covariance: two shifts and the pair's, per component.
+        let information = Matrix6::identity() / (2.0 * 1e-6 + 0.25e-6);
+        let poses = vec![Isometry3::identity(); n];
+        let mut priors = vec![None; n];
+        priors[0] = Some(Prior { target_from_source: Isometry3::identity(), information: Matrix6::identity() * 1e12 });
+        let draws = 4000;
+        let mut scatter = vec![Matrix6::zeros(); n];
+        let mut factor = 0.0;
+        for _ in 0..draws {
+            let shift: Vec<Vector6<f64>> = (0..n).map(|_| Vector6::from_fn(|_, _| own.sample(&mut rng))).collect();
+            let edges: Vec<Edge> = pairs
+                .iter()
+                .map(|&(target, source)| {
+                    let e = shift[source] - shift[target] + Vector6::from_fn(|_, _| pair.sample(&mut rng));
+                    Edge { target, source, target_from_source: crate::se3::exp(&e), information }
+                })
+                .collect();
+            let g = crate::graph::optimize(&poses, &priors, &edges, 20).expect("adjusts");
+            factor += judged(&g.world_from_scan, &edges).variance_factor / draws as f64;
+            for (s, pose) in scatter.iter_mut().zip(&g.world_from_scan).skip(1) {
+                let xi = left_difference(pose, &Isometry3::identity());
+                *s += xi * xi.transpose() / draws as f64;
+            }
+        }
+        // The pairs' share of a link's variance: 0.25 of 2.25.
+        assert!((factor - 0.25 / 2.25).abs() < 0.01, "σ̂₀² {factor}");
+        let edges: Vec<Edge> = pairs
+            .iter()
+            .map(|&(target, source)| Edge { target, source, target_from_source: Isometry3::identity(), information })
+            .collect();
+        let plain = crate::graph::optimize(&poses, &priors, &edges, 1).expect("adjusts").covariance;
+        let scaled: Vec<Edge> = edges.iter().map(|e| Edge { information: e.information / factor, ..*e }).collect();
+        let independent = crate::graph::optimize(&poses, &priors, &scaled, 1).expect("adjusts").covariance;
+        let shared = shared_noise(&poses, independent, &edges, factor);
+        for k in 1..n {
+            for d in 0..6 {
+                let (mc, model, naive) = (scatter[k][(d, d)], shared[k][(d, d)], plain[k][(d, d)]);
+                assert!((model / mc - 1.0).abs() < 0.08, "scan {k} [{d}]: {model:e} against Monte Carlo {mc:e}");
+                assert!(mc / naive > 1.8, "scan {k} [{d}]: independent links {naive:e}, Monte Carlo {mc:e}");
+            }
+        }
+    }
 
     fn links(pairs: &[(usize, usize)]) -> Vec<Link> {
         pairs

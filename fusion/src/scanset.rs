@@ -133,6 +133,12 @@ pub struct SetResult {
     pub checks: Vec<PairCheck>,
     /// The verification's wall-clock time, seconds.
     pub check_seconds: f64,
+    /// Graph mode: the covariance model calibrated on these scans' halves
+    /// ([`crate::noise::calibrate`]); its factor scales every covariance
+    /// of the links. `None` in the other modes or without a stage.
+    pub noise: Option<crate::noise::Calibration>,
+    /// The calibration's wall-clock time, seconds.
+    pub noise_seconds: f64,
     /// The registration from the starts again without the schedule's
     /// first stage, when a scan moved beyond the second stage's reach of
     /// its start, the schedule failed, put points in another scanner's
@@ -308,6 +314,30 @@ pub struct SetLink {
 /// `world_from_scan`. `progress(stage, stages, done, total)` is called as
 /// scans (and, in graph mode, pairs: stage = stages) are matched.
 pub fn register_set<S: AsRef<[Point3<f32>]> + Sync>(
+    scans: &[S],
+    starts: &[Isometry3<f64>],
+    config: &SetConfig,
+    progress: &mut dyn FnMut(usize, usize, usize, usize),
+) -> Result<SetResult> {
+    // Graph mode's links reported with the covariance model calibrated on
+    // these scans (the coarser stages' matches only steer). Not in the
+    // other modes: their covariances add the partners' as independent and
+    // were 1.3–2.7× optimistic with calibrated matches, against 0.55–2.8×
+    // without (BENCHMARKS.md, "Covariances the data calibrate"). The
+    // calibration multiplies the caller's own scale.
+    let started = std::time::Instant::now();
+    let noise = finest_link(config)
+        .filter(|_| config.mode == Mode::Graph)
+        .map(|(_, link)| crate::noise::calibrate(scans, &link.multiview, link.both_ways));
+    let noise_seconds = started.elapsed().as_secs_f64();
+    let mut calibrated = config.clone();
+    calibrated.link.multiview.icp.noise_scale *= noise.map_or(1.0, |n| n.variance_scale);
+    let config = &calibrated;
+    let r = registered(scans, starts, config, progress)?;
+    Ok(SetResult { noise, noise_seconds, ..r })
+}
+
+fn registered<S: AsRef<[Point3<f32>]> + Sync>(
     scans: &[S],
     starts: &[Isometry3<f64>],
     config: &SetConfig,
@@ -626,6 +656,7 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
         icp: crate::icp::IcpConfig {
             max_correspondence_m: s.max_correspondence_m,
             only_covered: config.only_covered && k == finest_stage,
+            noise_scale: if k == finest_stage { config.link.multiview.icp.noise_scale } else { 1.0 },
             ..config.link.multiview.icp
         },
         // Fewer reduced points at a coarse stage give fewer pairs: the
@@ -714,6 +745,8 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
         stages: runs,
         checks: Vec::new(),
         check_seconds: 0.0,
+        noise: None,
+        noise_seconds: 0.0,
         restart: None,
     })
 }
@@ -772,6 +805,8 @@ fn from_graph(g: LinkGraph, matches: usize, settled: bool, stages: Vec<StageRun>
         stages,
         checks: Vec::new(),
         check_seconds: 0.0,
+        noise: None,
+        noise_seconds: 0.0,
         restart: None,
     }
 }

@@ -136,6 +136,21 @@ impl Observability {
         0.5 * (h + h.transpose())
     }
 
+    /// `m` (an information of the same ξ) with this analysis' blind
+    /// directions taken out, as [`observed_part`](Self::observed_part)
+    /// takes them out of its own.
+    pub fn project(&self, m: &Matrix6<f64>) -> Matrix6<f64> {
+        let mut p = Matrix6::identity();
+        for b in self.blind() {
+            p -= b * b.transpose();
+        }
+        let s = scale(self.lever_arm_m);
+        let mu = s * self.about.transpose() * m * self.about * s;
+        let inv = scale(1.0 / self.lever_arm_m) * self.about_inverse();
+        let h = inv.transpose() * (p * mu * p) * inv;
+        0.5 * (h + h.transpose())
+    }
+
     /// How far a motion ξ = (ω, v) (about the frame's origin, in the frame
     /// of `h`) goes along the directions whose eigenvalue is at least
     /// `ratio` of the largest: its length in u = (L·ω, v_c), metres of

@@ -9,9 +9,11 @@
 //! covariance of the error ξ = (ω, v) — rotation first, then translation — in
 //! the **target** frame with **left** perturbation:
 //! `target_from_source_true = exp(ξ) · target_from_source`, so a source
-//! point p maps to `T̂p + ω × T̂p + v`. It is `Jᵀ J / σ̂²` at the last
+//! point p maps to `T̂p + ω × T̂p + v`. It is `Jᵀ J / (k·σ̂²)` at the last
 //! linearisation point (within the tolerances of the solution when
-//! converged), with σ̂² the residual variance per scalar residual.
+//! converged), with σ̂² the residual variance per scalar residual and k
+//! [`IcpConfig::noise_scale`] (1, or what the data's halves measured of
+//! that model: [`crate::noise`]).
 //!
 //! Parts, as small_gicp keeps its registration: [`config`] (the metric, the
 //! kernel, the settings), [`target`] (the k-d tree, normals and the

@@ -294,16 +294,30 @@ fn align_impl(
     }
     let sums = last;
     let rmse_m = (sums.sq / sums.n.max(1) as f64).sqrt();
-    let mut information = sums.normal_matrix(config.method) / residual_variance(&sums, config.method)
-        + prior.map_or_else(Matrix6::zeros, |p| p.information);
-    if let Some(ratio) = config.degeneracy_ratio {
-        // What the match cannot see it does not know: its information
-        // leaves those directions out (to the prior, another match, or
-        // odometry in a pose graph).
-        let o = Observability::about(&information, &(estimate * centre), lever_arm_m, ratio);
-        unobservable = o.unobservable();
-        information = o.observed_part();
-    }
+    let prior_information = prior.map_or_else(Matrix6::zeros, |p| p.information);
+    let sigma2 = residual_variance(&sums, config.method);
+    // The pairs taken as independent, H/σ̂², then scaled by what the data's
+    // halves measured of that model (`noise_scale`). (A sandwich estimate,
+    // H·B⁻¹·H with B = Σ (w·r)² JJᵀ, judged rotation against translation
+    // better on real scans' halves, but weighed the 3DTK set's links
+    // otherwise and moved its triangle's scans 0.1° further from the
+    // references: BENCHMARKS.md, "Covariances the data calibrate".)
+    let data = sums.normal_matrix(config.method) / sigma2;
+    let independent = data + prior_information;
+    let measured = data / config.noise_scale + prior_information;
+    let information = match config.degeneracy_ratio {
+        Some(ratio) => {
+            // What the match cannot see it does not know: its information
+            // leaves those directions out (to the prior, another match, or
+            // odometry in a pose graph). Which directions those are is
+            // judged on the residuals' own scatter, as the iteration
+            // judges them.
+            let o = Observability::about(&independent, &(estimate * centre), lever_arm_m, ratio);
+            unobservable = o.unobservable();
+            o.project(&measured)
+        }
+        None => measured,
+    };
     Ok(IcpResult {
         target_from_source: estimate,
         converged,
@@ -335,6 +349,7 @@ fn check(c: &IcpConfig) -> Result<()> {
     if let Kernel::Huber { width_m } = c.kernel {
         FusionError::require_positive("Huber width (m)", width_m)?;
     }
+    FusionError::require_positive("noise scale", c.noise_scale)?;
     FusionError::require_non_negative("translation tolerance (m)", c.translation_tolerance_m)?;
     FusionError::require_non_negative("rotation tolerance (rad)", c.rotation_tolerance_rad)?;
     if let Some(ratio) = c.degeneracy_ratio {

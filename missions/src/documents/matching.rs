@@ -28,6 +28,12 @@ pub struct MatchReport {
     /// covariance (not the start's steps, which hold what no match sees).
     /// In the other modes null when no pair was verified (a single scan).
     pub variance_factor: Option<f64>,
+    /// Graph mode: the covariance model calibrated on the scans
+    /// themselves — each scan's random halves matched under a known turn,
+    /// their errors against their own covariances. Its `variance_scale`
+    /// multiplies every link's covariance (before `variance_factor`).
+    /// Null in the other modes.
+    pub noise: Option<NoiseReport>,
     /// Registration time, seconds (reading the scans and writing excluded).
     pub seconds: f64,
     /// The length scales measured on the scans and the schedule used.
@@ -53,6 +59,24 @@ pub struct MatchReport {
     /// first, which holds the frame, when its partner is named): their
     /// poses are not where the data agree, and the exit is 1.
     pub untrusted: Vec<usize>,
+}
+
+/// The noise calibration (`fusion::noise`).
+#[derive(Debug, Clone, Serialize, schemars::JsonSchema)]
+pub struct NoiseReport {
+    /// Σχ²/Σdof of the halves' errors: above 1 the match's own covariance
+    /// was optimistic on these data, below 1 pessimistic; 1 when nothing
+    /// could be measured (`dof` 0).
+    pub variance_scale: f64,
+    /// The degrees of freedom it rests on (6 per halving, less its blind
+    /// directions).
+    pub dof: usize,
+    /// Halvings matched (two per scan that has enough points).
+    pub halvings: usize,
+    /// Halvings left out as mismatches (χ²/dof beyond 25× the median).
+    pub left_out: usize,
+    /// Its wall-clock time, seconds (within `seconds`).
+    pub seconds: f64,
 }
 
 /// One pair of the verification.

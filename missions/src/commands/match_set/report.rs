@@ -64,6 +64,13 @@ pub(super) fn report(
             .collect(),
         matches: r.matches,
         variance_factor: r.variance_factor,
+        noise: r.noise.map(|n| NoiseReport {
+            variance_scale: n.variance_scale,
+            dof: n.dof,
+            halvings: n.halvings,
+            left_out: n.left_out,
+            seconds: r.noise_seconds,
+        }),
         seconds,
         settings,
         stages: stage_reports(&r.stages),

@@ -46,6 +46,13 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
         each.join("; ")
     };
     writeln!(out, "stages: {}", stages(&report.stages))?;
+    if let Some(n) = &report.noise {
+        writeln!(
+            out,
+            "covariances calibrated on the scans' halves: ×{:.2} ({} degrees of freedom, {:.3} s)",
+            n.variance_scale, n.dof, n.seconds
+        )?;
+    }
     if let Some(r) = &report.restart {
         let names = |list: &[usize]| -> String {
             if list.is_empty() {
