@@ -1,6 +1,7 @@
 //! What the data's noise does to a match, measured on the data: each scan
-//! dealt into two random halves, which are matched as the set's pairs are
-//! matched — where the truth is known, the identity. The halves' errors
+//! dealt into two random halves, the second put in a frame of its own by
+//! a known turn, and the halves matched as the set's pairs are matched —
+//! where the truth is known. The halves' errors
 //! against their own reported covariances say by how much the covariance
 //! model misjudges these data ([`calibrate`]); the set's covariances are
 //! scaled by it ([`crate::icp::IcpConfig::noise_scale`]).
@@ -44,18 +45,19 @@ pub struct Calibration {
     pub dof: usize,
     /// Halvings matched.
     pub halvings: usize,
-    /// Halvings left out as gross mismatches ([`GROSS`]).
+    /// Halvings left out as gross mismatches (χ²/dof beyond 25× the median).
     pub left_out: usize,
 }
 
 /// Each scan dealt into two halves by a hash of its points' indices
-/// ([`HALVINGS`] times, each time another hash), the halves reduced as
-/// `config` reduces the scans and matched from the identity — both ways
-/// when `both_ways` (point-to-plane) — with `config`'s ICP settings and no
-/// noise scale. Each halving's error ξ (its estimate, as the truth is the
-/// identity) gives χ² = ξᵀ·I·ξ with I its reported information, whose
-/// mean is the observed degrees of freedom when I is honest. A half that
-/// cannot be matched (too few points) is passed over.
+/// ([`HALVINGS`] times, each time another hash), the second half turned
+/// about the scanner (`turned`), the halves reduced as `config` reduces
+/// the scans and matched from near that turn (`off`) — both ways when
+/// `both_ways` (point-to-plane) — with `config`'s ICP settings and no
+/// noise scale. Each halving's error ξ against the turn gives χ² = ξᵀ·I·ξ
+/// with I its reported information, whose mean is the observed degrees
+/// of freedom when I is honest. A half that cannot be matched (too few
+/// points, no more pairs than `min_pairs`) is passed over.
 pub fn calibrate<S: AsRef<[Point3<f32>]> + Sync>(
     scans: &[S],
     config: &MultiviewConfig,
@@ -124,15 +126,16 @@ fn turned(viewpoint: &Point3<f64>, h: u64) -> Isometry3<f64> {
     Isometry3::from_parts(nalgebra::Translation3::from(viewpoint.coords - turn * viewpoint.coords), turn)
 }
 
-/// Where a halving's match starts: `truth` moved by a quarter of the
-/// correspondence distance, and turned by as much at the source's RMS
-/// radius — as a finest stage starts from a coarser stage's result. From
+/// Where a halving's match starts: `truth` off by a quarter of the
+/// correspondence distance along a fixed direction of ξ, rotation counted
+/// at the source's RMS radius — as a finest stage starts from a coarser
+/// stage's result. From
 /// the truth itself the match stops within its tolerances of where it
 /// started, nearer than a match that comes from elsewhere ends.
 fn off(source: &[Point3<f32>], truth: &Isometry3<f64>, max_correspondence_m: f64) -> Isometry3<f64> {
     let (_, radius) = crate::icp::degeneracy::centroid_and_lever_arm(source);
     let d = 0.25 * max_correspondence_m;
-    let xi = nalgebra::Vector6::new(0.6, -0.3, 0.74, -0.5, 0.8, 0.33).normalize() * 1.0;
+    let xi = nalgebra::Vector6::new(0.6, -0.3, 0.74, -0.5, 0.8, 0.33).normalize();
     let xi = nalgebra::Vector6::new(
         xi[0] * d / radius,
         xi[1] * d / radius,
