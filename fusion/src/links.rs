@@ -624,20 +624,15 @@ fn solve(
         // the links agree better than their covariances say: the share of
         // their noise that is each scan's own, in every one of its links,
         // closes the cycles ([`shared_noise`]).
-        let covariance = if variance_factor > 1.0 {
-            let mut scaled = steps.clone();
-            scaled.extend(
-                edges[steps.len()..].iter().map(|e| Edge { information: e.information / variance_factor, ..*e }),
-            );
-            crate::graph::optimize(&g.world_from_scan, &priors, &scaled, 1)?.covariance
-        } else if redundancy > 0 && variance_factor < 1.0 {
+        // (σ̂₀² is exactly 1 without redundancy.)
+        let covariance = if variance_factor == 1.0 {
+            g.covariance
+        } else {
             let f = variance_factor.max(MIN_INDEPENDENT_SHARE);
             let mut scaled = steps.clone();
             scaled.extend(edges[steps.len()..].iter().map(|e| Edge { information: e.information / f, ..*e }));
-            let independent = crate::graph::optimize(&g.world_from_scan, &priors, &scaled, 1)?.covariance;
-            shared_noise(&g.world_from_scan, independent, &edges[steps.len()..], f)
-        } else {
-            g.covariance
+            let c = crate::graph::optimize(&g.world_from_scan, &priors, &scaled, 1)?.covariance;
+            if f < 1.0 { shared_noise(&g.world_from_scan, c, &edges[steps.len()..], f) } else { c }
         };
         // Scan 0's prior leaves it within 1e-20 m of its pose: put it there.
         let shift = poses[0] * g.world_from_scan[0].inverse();
@@ -687,7 +682,9 @@ fn shared_noise(
         // The link's covariance (nothing along what it cannot see), its ξ
         // in the target's frame carried to the world's axes.
         let a = adjoint(&poses[e.target]);
-        let c = a * pseudo_inverse(&e.information) * a.transpose() * (0.5 * (1.0 - independent_share));
+        let covariance =
+            e.information.pseudo_inverse(1e-12 * e.information.amax()).unwrap_or_else(|_| Matrix6::zeros());
+        let c = a * covariance * a.transpose() * (0.5 * (1.0 - independent_share));
         for k in [e.source, e.target] {
             own[k] += c;
             count[k] += 1;
@@ -697,22 +694,6 @@ fn shared_noise(
         *s /= c.max(1) as f64;
     }
     independent.into_iter().enumerate().map(|(k, p)| if k == 0 { p } else { p + own[k] + own[0] }).collect()
-}
-
-/// The inverse of a symmetric positive semi-definite 6×6 on its range
-/// (eigenvalues below 1e-12 of the largest: none).
-fn pseudo_inverse(m: &Matrix6<f64>) -> Matrix6<f64> {
-    let e = (0.5 * (m + m.transpose())).symmetric_eigen();
-    let max = e.eigenvalues.max();
-    let mut out = Matrix6::zeros();
-    for i in 0..6 {
-        let v = e.eigenvalues[i];
-        if max > 0.0 && v > 1e-12 * max {
-            let u = e.eigenvectors.column(i);
-            out += u * u.transpose() / v;
-        }
-    }
-    out
 }
 
 #[cfg(test)]

@@ -20,9 +20,9 @@
 use nalgebra::{Isometry3, Point3};
 use rayon::prelude::*;
 
+use crate::icp::Method;
 use crate::icp::correspondences::Partners;
 use crate::icp::solve::{Reverse, align_both, align_from};
-use crate::icp::{Method, Target};
 use crate::multiview::MultiviewConfig;
 
 /// Random halvings of each scan.
@@ -64,7 +64,6 @@ pub fn calibrate<S: AsRef<[Point3<f32>]> + Sync>(
     both_ways: bool,
 ) -> Calibration {
     let icp = crate::icp::IcpConfig { noise_scale: 1.0, trace: false, ..config.icp };
-    let k = if icp.method == Method::PointToPlane { icp.normal_neighbours.max(3) } else { 0 };
     let jobs: Vec<(usize, u64)> = (0..scans.len()).flat_map(|i| (0..HALVINGS).map(move |h| (i, h))).collect();
     let samples: Vec<(f64, usize)> = jobs
         .par_iter()
@@ -84,25 +83,15 @@ pub fn calibrate<S: AsRef<[Point3<f32>]> + Sync>(
                     b.push((truth * p.cast::<f64>()).cast::<f32>());
                 }
             }
-            let reduce = |p: &[Point3<f32>]| -> Option<(Vec<Point3<f32>>, Target)> {
-                let source = scanner::reduced_points(p, config.source_voxel_m).ok()?;
-                let model = if config.target_voxel_m == config.source_voxel_m {
-                    source.clone()
-                } else {
-                    scanner::reduced_points(p, config.target_voxel_m).ok()?
-                };
-                let mut target = Target::new(&model, k).ok()?;
-                target.orient_normals_towards(&icp.source_viewpoint);
-                Some((source, target))
-            };
-            let (sa, ta) = reduce(&a)?;
-            let (sb, tb) = reduce(&b)?;
-            let start = off(&sa, &truth, icp.max_correspondence_m);
-            let partners = Partners::at(&sa, &tb, &start);
+            // Reduced and modelled as the set's scans are.
+            let halves = crate::multiview::prepare(&[a, b], config).ok()?;
+            let (sa, ta, sb, tb) = (&halves[0].source, &halves[0].local, &halves[1].source, &halves[1].local);
+            let start = off(sa, &truth, icp.max_correspondence_m);
+            let partners = Partners::at(sa, tb, &start);
             let r = if both_ways && icp.method == Method::PointToPlane {
-                align_both(&sa, &tb, &start, &icp, partners, Reverse { points: &sb, model: &ta })
+                align_both(sa, tb, &start, &icp, partners, Reverse { points: sb, model: ta })
             } else {
-                align_from(&sa, &tb, &start, &icp, partners)
+                align_from(sa, tb, &start, &icp, partners)
             }
             .ok()?;
             if r.inliers <= config.min_pairs {
@@ -172,7 +161,7 @@ mod tests {
     use rand_distr::{Distribution, Normal};
 
     use super::*;
-    use crate::icp::{IcpConfig, Kernel};
+    use crate::icp::{IcpConfig, Kernel, Target};
 
     /// A room's corner with a wavy floor, sampled at random, each point
     /// off along a random direction by a mixture: 75 % σ 1 mm, 25 %

@@ -126,26 +126,24 @@ impl Observability {
     /// information a match actually carries): P·H·P in u, P the projector
     /// off the blind directions, mapped back to ξ.
     pub fn observed_part(&self) -> Matrix6<f64> {
-        let mut p = Matrix6::identity();
-        for b in self.blind() {
-            p -= b * b.transpose();
-        }
-        // H = A⁻ᵀ·S⁻¹·H_u·S⁻¹·A⁻¹, S⁻¹ = scale(1/L).
-        let inv = scale(1.0 / self.lever_arm_m) * self.about_inverse();
-        let h = inv.transpose() * (p * self.hu * p) * inv;
-        0.5 * (h + h.transpose())
+        self.projected(&self.hu)
     }
 
     /// `m` (an information of the same ξ) with this analysis' blind
     /// directions taken out, as [`observed_part`](Self::observed_part)
     /// takes them out of its own.
     pub fn project(&self, m: &Matrix6<f64>) -> Matrix6<f64> {
+        let s = scale(self.lever_arm_m);
+        self.projected(&(s * self.about.transpose() * m * self.about * s))
+    }
+
+    /// P·M_u·P in u, P the projector off the blind directions, mapped back
+    /// to ξ: H = A⁻ᵀ·S⁻¹·H_u·S⁻¹·A⁻¹, S⁻¹ = scale(1/L).
+    fn projected(&self, mu: &Matrix6<f64>) -> Matrix6<f64> {
         let mut p = Matrix6::identity();
         for b in self.blind() {
             p -= b * b.transpose();
         }
-        let s = scale(self.lever_arm_m);
-        let mu = s * self.about.transpose() * m * self.about * s;
         let inv = scale(1.0 / self.lever_arm_m) * self.about_inverse();
         let h = inv.transpose() * (p * mu * p) * inv;
         0.5 * (h + h.transpose())
