@@ -25,7 +25,9 @@ source, NEES_VERBOSE=1 prints every part, NEES_CHECKS=1 every verified
 pair (its RMS residual against the noise floor, and its true error),
 NEES_KEEP=DIR keeps each trial's inputs, NEES_PARTS=K deals the shares
 into K parts (4; 2 is one link alone), NEES_ARGS="--only-covered" adds
-arguments to every `match`.
+arguments to every `match`, NEES_VIEWPOINTS=1 writes the parts as PCD with
+the scanner's position (VIEWPOINT) so that the verification tests free
+space (PLY says nothing of it).
 """
 import json
 import math
@@ -97,6 +99,13 @@ def wedges(xyz, up, k, width_deg, first_deg=0.0):
     return [xyz[owner[j]] for j in range(k)]
 
 
+def write_pcd(path, xyz, viewpoint):
+    with open(path, "w") as out:
+        out.write(f"VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH {len(xyz)}\nHEIGHT 1\n"
+                  f"VIEWPOINT {float(viewpoint[0])!r} {float(viewpoint[1])!r} {float(viewpoint[2])!r} 1 0 0 0\nPOINTS {len(xyz)}\nDATA ascii\n")
+        np.savetxt(out, xyz.astype(np.float32), fmt="%.9g")
+
+
 def xi(estimate, truth):
     """ξ = (ω, v) with estimate = exp(ξ)·truth (left, world axes)."""
     d = estimate @ np.linalg.inv(truth)
@@ -110,9 +119,15 @@ def xi(estimate, truth):
 def run(tool, d, parts, truths, starts, mode):
     files = []
     for i, p in enumerate(parts):
-        f = os.path.join(d, f"part{i}.ply")
         local = (p - truths[i][:3, 3]) @ truths[i][:3, :3]
-        write_ply(f, local)
+        if os.environ.get("NEES_VIEWPOINTS"):
+            # PCD with the scanner's position (the source scan's origin)
+            # in the part's frame: the verification tests free space.
+            f = os.path.join(d, f"part{i}.pcd")
+            write_pcd(f, local, -truths[i][:3, :3].T @ truths[i][:3, 3])
+        else:
+            f = os.path.join(d, f"part{i}.ply")
+            write_ply(f, local)
         files.append(f)
     with open(os.path.join(d, "init.json"), "w") as out:
         json.dump([{"file": os.path.basename(f), "world_from_scan": s.tolist()} for f, s in zip(files, starts)], out)

@@ -215,6 +215,48 @@ pub struct Restart {
     /// these scans are not trusted (the one the scans agree with better is
     /// kept). Empty otherwise.
     pub undecided: Vec<(usize, f64, f64)>,
+    /// Further restarts from the starts, each without one more of the
+    /// schedule's stages (the first without its first two, …, the last
+    /// with the finest stage alone), run in turn while the result is not
+    /// to be trusted — the verification names some of its scans, or the
+    /// restart left some [`undecided`](Self::undecided) — and the schedule
+    /// has more than two stages: a restart's second stage can drag scans
+    /// as the schedule's first did. One is kept, in place of all before
+    /// it, when the scans agree [`RESTART_RATIO`] times better there than
+    /// at the best registration so far (or the schedule's result was
+    /// impossible and the verification names nothing of it); then
+    /// [`kept`](Self::kept) is false and nothing is undecided, and they go
+    /// on only while the verification names scans of it. A trusted result
+    /// runs none (the 3DTK set, the simulated corridor: no cost). Measured
+    /// on small_gicp's street cut into 150° wedges from starts 0.1 m / 2°
+    /// off (16 trials, `NEES_PARTS=2` of `fusion/benches/covariance_nees.py`,
+    /// graph mode): in one the schedule and the restart both left three
+    /// wedges 2.6 m off together (one named undecided, exit 1) and the
+    /// schedule's finest two stages alone landed them within 2 mm, the
+    /// scans agreeing 1.6× better; in another both slid a wedge 1.2 m along
+    /// the street — named by free space where the parts' scanner positions
+    /// are known, and then landed within 1 mm by the schedule without its
+    /// first two stages, the scans agreeing 2.0× better (as PLY with no
+    /// scanner position it is exit 0: see docs/match.md, "Known limits").
+    /// Empty when none ran.
+    pub further: Vec<Further>,
+}
+
+/// A further restart from the starts ([`Restart::further`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Further {
+    /// Its stages as they ran (empty when it failed).
+    pub stages: Vec<StageRun>,
+    /// The scans' disagreement at its poses, m² a point
+    /// ([`crate::agreement`]); `None` when it failed.
+    pub disagreement_m2: Option<f64>,
+    /// Why it failed.
+    pub error: Option<String>,
+    /// True when its registration is the result.
+    pub kept: bool,
+    /// The scans the verification names at its poses; `None` when it
+    /// failed or was not verified (verified only where it may be kept).
+    pub untrusted: Option<Vec<usize>>,
 }
 
 /// What sets a [`Restart`] off.
@@ -408,7 +450,7 @@ fn restart_after_failure<S: AsRef<[Point3<f32>]> + Sync>(
         FusionError::NoOverlap { scan, .. } | FusionError::InScan { scan, .. } => Some(*scan),
         _ => None,
     };
-    let Ok(r) = without_first_stage(scans, starts, config, progress) else { return Err(failure) };
+    let Ok(r) = without_first(scans, starts, config, 1, progress) else { return Err(failure) };
     let mut r = verified(scans, r, config)?;
     let after = finest_link(config).and_then(|(finest, link)| {
         let prepared = crate::multiview::prepare(scans, &link.multiview).ok()?;
@@ -425,19 +467,22 @@ fn restart_after_failure<S: AsRef<[Point3<f32>]> + Sync>(
         trigger: Trigger::Failed,
         untrusted: (None, Some(crate::verify::untrusted(scans.len(), &r.checks))),
         undecided: Vec::new(),
+        further: Vec::new(),
     });
     Ok(r)
 }
 
 /// The registration from `starts` with the schedule of `config` less its
-/// first stage: the restart's ([`Restart`]).
-fn without_first_stage<S: AsRef<[Point3<f32>]> + Sync>(
+/// first `skip` stages: the restart's (1, [`Restart`]) and the further
+/// restarts' ([`Restart::further`]).
+fn without_first<S: AsRef<[Point3<f32>]> + Sync>(
     scans: &[S],
     starts: &[Isometry3<f64>],
     config: &SetConfig,
+    skip: usize,
     progress: &mut dyn FnMut(usize, usize, usize, usize),
 ) -> Result<SetResult> {
-    let shorter = SetConfig { stages: config.stages[1..].to_vec(), ..config.clone() };
+    let shorter = SetConfig { stages: config.stages[skip..].to_vec(), ..config.clone() };
     register_in_first_frame(scans, starts, &shorter, progress)
 }
 
@@ -507,7 +552,7 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     // The restart is verified where its verdict decides (an impossible
     // first result) or where it is kept: a verification of a large set
     // costs as much as its last stage.
-    let (mut second, error) = match without_first_stage(scans, starts, config, progress) {
+    let (mut second, error) = match without_first(scans, starts, config, 1, progress) {
         Ok(r) if impossible => (Some(verified(scans, r, config)?), None),
         Ok(r) => (Some(r), None),
         Err(e) => (None, Some(e.to_string())),
@@ -557,9 +602,63 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
         second = second.map(|r| verified(scans, r, config)).transpose()?;
         named_after = second.as_ref().map(|r| crate::verify::untrusted(scans.len(), &r.checks));
     }
+    // While the result is not to be trusted — the verification names some
+    // of its scans, or the restart left some undecided — the schedule
+    // without one more stage at a time ([`Restart::further`]), each held
+    // to the best registration so far and verified where it may be kept.
+    // A trusted result costs nothing more.
+    let (mut further, mut spent, mut alone) = (Vec::new(), (0, 0.0), None);
+    let mut best = after.map_or(before, |a| a.min(before));
+    let mut doubted = if kept { named_after.as_ref().is_some_and(|n| !n.is_empty()) } else { !named.is_empty() }
+        || !undecided.is_empty();
+    for skip in 2..config.stages.len() {
+        if !doubted {
+            break;
+        }
+        let report = match without_first(scans, starts, config, skip, progress) {
+            Ok(f) => {
+                let a = crate::agreement::disagreement(&prepared, &f.world_from_scan, tau);
+                let (f, named) = if impossible || best > RESTART_RATIO * a {
+                    let f = verified(scans, f, config)?;
+                    let named = crate::verify::untrusted(scans.len(), &f.checks);
+                    (f, Some(named))
+                } else {
+                    (f, None)
+                };
+                let report = Further {
+                    stages: f.stages.clone(),
+                    disagreement_m2: Some(a),
+                    error: None,
+                    kept: keeps_restart(impossible, named.as_deref(), best, Some(a)),
+                    untrusted: named,
+                };
+                best = best.min(a);
+                let dropped = if report.kept {
+                    doubted = report.untrusted.as_ref().is_some_and(|n| !n.is_empty());
+                    (kept, undecided) = (false, Vec::new());
+                    alone.replace(f)
+                } else {
+                    Some(f)
+                };
+                if let Some(d) = dropped {
+                    spent = (spent.0 + d.matches, spent.1 + d.check_seconds);
+                }
+                report
+            }
+            Err(e) => Further {
+                stages: Vec::new(),
+                disagreement_m2: None,
+                error: Some(e.to_string()),
+                kept: false,
+                untrusted: None,
+            },
+        };
+        further.push(report);
+    }
     let stages = second.as_ref().map_or_else(Vec::new, |r| r.stages.clone());
-    let matches = first.matches + second.as_ref().map_or(0, |r| r.matches);
-    let check_seconds = first.check_seconds + second.as_ref().map_or(0.0, |r| r.check_seconds);
+    let ran = || [Some(&first), second.as_ref(), alone.as_ref()].into_iter().flatten();
+    let matches = ran().map(|r| r.matches).sum::<usize>() + spent.0;
+    let check_seconds = ran().map(|r| r.check_seconds).sum::<f64>() + spent.1;
     let restart = Restart {
         scan: Some(scan),
         moved_m: Some(moved_m),
@@ -571,9 +670,11 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
         trigger,
         untrusted: (Some(named), named_after),
         undecided,
+        further,
     };
-    let mut r = match second.take() {
-        Some(s) if kept => SetResult { stages: first.stages, ..s },
+    let mut r = match (second.take(), alone.take()) {
+        (_, Some(a)) => SetResult { stages: first.stages, ..a },
+        (Some(s), _) if kept => SetResult { stages: first.stages, ..s },
         _ => first,
     };
     r.matches = matches;

@@ -215,6 +215,36 @@ pub struct RestartReport {
     /// they are in `untrusted` (exit 1), and the registration the scans
     /// agree with better is the result. Empty otherwise.
     pub undecided: Vec<UndecidedReport>,
+    /// Further restarts from the starts, each without one more of the
+    /// schedule's stages (the first without its first two, …, the last
+    /// with the finest stage alone), run in turn while the set is not
+    /// settled — the restart and the further ones so far were not kept, or
+    /// the restart was kept only with scans `undecided` — and the schedule
+    /// has more than two stages: a restart's second stage can drag scans
+    /// as the schedule's first did. The first one kept ends them. Empty
+    /// when none ran.
+    pub further: Vec<FurtherReport>,
+}
+
+/// A further restart from the starts ([`RestartReport::further`]).
+#[derive(Debug, Clone, Serialize, schemars::JsonSchema)]
+pub struct FurtherReport {
+    /// Its stages as they ran (empty when it failed).
+    pub stages: Vec<StageReport>,
+    /// The scans' disagreement at its poses, m² a point (as
+    /// `schedule_disagreement_m2`); null when it failed.
+    pub disagreement_m2: Option<f64>,
+    /// Why it failed.
+    pub error: Option<String>,
+    /// True when its poses are the result (then the restart's `kept` is
+    /// false and nothing is `undecided`): the scans disagree more than 1.5
+    /// times less there than at the best registration before it, or the
+    /// schedule's put points in another scanner's free space and the
+    /// verification names nothing of its.
+    pub kept: bool,
+    /// The scans the verification names at its poses; null when it failed
+    /// or was not verified (it is where it may be kept).
+    pub untrusted: Option<Vec<usize>>,
 }
 
 /// A scan two registrations of the set place apart ([`RestartReport::undecided`]).

@@ -92,6 +92,8 @@ fn the_3dtk_set_lands_on_the_references_from_its_odometry() {
     assert_eq!(v["restart"]["kept"], false, "{}", v["restart"]);
     let restart = v["restart"]["stages"].as_array().expect("the restart's stages");
     assert_eq!(restart.len(), 3, "{restart:?}");
+    // A trusted result runs no further restart.
+    assert_eq!(v["restart"]["further"], serde_json::json!([]), "{}", v["restart"]);
     let runs: u64 = stages.iter().chain(restart).map(|s| s["matches"].as_u64().expect("runs")).sum();
     assert_eq!(Some(runs), v["matches"].as_u64());
     assert!(stages.iter().all(|s| s["seconds"].as_f64().is_some_and(|t| t > 0.0) && s["settled"] == true));
@@ -972,9 +974,12 @@ fn only_covered_pairs_bring_wedges_closer() {
 /// 0.1° and 5 mm, and the verification (each overlapping pair matched once
 /// more from the final poses) finds every pair consistent. From 1 m / 10°
 /// the coarse stages trap them in the room's other symmetric fit (90° off;
-/// every link was "used" and the exit 0): each mode now either lands, by
-/// the restart from the starts without the coarse stage, or exits 1 and
-/// names scans of inconsistent pairs — only scans that are indeed off.
+/// every link was "used" and the exit 0): every mode now lands, by the
+/// restart from the starts without the coarse stage or — where that is
+/// trapped too and named — by a further restart without the first two
+/// stages. With a schedule of three stages (0.3/1.2, 0.15/0.6, 0.03/0.12
+/// m) some modes stay trapped: they exit 1 and name scans of inconsistent
+/// pairs — only scans that are indeed off.
 #[test]
 fn wedges_from_rough_starts_land_or_are_named_with_exit_1() {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -986,13 +991,18 @@ fn wedges_from_rough_starts_land_or_are_named_with_exit_1() {
             .map(|s| error(&pose(&s["world_from_scan"]), &Isometry3::identity()))
             .collect()
     };
-    let mut rescued = Vec::new();
-    for (m, deg, lands) in [(0.5, 5.0, true), (1.0, 10.0, false)] {
+    let (mut rescued, mut further, mut trapped) = (Vec::new(), Vec::new(), Vec::new());
+    let three = "0.3/1.2,0.15/0.6,0.03/0.12";
+    for (m, deg, schedule) in [(0.5, 5.0, None), (1.0, 10.0, None), (1.0, 10.0, Some(three))] {
+        let lands = schedule.is_none();
         let inputs = room_wedges(&dir.path().join(format!("w{m}")), m, deg);
         for mode in ["graph", "pairwise", "incremental", "simultaneous"] {
             let mut args = inputs.clone();
             args.extend(["--mode".into(), mode.into()]);
-            let (r, v) = run(&args, &dir.path().join(format!("o{m}-{mode}")));
+            if let Some(s) = schedule {
+                args.extend(["--schedule".into(), s.into()]);
+            }
+            let (r, v) = run(&args, &dir.path().join(format!("o{m}-{mode}-{}", schedule.is_some())));
             let v = v.expect("JSON");
             let errors = off(&v);
             let untrusted: Vec<usize> = v["untrusted"]
@@ -1004,16 +1014,27 @@ fn wedges_from_rough_starts_land_or_are_named_with_exit_1() {
             if lands || r.code == 0 {
                 assert_eq!(r.code, 0, "{m} m {mode}: {}", r.stderr);
                 assert!(untrusted.is_empty(), "{m} m {mode}: {}", v["checks"]);
+                // With the three stages simultaneous mode's restart ends
+                // 0.11° / 3.7 mm off (its last stage re-queues a scan only
+                // beyond 0.05°): landed, not trapped.
+                let (deg, metres) = if lands { (0.1, 0.005) } else { (0.2, 0.01) };
                 for (k, (d, e)) in errors.iter().enumerate() {
-                    assert!(*d < 0.1 && *e < 0.005, "{m} m {mode}: wedge {k} {d}° {e} m off");
+                    assert!(*d < deg && *e < metres, "{m} m {mode} {schedule:?}: wedge {k} {d}° {e} m off");
                 }
-                if !lands {
-                    // Landed from 1 m / 10° only by the restart without
-                    // the coarse stage that trapped it.
-                    assert_eq!(v["restart"]["kept"], true, "{m} m {mode}: {}", v["restart"]);
+                if m > 0.5 {
+                    // Landed from 1 m / 10° only by a restart without the
+                    // coarse stages that trapped it.
+                    let by_further =
+                        v["restart"]["further"].as_array().expect("further restarts").iter().any(|f| f["kept"] == true);
+                    assert!(v["restart"]["kept"] == true || by_further, "{m} m {mode}: {}", v["restart"]);
+                    if by_further {
+                        assert_eq!(v["restart"]["kept"], false, "{}", v["restart"]);
+                        further.push(mode);
+                    }
                     rescued.push(mode);
                 }
             } else {
+                trapped.push(mode);
                 assert_eq!(r.code, 1, "{m} m {mode}: {errors:?}");
                 // The trap this test is about: a wedge in the room's other
                 // symmetric fit (90° off; 10.8° in one mode since the pairs
@@ -1045,18 +1066,24 @@ fn wedges_from_rough_starts_land_or_are_named_with_exit_1() {
             }
         }
     }
-    // The trap is still there for the others: the restart is kept only
+    // The further restarts are what rescued some (in this session's runs:
+    // every mode but incremental, where the first restart lands them).
+    assert!(!further.is_empty(), "rescued by the first restart alone: {rescued:?}");
+    // The trap is still there with three stages: a restart is kept only
     // where the scans agree clearly better (the others stay named).
-    assert!(rescued.len() < 4, "every mode rescued: {rescued:?}");
-    // The text output names them.
+    assert!(!trapped.is_empty(), "every mode landed with the three stages too");
+    // The text output names them, and the further restart that ran.
     let mut args = room_wedges(&dir.path().join("text"), 1.0, 10.0);
-    args.extend(["--mode".into(), "pairwise".into(), "--out".into(), dir.path().join("t").into_os_string()]);
+    args.extend(["--mode".into(), "pairwise".into(), "--schedule".into(), three.into()]);
+    args.extend(["--out".into(), dir.path().join("t").into_os_string()]);
     let mut all: Vec<OsString> = vec!["match".into()];
     all.extend(args);
     let r = cps_survey(all);
     assert_eq!(r.code, 1, "{}", r.stderr);
     assert!(
-        r.stdout.contains("not trusted: wedge") && r.stdout.contains("matched again from the final poses"),
+        r.stdout.contains("not trusted: wedge")
+            && r.stdout.contains("matched again from the final poses")
+            && r.stdout.contains("again without the first 2 stages"),
         "{}",
         r.stdout
     );
@@ -1433,6 +1460,111 @@ fn registrations_the_data_cannot_choose_between_are_named_with_exit_1() {
     for k in 1..4 {
         let line = format!("not trusted: part{k}: the schedule's and the restart's registrations place it");
         assert!(text.stdout.contains(&line), "{}", text.stdout);
+    }
+}
+
+/// Issue 38, "no silent failure", a slide along a street: the bench's
+/// street wedges (`fusion/benches/covariance_nees.py`, `NEES_PARTS=2`, 16
+/// trials, graph mode, trial 12) from starts 0.1 m / 2° off. The auto
+/// schedule slid part3 1.2 m along the street, and the restart without
+/// its first stage landed the same poses (its second stage slid it alike);
+/// its links agree with the cycle they close, their residuals 3–4× the
+/// set's others. As PLY — no scanner position — that was exit 0. Given as
+/// PCD with each part's scanner position (VIEWPOINT: where the LiDAR
+/// stood, in the part's frame), the verification sees part0's and part2's
+/// points where part3's scanner saw through, names part3 — and a further
+/// restart from the starts without the first two stages lands every part,
+/// the scans agreeing 2× better there: exit 0, nothing named.
+#[test]
+fn a_slide_along_the_street_that_free_space_names_lands_by_a_further_restart() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let truths: [[[f64; 4]; 3]; 3] = [
+        [
+            [0.9355299227322029, -0.35321674406827874, 0.004657830233316952, 0.44289659526088265],
+            [0.3532233794826053, 0.935538779043406, -0.0006611299876453393, -0.4209439536071726],
+            [-0.0041240586278268295, 0.0022637614223262287, 0.999988933701097, 0.3600854021545682],
+        ],
+        [
+            [0.9125997540201193, 0.4087493708069689, -0.009254232940917246, 0.41606880372053623],
+            [-0.40872950394712415, 0.9126466682957399, 0.0040313089466690565, 0.21562496447122315],
+            [0.010093639856640293, 0.00010350648624298066, 0.9999490525626051, -0.3865212889413653],
+        ],
+        [
+            [0.984595364782294, -0.1747212381678178, -0.006667576945664116, 0.42917536420935976],
+            [0.1748216764823656, 0.9843956259781234, 0.020065716708698025, 0.15777475068560343],
+            [0.0030576267131159074, -0.020922248642134874, 0.9997764302235974, 0.4885192866633046],
+        ],
+    ];
+    let starts: [[[f64; 4]; 3]; 3] = [
+        [
+            [0.935273213459791, -0.3535205727365802, 0.016947590878830174, 0.49847792510423544],
+            [0.35360089762518737, 0.9353944518786708, -0.0019038364590639322, -0.43445252544875107],
+            [-0.015179637125362262, 0.007773290590309396, 0.9998545667096495, 0.33017789509110707],
+        ],
+        [
+            [0.9285904092664707, 0.37104209473433847, -0.0069004169064135765, 0.42321219130755283],
+            [-0.3710093119770911, 0.9286123217660273, 0.005589838154517823, 0.2717286521815087],
+            [0.008481877422696474, -0.0026305511708334213, 0.9999605682005286, -0.41459630774135403],
+        ],
+        [
+            [0.9820600020058988, -0.1877469432418765, -0.017585157477420215, 0.38923401018061005],
+            [0.18803021825903216, 0.982030749571977, 0.01613207725501014, 0.1403306337521057],
+            [0.014240417186122243, -0.019149208820013325, 0.9997152186097461, 0.453962863080858],
+        ],
+    ];
+    let (inputs, truths) = street_wedges(dir.path(), 284.010_844_289_681_24, true, &truths, &starts);
+    // The same parts as ASCII PCD, each with its scanner's position (the
+    // street frame's origin) in its own frame; the starts as they were.
+    let mut pcds: Vec<OsString> = Vec::new();
+    let mut entries: Value = serde_json::from_str(&std::fs::read_to_string(&inputs[5]).expect("init")).expect("JSON");
+    for (k, truth) in truths.iter().enumerate() {
+        let part = scanner::io::read(Path::new(&inputs[k])).expect("part");
+        let at = truth.inverse() * Point3::origin();
+        let mut text = format!(
+            "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH {n}\nHEIGHT 1\n\
+             VIEWPOINT {} {} {} 1 0 0 0\nPOINTS {n}\nDATA ascii\n",
+            at.x,
+            at.y,
+            at.z,
+            n = part.points.len()
+        );
+        for p in &part.points {
+            text.push_str(&format!("{} {} {}\n", p.x, p.y, p.z));
+        }
+        let path = dir.path().join(format!("part{k}.pcd"));
+        std::fs::write(&path, text).expect("PCD");
+        entries[k]["file"] = format!("part{k}.pcd").into();
+        pcds.push(path.into_os_string());
+    }
+    let init = dir.path().join("init-pcd.json");
+    std::fs::write(&init, entries.to_string()).expect("init");
+    pcds.extend(["--init-poses".into(), init.into_os_string()]);
+    let (r, v) = run(&pcds, &dir.path().join("out"));
+    let v = v.expect("JSON");
+    assert_eq!(r.code, 0, "{}\n{}", r.stdout, r.stderr);
+    assert_eq!(v["untrusted"], serde_json::json!([]), "{}", v["restart"]);
+    let restart = &v["restart"];
+    // The schedule's slide, named by free space; the restart without the
+    // first stage the same poses; a further restart kept.
+    assert_eq!(restart["trigger"], "untrusted", "{restart}");
+    assert_eq!(restart["schedule_untrusted"], serde_json::json!([3]), "{restart}");
+    assert_eq!(restart["kept"], false, "{restart}");
+    let further = restart["further"].as_array().expect("further restarts");
+    let kept: Vec<&Value> = further.iter().filter(|f| f["kept"] == true).collect();
+    assert_eq!(kept.len(), 1, "{restart}");
+    assert_eq!(kept[0]["untrusted"], serde_json::json!([]), "{restart}");
+    let (schedule, landed) = (
+        restart["schedule_disagreement_m2"].as_f64().expect("schedule's"),
+        kept[0]["disagreement_m2"].as_f64().expect("further's"),
+    );
+    // (Measured 1.07e-2 against 5.38e-3 m² a point.)
+    assert!(schedule > 1.5 * landed, "{restart}");
+    let poses: Vec<Isometry3<f64>> =
+        v["scans"].as_array().expect("scans").iter().map(|s| pose(&s["world_from_scan"])).collect();
+    for k in 1..4 {
+        let (deg, m) = error(&(poses[0].inverse() * poses[k]), &truths[k]);
+        // (Measured within 0.02° / 2 mm; the schedule's part3 1.2 m off.)
+        assert!(deg < 0.1 && m < 0.01, "part{k}: {deg}° {m} m off; restart {restart}");
     }
 }
 

@@ -97,6 +97,17 @@ pub(super) fn report(
                 .iter()
                 .map(|&(scan, apart_m, angle)| UndecidedReport { scan, apart_m, apart_deg: angle.to_degrees() })
                 .collect(),
+            further: x
+                .further
+                .iter()
+                .map(|f| FurtherReport {
+                    stages: stage_reports(&f.stages),
+                    disagreement_m2: f.disagreement_m2,
+                    error: f.error.clone(),
+                    kept: f.kept,
+                    untrusted: f.untrusted.clone(),
+                })
+                .collect(),
         }),
         checks: r
             .checks

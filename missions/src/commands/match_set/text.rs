@@ -84,18 +84,30 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
             ),
             _ => String::new(),
         };
+        let verdict = match (r.kept, r.further.iter().any(|f| f.kept)) {
+            (true, _) => "its poses kept",
+            (false, true) => "not kept, nor the schedule's",
+            (false, false) => "the schedule's poses kept",
+        };
         let outcome = match (r.restart_disagreement_m2, r.schedule_disagreement_m2, &r.error) {
-            _ if !named.is_empty() => {
-                format!("{named}: {}", if r.kept { "its poses kept" } else { "the schedule's poses kept" })
-            }
+            _ if !named.is_empty() => format!("{named}: {verdict}"),
             (Some(after), Some(before), _) => format!(
-                "the scans disagree {after:.3e} m² a point there against {before:.3e} at the schedule's poses: {}",
-                if r.kept { "its poses kept" } else { "the schedule's poses kept" }
+                "the scans disagree {after:.3e} m² a point there against {before:.3e} at the schedule's poses: {verdict}"
             ),
-            (_, _, Some(e)) => format!("it failed ({e}): the schedule's poses kept"),
+            (_, _, Some(e)) => format!("it failed ({e}): {verdict}"),
             _ => "its poses kept".into(),
         };
         writeln!(out, "restart: {why}; from the starts without the first stage ({}), {outcome}", stages(&r.stages))?;
+        for (k, f) in r.further.iter().enumerate() {
+            let outcome = match (f.disagreement_m2, &f.error) {
+                (Some(a), _) => format!(
+                    "the scans disagree {a:.3e} m² a point there: {}",
+                    if f.kept { "its poses kept" } else { "not kept (not 1.5× better than the best before)" }
+                ),
+                (None, e) => format!("it failed ({}): not kept", e.as_deref().unwrap_or("")),
+            };
+            writeln!(out, "  again without the first {} stages ({}), {outcome}", k + 2, stages(&f.stages))?;
+        }
     }
     for i in unlinked(report) {
         writeln!(
