@@ -185,6 +185,9 @@ pub struct RestartReport {
     pub schedule_disagreement_m2: Option<f64>,
     /// The same at the restart's poses; null when the restart failed.
     pub restart_disagreement_m2: Option<f64>,
+    /// The same at the starts; null when the schedule failed. A result the
+    /// scans agree with no better sets off `further` restarts.
+    pub starts_disagreement_m2: Option<f64>,
     /// Why the restart failed.
     pub error: Option<String>,
     /// True when the restart's poses are the result: the schedule's put
@@ -217,12 +220,13 @@ pub struct RestartReport {
     pub undecided: Vec<UndecidedReport>,
     /// Further restarts from the starts, each without one more of the
     /// schedule's stages (the first without its first two, …, the last
-    /// with the finest stage alone), run in turn while the set is not
-    /// settled — the restart and the further ones so far were not kept, or
-    /// the restart was kept only with scans `undecided` — and the schedule
-    /// has more than two stages: a restart's second stage can drag scans
-    /// as the schedule's first did. The first one kept ends them. Empty
-    /// when none ran.
+    /// with the finest stage alone), run in turn while the result is not
+    /// to be trusted — the verification names scans of it, the restart
+    /// left some `undecided`, or its disagreement is no less than
+    /// `starts_disagreement_m2` — and the schedule has more than two
+    /// stages: a restart's second stage can drag scans as the schedule's
+    /// first did. One kept replaces every registration before it; they go
+    /// on while it is not to be trusted either. Empty when none ran.
     pub further: Vec<FurtherReport>,
 }
 

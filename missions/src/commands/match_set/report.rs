@@ -81,6 +81,7 @@ pub(super) fn report(
             stages: stage_reports(&x.stages),
             schedule_disagreement_m2: x.disagreement_m2.0,
             restart_disagreement_m2: x.disagreement_m2.1,
+            starts_disagreement_m2: x.starts_disagreement_m2,
             error: x.error.clone(),
             kept: x.kept,
             trigger: match x.trigger {

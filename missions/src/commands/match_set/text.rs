@@ -98,6 +98,13 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
             _ => "its poses kept".into(),
         };
         writeln!(out, "restart: {why}; from the starts without the first stage ({}), {outcome}", stages(&r.stages))?;
+        if !r.further.is_empty() {
+            writeln!(
+                out,
+                "  not to be trusted (scans named, or the scans agree no better than at their starts, {:.3e} m² a point):",
+                r.starts_disagreement_m2.unwrap_or(f64::NAN)
+            )?;
+        }
         for (k, f) in r.further.iter().enumerate() {
             let outcome = match (f.disagreement_m2, &f.error) {
                 (Some(a), _) => format!(
