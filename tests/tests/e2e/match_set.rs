@@ -92,9 +92,14 @@ fn the_3dtk_set_lands_on_the_references_from_its_odometry() {
     assert_eq!(v["restart"]["kept"], false, "{}", v["restart"]);
     let restart = v["restart"]["stages"].as_array().expect("the restart's stages");
     assert_eq!(restart.len(), 3, "{restart:?}");
-    // A trusted result runs no further restart.
-    assert_eq!(v["restart"]["further"], serde_json::json!([]), "{}", v["restart"]);
-    let runs: u64 = stages.iter().chain(restart).map(|s| s["matches"].as_u64().expect("runs")).sum();
+    // Every ICP run is accounted for, a further restart's too (none runs
+    // here: the result is trusted, and the scans agree 0.9993× as much as
+    // at the odometry's poses — the criterion's edge, so not asserted).
+    let further = v["restart"]["further"].as_array().expect("further restarts");
+    assert!(further.iter().all(|f| f["kept"] == false), "{}", v["restart"]);
+    let further_stages = further.iter().flat_map(|f| f["stages"].as_array().expect("stages"));
+    let runs: u64 =
+        stages.iter().chain(restart).chain(further_stages).map(|s| s["matches"].as_u64().expect("runs")).sum();
     assert_eq!(Some(runs), v["matches"].as_u64());
     assert!(stages.iter().all(|s| s["seconds"].as_f64().is_some_and(|t| t > 0.0) && s["settled"] == true));
     let links = v["links"].as_array().expect("links");
