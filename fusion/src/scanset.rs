@@ -247,7 +247,9 @@ pub struct Restart {
     /// the street, the scans agreeing 1.11× worse than at the starts (and,
     /// where the parts' scanner positions are known, named by free space),
     /// and the schedule without its first two stages landed it within
-    /// 1 mm, the scans agreeing 2.0× better. Empty when none ran.
+    /// 1 mm, the scans agreeing 2.0× better. Empty when none ran, and
+    /// after a schedule that failed ([`Trigger::Failed`]: the restart
+    /// alone).
     pub further: Vec<Further>,
 }
 
