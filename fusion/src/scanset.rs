@@ -623,10 +623,12 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     // result costs nothing more.
     let (mut further, mut spent, mut alone) = (Vec::new(), (0, 0.0), None);
     let mut best = after.map_or(before, |a| a.min(before));
+    // (A kept restart has its disagreement and its verification.)
+    let in_doubt = |named: &[usize], disagreement: f64| !named.is_empty() || disagreement >= at_starts;
     let mut doubted = if kept {
-        named_after.as_ref().is_some_and(|n| !n.is_empty()) || after.is_some_and(|a| a >= at_starts)
+        in_doubt(named_after.as_deref().unwrap_or_default(), after.unwrap_or(before))
     } else {
-        !named.is_empty() || before >= at_starts
+        in_doubt(&named, before)
     } || !undecided.is_empty();
     for skip in 2..config.stages.len() {
         if !doubted {
@@ -642,6 +644,7 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
                 } else {
                     (f, None)
                 };
+                spent = (spent.0 + f.matches, spent.1 + f.check_seconds);
                 let report = Further {
                     stages: f.stages.clone(),
                     disagreement_m2: Some(a),
@@ -650,15 +653,9 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
                     untrusted: named,
                 };
                 best = best.min(a);
-                let dropped = if report.kept {
-                    doubted = report.untrusted.as_ref().is_some_and(|n| !n.is_empty()) || a >= at_starts;
-                    (kept, undecided) = (false, Vec::new());
-                    alone.replace(f)
-                } else {
-                    Some(f)
-                };
-                if let Some(d) = dropped {
-                    spent = (spent.0 + d.matches, spent.1 + d.check_seconds);
+                if report.kept {
+                    doubted = in_doubt(report.untrusted.as_deref().unwrap_or_default(), a);
+                    (kept, undecided, alone) = (false, Vec::new(), Some(f));
                 }
                 report
             }
@@ -673,7 +670,7 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
         further.push(report);
     }
     let stages = second.as_ref().map_or_else(Vec::new, |r| r.stages.clone());
-    let ran = || [Some(&first), second.as_ref(), alone.as_ref()].into_iter().flatten();
+    let ran = || [Some(&first), second.as_ref()].into_iter().flatten();
     let matches = ran().map(|r| r.matches).sum::<usize>() + spent.0;
     let check_seconds = ran().map(|r| r.check_seconds).sum::<f64>() + spent.1;
     let restart = Restart {
