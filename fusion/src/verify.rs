@@ -230,7 +230,11 @@ pub fn noise_floor(points: &[Point3<f32>], config: &LinkConfig) -> f64 {
 /// its pairs set aside, while some scan is in two or more; the scans of
 /// each pair left are all named (a pair alone cannot tell which of its two
 /// is wrong). So a hall scan placed among two room scans names the hall
-/// scan, not the room scan it disagrees with too.
+/// scan, not the room scan it disagrees with too. Then a scan that agrees
+/// with named scans but is tied by agreeing pairs of unnamed scans to
+/// neither scan 0 nor anything else is named too: nothing verified places
+/// it (the room's wedges: two wedges left 1.8 m off together agree with
+/// each other, and only one of them was in a pair that moved).
 pub fn untrusted(n: usize, checks: &[PairCheck]) -> Vec<usize> {
     let mut open: Vec<[usize; 2]> = checks
         .iter()
@@ -253,5 +257,78 @@ pub fn untrusted(n: usize, checks: &[PairCheck]) -> Vec<usize> {
         named[worst] = true;
         open.retain(|pair| !pair.contains(&worst));
     }
-    (1..n).filter(|&i| named[i]).collect()
+    let agreeing: Vec<[usize; 2]> = checks.iter().filter(|c| c.consistent).map(|c| [c.source, c.target]).collect();
+    // Reached from `from` along agreeing pairs through scans `through` lets.
+    let reach = |from: Vec<usize>, through: &dyn Fn(usize) -> bool| {
+        let mut reached = vec![false; n];
+        let mut queue = from;
+        while let Some(i) = queue.pop() {
+            if i >= n || reached[i] {
+                continue;
+            }
+            reached[i] = true;
+            queue.extend(agreeing.iter().filter(|p| p.contains(&i)).map(|p| p[0] + p[1] - i).filter(|&j| through(j)));
+        }
+        reached
+    };
+    let tied = reach(vec![0], &|j| !named[j]);
+    let on_named = reach((1..n).filter(|&i| named[i]).collect(), &|j| !tied[j]);
+    (1..n).filter(|&i| named[i] || on_named[i]).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pair(target: usize, source: usize, moved_m: Option<f64>, consistent: bool) -> PairCheck {
+        PairCheck {
+            target,
+            source,
+            overlap: 1000,
+            moved_m,
+            angle_rad: moved_m.map(|_| 0.0),
+            chi2: None,
+            relative_motion: None,
+            seen_motion_m: None,
+            rmse_m: None,
+            noise_m: 0.001,
+            consistent,
+            free_space: None,
+            edge: None,
+        }
+    }
+
+    /// The room's wedges of the NEES bench (trial 5 of 8): wedges 2 and 3
+    /// left 1.8 m off together agree with each other; 1 and 3, which the
+    /// truth does not overlap, move 1 m against each other; 1 and 2 no
+    /// longer overlap, nor 0 and 2. Named: 1 and 3 by their pair, and 2,
+    /// which only agrees with 3; wedge 1's agreeing pair with wedge 0
+    /// does not clear it (a pair alone cannot tell which of its two is
+    /// wrong).
+    #[test]
+    fn a_scan_placed_only_on_named_scans_is_named() {
+        let checks = [
+            pair(0, 1, Some(0.001), true),
+            pair(1, 3, Some(0.97), false),
+            pair(3, 2, Some(0.001), true),
+            pair(0, 3, None, false),
+        ];
+        assert_eq!(untrusted(4, &checks), [1, 2, 3]);
+        // With 2 also tied to the frame through 0, it stays trusted.
+        let mut tied = checks.to_vec();
+        tied.push(pair(0, 2, Some(0.001), true));
+        assert_eq!(untrusted(4, &tied), [1, 3]);
+        // A failed match names no one, and nothing agrees with a named scan.
+        let failed = [pair(0, 1, Some(0.001), true), pair(1, 2, None, false), pair(0, 2, Some(0.002), true)];
+        assert!(untrusted(3, &failed).is_empty());
+        // A scan agreeing with a scan in the most inconsistent pairs, which
+        // is named alone, and with nothing else.
+        let hub = [
+            pair(0, 1, Some(0.5), false),
+            pair(2, 1, Some(0.5), false),
+            pair(0, 2, Some(0.001), true),
+            pair(1, 3, Some(0.001), true),
+        ];
+        assert_eq!(untrusted(4, &hub), [1, 3]);
+    }
 }

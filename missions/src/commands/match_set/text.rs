@@ -109,7 +109,12 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
             let outcome = match (f.disagreement_m2, &f.error) {
                 (Some(a), _) => format!(
                     "the scans disagree {a:.3e} m² a point there: {}",
-                    if f.kept { "its poses kept" } else { "not kept (not 1.5× better than the best before)" }
+                    match f.untrusted.as_deref() {
+                        _ if f.kept => "its poses kept".to_string(),
+                        Some(named) if !named.is_empty() =>
+                            format!("not kept (the verification names {})", names(named)),
+                        _ => "not kept (not 1.5× better than the best before)".to_string(),
+                    }
                 ),
                 (None, e) => format!("it failed ({}): not kept", e.as_deref().unwrap_or("")),
             };
@@ -177,6 +182,24 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
                  that is not where the scans meet",
                 scans[i].name,
                 seen.join("; ")
+            )?;
+        }
+        let undecided = report.restart.iter().flat_map(|r| &r.undecided).any(|u| u.scan == i);
+        let on: Vec<&str> = report
+            .checks
+            .iter()
+            .filter(|c| c.consistent && (c.source == i || c.target == i))
+            .map(other)
+            .filter(|j| report.untrusted.contains(j))
+            .map(|j| scans[j].name.as_str())
+            .collect();
+        if moved.is_empty() && seen.is_empty() && !undecided && !on.is_empty() {
+            writeln!(
+                out,
+                "  not trusted: {}: it agrees only with scans named here ({}): nothing verified ties it to {}",
+                scans[i].name,
+                on.join(", "),
+                scans[0].name
             )?;
         }
     }
