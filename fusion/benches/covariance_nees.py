@@ -27,7 +27,7 @@ NEES_KEEP=DIR keeps each trial's inputs, NEES_PARTS=K deals the shares
 into K parts (4; 2 is one link alone), NEES_ARGS="--only-covered" adds
 arguments to every `match`, NEES_VIEWPOINTS=1 writes the parts as PCD with
 the scanner's position (VIEWPOINT) so that the verification tests free
-space (PLY says nothing of it).
+space (PLY says nothing of it), NEES_SEED=S draws with another seed (7).
 """
 import json
 import math
@@ -143,7 +143,7 @@ def run(tool, d, parts, truths, starts, mode):
 def main():
     tool, trials = sys.argv[1], int(sys.argv[2])
     modes = sys.argv[3].split(",") if len(sys.argv) > 3 else ["graph", "pairwise", "incremental", "simultaneous"]
-    rng = np.random.default_rng(7)
+    rng = np.random.default_rng(int(os.environ.get("NEES_SEED", "7")))
     scenarios = []
     only = os.environ.get("NEES_ONLY")
     for name, xyz, up in sources():
@@ -182,6 +182,7 @@ def main():
                             e = xi(got, np.linalg.inv(truths[a]) @ truths[b])
                             print(f"  CHECK {label} {mode} {a}<-{b} rmse {c['rmse_m']} noise {c['noise_m']:.4f} "
                                   f"ratio {(c['rmse_m'] or 0) / c['noise_m']:.2f} moved {c['moved_m']} "
+                                  f"relative {c['relative_motion']} consistent {c['consistent']} exit {code} "
                                   f"err {np.linalg.norm(e[:3]) * 180 / math.pi:.3f}° {np.linalg.norm(e[3:]) * 1e3:.1f} mm")
                     for i in range(1, len(parts)):
                         e = xi(np.array(v["scans"][i]["world_from_scan"]), truths[i])

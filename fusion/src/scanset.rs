@@ -565,14 +565,21 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     // The restart is verified where its verdict decides (an impossible
     // first result) or where it is kept: a verification of a large set
     // costs as much as its last stage.
+    // A registration verified, with the scans its verification names.
+    let verify = |r: Option<SetResult>| -> Result<(Option<SetResult>, Option<Vec<usize>>)> {
+        let r = r.map(|r| verified(scans, r, config)).transpose()?;
+        let named = r.as_ref().map(|r| crate::verify::untrusted(scans.len(), &r.checks));
+        Ok((r, named))
+    };
     let (mut second, error) = match without_first(scans, starts, config, 1, progress) {
-        Ok(r) if impossible => (Some(verified(scans, r, config)?), None),
         Ok(r) => (Some(r), None),
         Err(e) => (None, Some(e.to_string())),
     };
+    let mut named_after = None;
+    if impossible {
+        (second, named_after) = verify(second.take())?;
+    }
     let after = second.as_ref().map(|r| crate::agreement::disagreement(&prepared, &r.world_from_scan, tau));
-    let mut named_after =
-        second.as_ref().filter(|_| impossible).map(|r| crate::verify::untrusted(scans.len(), &r.checks));
     // An impossible result gives way to one the verification names
     // nothing of (the disagreement may prefer the impossible: a slide
     // lays floors and walls on each other); else the disagreement decides.
@@ -602,8 +609,7 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     {
         let far = apart(scans, &first.world_from_scan, &r.world_from_scan);
         if !far.is_empty() {
-            second = second.map(|r| verified(scans, r, config)).transpose()?;
-            named_after = second.as_ref().map(|r| crate::verify::untrusted(scans.len(), &r.checks));
+            (second, named_after) = verify(second.take())?;
             restart_verified = true;
             if named_after.as_ref().is_some_and(Vec::is_empty) {
                 undecided = far;
@@ -626,16 +632,14 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
         && a < before
     {
         if !restart_verified {
-            second = second.map(|r| verified(scans, r, config)).transpose()?;
-            named_after = second.as_ref().map(|r| crate::verify::untrusted(scans.len(), &r.checks));
+            (second, named_after) = verify(second.take())?;
             restart_verified = true;
         }
         kept = named_after.as_ref().is_some_and(Vec::is_empty);
         rescued = kept;
     }
     if kept && !restart_verified {
-        second = second.map(|r| verified(scans, r, config)).transpose()?;
-        named_after = second.as_ref().map(|r| crate::verify::untrusted(scans.len(), &r.checks));
+        (second, named_after) = verify(second.take())?;
     }
     // While the result is not to be trusted — the verification names some
     // of its scans, the restart left some undecided, or the scans agree no
