@@ -164,7 +164,9 @@ impl SetResult {
 /// (coarsest) stage, run when the first registration moved a scan further
 /// from its start than the second stage's correspondence distance (out of
 /// the restart's reach: the first stage decided where it went), and kept
-/// when the scans agree clearly better there ([`crate::agreement`]); or
+/// when the scans agree clearly better there ([`crate::agreement`]) — or
+/// better at all when the verification names scans of the first and none
+/// of the restart's; or
 /// run when the schedule failed (a stage moved two scans apart that
 /// overlapped at their starts, a match lost every correspondence), and
 /// kept when it succeeds; or run when the first registration's links
@@ -524,7 +526,8 @@ fn finest_link(config: &SetConfig) -> Option<(Stage, LinkConfig)> {
 /// or its links disagree more than their covariances allow — the
 /// registration from the starts without the schedule's first
 /// stage, if `first` is impossible and the verification names nothing of
-/// it, or the scans agree clearly better there ([`Restart`]).
+/// it, or the scans agree clearly better there — or at all, where the
+/// verification names scans of `first` and none of it ([`Restart`]).
 fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     scans: &[S],
     starts: &[Isometry3<f64>],
@@ -562,15 +565,15 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     let tau = finest.max_correspondence_m;
     let before = crate::agreement::disagreement(&prepared, &first.world_from_scan, tau);
     let at_starts = crate::agreement::disagreement(&prepared, starts, tau);
-    // The restart is verified where its verdict decides (an impossible
-    // first result) or where it is kept: a verification of a large set
-    // costs as much as its last stage.
     // A registration verified, with the scans its verification names.
     let verify = |r: Option<SetResult>| -> Result<(Option<SetResult>, Option<Vec<usize>>)> {
         let r = r.map(|r| verified(scans, r, config)).transpose()?;
         let named = r.as_ref().map(|r| crate::verify::untrusted(scans.len(), &r.checks));
         Ok((r, named))
     };
+    // The restart is verified where its verdict decides (an impossible
+    // first result, a named one) or where it is kept: a verification of a
+    // large set costs as much as its last stage.
     let (mut second, error) = match without_first(scans, starts, config, 1, progress) {
         Ok(r) => (Some(r), None),
         Err(e) => (None, Some(e.to_string())),

@@ -193,8 +193,9 @@ pub struct RestartReport {
     /// True when the restart's poses are the result: the schedule's put
     /// points in another scanner's free space and the verification names
     /// nothing of the restart's, or the schedule's disagreement is more
-    /// than 1.5 times the restart's, or — with `undecided` scans — more
-    /// than the restart's at all.
+    /// than 1.5 times the restart's, or — with `undecided` scans, or when
+    /// the verification named scans of the schedule's and names none of
+    /// the restart's — more than the restart's at all.
     pub kept: bool,
     /// What set it off: "moved" (the schedule moved `scan` beyond the
     /// second stage's reach of its start), "failed" (`schedule_error`),
@@ -244,7 +245,9 @@ pub struct FurtherReport {
     /// false and nothing is `undecided`): the scans disagree more than 1.5
     /// times less there than at the best registration before it, or the
     /// schedule's put points in another scanner's free space and the
-    /// verification names nothing of its.
+    /// verification names nothing of its, or the verification named scans
+    /// of the result before it, names none of its, and the scans disagree
+    /// less there at all.
     pub kept: bool,
     /// The scans the verification names at its poses; null when it failed
     /// or was not verified (it is where it may be kept).
