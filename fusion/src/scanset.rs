@@ -566,9 +566,9 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     let before = crate::agreement::disagreement(&prepared, &first.world_from_scan, tau);
     let at_starts = crate::agreement::disagreement(&prepared, starts, tau);
     // A registration verified, with the scans its verification names.
-    let verify = |r: Option<SetResult>| -> Result<(Option<SetResult>, Option<Vec<usize>>)> {
-        let r = r.map(|r| verified(scans, r, config)).transpose()?;
-        let named = r.as_ref().map(|r| crate::verify::untrusted(scans.len(), &r.checks));
+    let verify = |r: SetResult| -> Result<(SetResult, Vec<usize>)> {
+        let r = verified(scans, r, config)?;
+        let named = crate::verify::untrusted(scans.len(), &r.checks);
         Ok((r, named))
     };
     // The restart is verified where its verdict decides (an impossible
@@ -580,7 +580,7 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     };
     let mut named_after = None;
     if impossible {
-        (second, named_after) = verify(second.take())?;
+        (second, named_after) = second.take().map(verify).transpose()?.unzip();
     }
     let after = second.as_ref().map(|r| crate::agreement::disagreement(&prepared, &r.world_from_scan, tau));
     // An impossible result gives way to one the verification names
@@ -612,7 +612,7 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     {
         let far = apart(scans, &first.world_from_scan, &r.world_from_scan);
         if !far.is_empty() {
-            (second, named_after) = verify(second.take())?;
+            (second, named_after) = second.take().map(verify).transpose()?.unzip();
             restart_verified = true;
             if named_after.as_ref().is_some_and(Vec::is_empty) {
                 undecided = far;
@@ -635,14 +635,14 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
         && a < before
     {
         if !restart_verified {
-            (second, named_after) = verify(second.take())?;
+            (second, named_after) = second.take().map(verify).transpose()?.unzip();
             restart_verified = true;
         }
         kept = named_after.as_ref().is_some_and(Vec::is_empty);
         rescued = kept;
     }
     if kept && !restart_verified {
-        (second, named_after) = verify(second.take())?;
+        (second, named_after) = second.take().map(verify).transpose()?.unzip();
     }
     // While the result is not to be trusted — the verification names some
     // of its scans, the restart left some undecided, or the scans agree no
@@ -656,10 +656,9 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     let in_doubt = |named: &[usize], disagreement: f64| !named.is_empty() || disagreement >= at_starts;
     // The scans the verification names of the result so far.
     let mut current_named = if kept { named_after.clone().unwrap_or_default() } else { named.clone() };
-    let mut doubted =
-        if kept { in_doubt(&current_named, after.unwrap_or(before)) } else { in_doubt(&current_named, before) }
-            || !undecided.is_empty()
-            || rescued;
+    let mut doubted = in_doubt(&current_named, if kept { after.unwrap_or(before) } else { before })
+        || !undecided.is_empty()
+        || rescued;
     for skip in 2..config.stages.len() {
         if !doubted {
             break;
@@ -671,8 +670,7 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
                 // the verification names nothing of (as the restart's).
                 let rescue = !current_named.is_empty() && a < best;
                 let (f, named) = if impossible || rescue || best > RESTART_RATIO * a {
-                    let f = verified(scans, f, config)?;
-                    let named = crate::verify::untrusted(scans.len(), &f.checks);
+                    let (f, named) = verify(f)?;
                     (f, Some(named))
                 } else {
                     (f, None)
