@@ -75,6 +75,10 @@ pub struct LinkConfig {
     /// off by about 0.4 mm along the same direction whichever half was the
     /// source: BENCHMARKS, "Matching both ways").
     pub both_ways: bool,
+    /// The factor on the links' covariance by range
+    /// ([`crate::icp::IcpResult::range_covariance`]) measured on the scans
+    /// ([`crate::noise::Calibration::range_scale`]). Default 1.
+    pub range_scale: f64,
 }
 
 impl LinkConfig {
@@ -123,6 +127,7 @@ impl Default for LinkConfig {
             gate_chi2: GATE_CHI2,
             max_partners: 10,
             both_ways: true,
+            range_scale: 1.0,
         }
     }
 }
@@ -619,20 +624,43 @@ fn solve(
                 })
                 .collect(),
         };
-        // σ̂₀² above 1 scales the links' information, not the start's
-        // steps: along what no link sees the σ stays the start's. Below 1
-        // the links agree better than their covariances say: the share of
-        // their noise that is each scan's own, in every one of its links,
-        // closes the cycles ([`shared_noise`]).
-        // (σ̂₀² is exactly 1 without redundancy.)
-        let covariance = if variance_factor == 1.0 {
-            g.covariance
+        // Each link's covariance, as the adjustment weighs the links by
+        // their information (the poses stay the links' own):
+        // - its noise: the match's covariance by range from the scanner
+        //   (`IcpResult::range_covariance`: far points are noisier, which
+        //   one variance for all pairs hides), calibrated on the scans'
+        //   halves (`LinkConfig::range_scale`) — or, without it, its
+        //   information's inverse — times σ̂₀²: above 1 the links disagree
+        //   more than their noise says; below 1 they agree better, and
+        //   the share of their noise that is each scan's own, in every one
+        //   of its links, closes the cycles ([`shared_noise`]). (σ̂₀² is
+        //   exactly 1 without redundancy.) The start's steps, which hold
+        //   only what no link sees, are taken as they are weighed.
+        // - its pull by its pairs beyond the other scan's sampled edge
+        //   (`IcpResult::edge_bias`): a bias that its residuals do not
+        //   show, nor — where the pulls close the cycles — σ̂₀²; each
+        //   link's an independent error.
+        let f = if variance_factor == 1.0 { 1.0 } else { variance_factor.max(MIN_INDEPENDENT_SHARE) };
+        let noise: Vec<Matrix6<f64>> = used
+            .iter()
+            .map(|&k| {
+                let r = links[k].result.as_ref().expect("an accepted link has its match");
+                r.range_covariance.map_or_else(
+                    || r.information.pseudo_inverse(1e-12 * r.information.amax()).unwrap_or_else(|_| Matrix6::zeros()),
+                    |c| c * config.range_scale,
+                )
+            })
+            .collect();
+        let mut covariances = vec![None; steps.len()];
+        covariances.extend(used.iter().zip(&noise).map(|(&k, c)| {
+            let d = links[k].result.as_ref().map_or_else(Vector6::zeros, |r| r.edge_bias);
+            Some(c * f + d * d.transpose())
+        }));
+        let covariance = crate::graph::sandwich_covariance(&g.world_from_scan, &priors, &edges, &covariances)?;
+        let covariance = if f < 1.0 {
+            shared_noise(&g.world_from_scan, covariance, &edges[steps.len()..], &noise, f)
         } else {
-            let f = variance_factor.max(MIN_INDEPENDENT_SHARE);
-            let mut scaled = steps.clone();
-            scaled.extend(edges[steps.len()..].iter().map(|e| Edge { information: e.information / f, ..*e }));
-            let c = crate::graph::optimize(&g.world_from_scan, &priors, &scaled, 1)?.covariance;
-            if f < 1.0 { shared_noise(&g.world_from_scan, c, &edges[steps.len()..], f) } else { c }
+            covariance
         };
         // Scan 0's prior leaves it within 1e-20 m of its pose: put it there.
         let shift = poses[0] * g.world_from_scan[0].inverse();
@@ -662,10 +690,10 @@ const MIN_INDEPENDENT_SHARE: f64 = 0.05;
 /// scan, almost wholly so) — and partly the pair's. The graph takes its
 /// links as independent, so the scans' shares close every cycle and only
 /// the pairs' show in σ̂₀²: of each link's covariance C, the share σ̂₀² is
-/// the pair's and 1 − σ̂₀² the scans', half each. `independent` is the
-/// graph's covariance with the links' information divided by σ̂₀² (the
-/// pairs' share, which the adjustment averages down); a scan's own share
-/// S_k — the mean over its links of ½(1 − σ̂₀²)·C, in world axes — passes
+/// the pair's and 1 − σ̂₀² the scans', half each. `noise` is each link's
+/// C; `independent` the graph's covariance with the links' C times σ̂₀²
+/// (the pairs' share, which the adjustment averages down); a scan's own
+/// share S_k — the mean over its links of ½(1 − σ̂₀²)·C, in world axes — passes
 /// through it whole, as does the first scan's, against which every pose
 /// is: P_k = independent_k + S_k + S_0. Four parts of one scan, all
 /// linked, were up to 2× optimistic without it (BENCHMARKS.md).
@@ -673,17 +701,16 @@ fn shared_noise(
     poses: &[Isometry3<f64>],
     independent: Vec<Matrix6<f64>>,
     links: &[Edge],
+    noise: &[Matrix6<f64>],
     independent_share: f64,
 ) -> Vec<Matrix6<f64>> {
     let n = poses.len();
     let mut own = vec![Matrix6::zeros(); n];
     let mut count = vec![0usize; n];
-    for e in links {
+    for (e, covariance) in links.iter().zip(noise) {
         // The link's covariance (nothing along what it cannot see), its ξ
         // in the target's frame carried to the world's axes.
         let a = adjoint(&poses[e.target]);
-        let covariance =
-            e.information.pseudo_inverse(1e-12 * e.information.amax()).unwrap_or_else(|_| Matrix6::zeros());
         let c = a * covariance * a.transpose() * (0.5 * (1.0 - independent_share));
         for k in [e.source, e.target] {
             own[k] += c;
@@ -744,9 +771,10 @@ mod tests {
             .map(|&(target, source)| Edge { target, source, target_from_source: Isometry3::identity(), information })
             .collect();
         let plain = crate::graph::optimize(&poses, &priors, &edges, 1).expect("adjusts").covariance;
-        let scaled: Vec<Edge> = edges.iter().map(|e| Edge { information: e.information / factor, ..*e }).collect();
-        let independent = crate::graph::optimize(&poses, &priors, &scaled, 1).expect("adjusts").covariance;
-        let shared = shared_noise(&poses, independent, &edges, factor);
+        let noise = vec![information.try_inverse().expect("invertible"); edges.len()];
+        let scaled: Vec<Option<Matrix6<f64>>> = noise.iter().map(|c| Some(c * factor)).collect();
+        let independent = crate::graph::sandwich_covariance(&poses, &priors, &edges, &scaled).expect("adjusts");
+        let shared = shared_noise(&poses, independent, &edges, &noise, factor);
         for k in 1..n {
             for d in 0..6 {
                 let (mc, model, naive) = (scatter[k][(d, d)], shared[k][(d, d)], plain[k][(d, d)]);

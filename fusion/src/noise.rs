@@ -47,6 +47,10 @@ pub struct Calibration {
     pub halvings: usize,
     /// Halvings left out as gross mismatches (χ²/dof beyond 25× the median).
     pub left_out: usize,
+    /// The same of the halves' errors against their covariance by range
+    /// ([`crate::icp::IcpResult::range_covariance`]): the factor on it (1
+    /// when nothing could be measured).
+    pub range_scale: f64,
 }
 
 /// Each scan dealt into two halves by a hash of its points' indices
@@ -63,9 +67,9 @@ pub fn calibrate<S: AsRef<[Point3<f32>]> + Sync>(
     config: &MultiviewConfig,
     both_ways: bool,
 ) -> Calibration {
-    let icp = crate::icp::IcpConfig { noise_scale: 1.0, trace: false, ..config.icp };
+    let icp = crate::icp::IcpConfig { noise_scale: 1.0, trace: false, range_noise: true, ..config.icp };
     let jobs: Vec<(usize, u64)> = (0..scans.len()).flat_map(|i| (0..HALVINGS).map(move |h| (i, h))).collect();
-    let samples: Vec<(f64, usize)> = jobs
+    let samples: Vec<(f64, f64, usize)> = jobs
         .par_iter()
         .filter_map(|&(i, h)| {
             let points = scans[i].as_ref();
@@ -100,7 +104,12 @@ pub fn calibrate<S: AsRef<[Point3<f32>]> + Sync>(
             let xi = crate::se3::left_difference(&r.target_from_source, &truth);
             let dof = 6 - r.unobservable.len().min(6);
             let chi2 = (xi.transpose() * r.information * xi)[0];
-            (dof > 0 && chi2.is_finite()).then_some((chi2, dof))
+            let by_range = r.range_covariance.map(|c| {
+                let information = c.pseudo_inverse(1e-12 * c.amax()).unwrap_or_else(|_| nalgebra::Matrix6::zeros());
+                (xi.transpose() * information * xi)[0]
+            });
+            let by_range = by_range.filter(|c| c.is_finite()).unwrap_or(chi2);
+            (dof > 0 && chi2.is_finite()).then_some((chi2, by_range, dof))
         })
         .collect();
     pooled(&samples)
@@ -136,20 +145,22 @@ fn off(source: &[Point3<f32>], truth: &Isometry3<f64>, max_correspondence_m: f64
     crate::se3::exp(&xi) * truth
 }
 
-/// Σ χ² / Σ dof of the samples (χ², dof), those beyond [`GROSS`] times
-/// the median χ²/dof left out.
-fn pooled(samples: &[(f64, usize)]) -> Calibration {
-    let mut ratios: Vec<f64> = samples.iter().map(|(c, d)| c / *d as f64).collect();
+/// Σ χ² / Σ dof of the samples (χ², χ² by range, dof), those whose χ²/dof
+/// is beyond [`GROSS`] times the median left out.
+fn pooled(samples: &[(f64, f64, usize)]) -> Calibration {
+    let mut ratios: Vec<f64> = samples.iter().map(|(c, _, d)| c / *d as f64).collect();
     ratios.sort_by(f64::total_cmp);
     let median = ratios.get(ratios.len() / 2).copied().unwrap_or(0.0);
-    let kept: Vec<&(f64, usize)> = samples.iter().filter(|(c, d)| c / *d as f64 <= GROSS * median.max(1e-12)).collect();
-    let dof: usize = kept.iter().map(|(_, d)| d).sum();
-    let chi2: f64 = kept.iter().map(|(c, _)| c).sum();
+    let kept: Vec<&(f64, f64, usize)> =
+        samples.iter().filter(|(c, _, d)| c / *d as f64 <= GROSS * median.max(1e-12)).collect();
+    let dof: usize = kept.iter().map(|(_, _, d)| d).sum();
+    let scale = |chi2: f64| if dof > 0 && chi2 > 0.0 { chi2 / dof as f64 } else { 1.0 };
     Calibration {
-        variance_scale: if dof > 0 && chi2 > 0.0 { chi2 / dof as f64 } else { 1.0 },
+        variance_scale: scale(kept.iter().map(|(c, _, _)| c).sum()),
         dof,
         halvings: samples.len(),
         left_out: samples.len() - kept.len(),
+        range_scale: scale(kept.iter().map(|(_, r, _)| r).sum()),
     }
 }
 
@@ -244,9 +255,10 @@ mod tests {
     /// A gross halving (a mismatch) is left out of the pool, noise is not.
     #[test]
     fn gross_halvings_are_left_out() {
-        let c = pooled(&[(6.0, 6), (5.0, 6), (7.0, 6), (600.0, 6)]);
+        let c = pooled(&[(6.0, 12.0, 6), (5.0, 10.0, 6), (7.0, 14.0, 6), (600.0, 1.0, 6)]);
         assert_eq!((c.left_out, c.dof, c.halvings), (1, 18, 4));
         assert!((c.variance_scale - 1.0).abs() < 1e-12);
+        assert!((c.range_scale - 2.0).abs() < 1e-12);
         let none = pooled(&[]);
         assert_eq!((none.variance_scale, none.dof), (1.0, 0));
     }

@@ -387,6 +387,7 @@ pub fn register_set<S: AsRef<[Point3<f32>]> + Sync>(
     let noise_seconds = started.elapsed().as_secs_f64();
     let mut calibrated = config.clone();
     calibrated.link.multiview.icp.noise_scale *= noise.map_or(1.0, |n| n.variance_scale);
+    calibrated.link.range_scale *= noise.map_or(1.0, |n| n.range_scale);
     let config = &calibrated;
     let r = registered(scans, starts, config, progress)?;
     Ok(SetResult { noise, noise_seconds, ..r })
@@ -806,6 +807,10 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
         icp: crate::icp::IcpConfig {
             max_correspondence_m: s.max_correspondence_m,
             only_covered: config.only_covered && k == finest_stage,
+            // The graph's links carry their edges' pull into the
+            // covariance (`links`).
+            edge_bias: config.mode == Mode::Graph && k == finest_stage,
+            range_noise: config.mode == Mode::Graph && k == finest_stage,
             noise_scale: if k == finest_stage { config.link.multiview.icp.noise_scale } else { 1.0 },
             ..config.link.multiview.icp
         },

@@ -92,3 +92,113 @@ fn point_to_plane_covariance_matches_monte_carlo() {
     let m_right = mismatch(&empirical(&right), &predicted);
     assert!(m_right > 0.7, "right/source-frame convention should not match: {m_right}");
 }
+
+/// Noise that grows with range from the scanner, as real scans' does:
+/// one variance for all pairs understates what the far points — which
+/// carry the rotation — do to the estimate; the covariance with the
+/// variance measured by range (`IcpResult::range_covariance`) does not.
+#[test]
+fn noise_that_grows_with_range_is_reported_by_range() {
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    // Boards of 2 × 2 m around the scanner (at the origin), 1.5 to 24 m
+    // away, each facing it turned 50° about a tilted axis of its own: no
+    // two meet, so every residual is the noise — σ 0.5 mm + 1 mm per
+    // metre of range, along the board's normal.
+    let boards: Vec<(Vector3<f64>, nalgebra::Matrix3<f64>)> = (0..24)
+        .map(|k| {
+            let range = 1.5 * 2f64.powf(f64::from(k % 5));
+            let azimuth = f64::from(k) * 2.4;
+            let elevation = 0.5 * ((f64::from(k) * 1.7).sin());
+            let centre =
+                range * Vector3::new(azimuth.cos() * elevation.cos(), azimuth.sin() * elevation.cos(), elevation.sin());
+            let axis = nalgebra::Unit::new_normalize(Vector3::new(
+                (f64::from(k) * 0.7).sin(),
+                (f64::from(k) * 1.3).cos(),
+                0.4,
+            ));
+            let facing = nalgebra::Rotation3::rotation_between(&Vector3::z(), &(-centre)).expect("turn");
+            (centre, (nalgebra::Rotation3::from_axis_angle(&axis, 50f64.to_radians()) * facing).into_inner())
+        })
+        .collect();
+    let scan = |n: usize, noisy: bool, rng: &mut ChaCha8Rng| -> Vec<Point3<f64>> {
+        (0..n)
+            .map(|i| {
+                let (c, r) = &boards[i % boards.len()];
+                let local = Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), 0.0);
+                let p = c + r * local;
+                let sigma = 0.0005 + 0.001 * p.norm();
+                let along = if noisy { Normal::new(0.0, sigma).expect("σ").sample(rng) } else { 0.0 };
+                Point3::from(p + r.column(2) * along)
+            })
+            .collect()
+    };
+    let target_pts: Vec<Point3<f32>> = scan(96_000, false, &mut rng).iter().map(|p| p.cast()).collect();
+    let target = Target::new(&target_pts, 10).expect("target");
+    let truth = Isometry3::identity();
+    let base = IcpConfig { max_correspondence_m: 0.3, max_iterations: 20, ..IcpConfig::default() };
+    let trials = 300;
+    let (mut by_range, mut one) = (0.0, 0.0);
+    for _ in 0..trials {
+        let source: Vec<Point3<f32>> = scan(4_800, true, &mut rng).iter().map(|p| p.cast()).collect();
+        let r = align(&source, &target, &truth, &IcpConfig { range_noise: true, ..base }).expect("icp");
+        let plain = align(&source, &target, &truth, &base).expect("icp");
+        assert_eq!((r.target_from_source, r.information), (plain.target_from_source, plain.information));
+        let e = left_error(&r.target_from_source, &truth);
+        let c = r.range_covariance.expect("asked for");
+        by_range += (e.transpose() * c.try_inverse().expect("invertible") * e)[(0, 0)] / f64::from(trials);
+        one += (e.transpose() * plain.information * e)[(0, 0)] / f64::from(trials);
+    }
+    // 6 when honest (sampling sd 0.2 at 300 trials).
+    assert!((5.2..6.8).contains(&by_range), "mean NEES with the variance by range: {by_range}");
+    assert!(one > 8.0, "mean NEES with one variance: {one}");
+}
+
+/// Where a source runs on beyond the target's edge, its pairs there pull
+/// the match: `IcpResult::edge_bias`, the linearised step of the fit
+/// without them, is where the match without them (`only_covered`) lands;
+/// where the target covers the source it is nothing.
+#[test]
+fn the_edges_pull_is_where_the_covered_match_lands() {
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    // A corner of three curved faces: the floor z = f(x, y), walls at x = 0 and y = 0.
+    let f = |a: f64, b: f64| 0.06 * (1.3 * a).sin() + 0.04 * (0.9 * b).cos();
+    let corner = |n: usize, floor_to: f64, rng: &mut ChaCha8Rng| -> Vec<Point3<f32>> {
+        (0..n)
+            .map(|i| {
+                let (a, b) = (rng.random_range(0.0..4.0), rng.random_range(0.0..4.0));
+                let p = match i % 3 {
+                    0 => Point3::new(a * floor_to / 4.0, b, f(a * floor_to / 4.0, b)),
+                    1 => Point3::new(f(a, b) + 0.0, a, b * 0.6),
+                    _ => Point3::new(a, f(b, a) + 0.0, b * 0.6),
+                };
+                p.cast::<f32>()
+            })
+            .collect()
+    };
+    let mut target = Target::new(&corner(30_000, 4.0, &mut rng), 10).expect("target");
+    target.orient_normals_towards(&Point3::new(2.0, 2.0, 1.0));
+    let base = IcpConfig {
+        max_correspondence_m: 0.5,
+        max_iterations: 100,
+        translation_tolerance_m: 1e-9,
+        rotation_tolerance_rad: 1e-9,
+        ..IcpConfig::default()
+    };
+    let start = Isometry3::translation(0.01, -0.01, 0.005);
+    // The source's floor runs on to x = 6, two metres past the target's.
+    let beyond = corner(9_000, 6.0, &mut rng);
+    let all = align(&beyond, &target, &start, &IcpConfig { edge_bias: true, ..base }).expect("icp");
+    let covered = align(&beyond, &target, &start, &IcpConfig { only_covered: true, ..base }).expect("icp");
+    let moved = left_error(&covered.target_from_source, &all.target_from_source);
+    let miss = (all.edge_bias - moved).norm();
+    // About a millimetre; the linearised step comes within a fifth of it.
+    assert!(moved.fixed_rows::<3>(3).norm() > 5e-4, "the edge's pairs pull by {moved}");
+    assert!(miss < 0.25 * moved.norm(), "edge bias {} against the covered match's move {moved}", all.edge_bias);
+    // Covered: the source kept 0.3 m inside the target's borders (a few
+    // pairs still count as beyond, where the faces meet and where random
+    // samples leave a gap on one side).
+    let inside: Vec<Point3<f32>> =
+        corner(9_000, 4.0, &mut rng).into_iter().filter(|p| p.x < 3.7 && p.y < 3.7 && p.z < 2.1).collect();
+    let r = align(&inside, &target, &start, &IcpConfig { edge_bias: true, ..base }).expect("icp");
+    assert!(r.edge_bias.norm() < 0.1 * moved.norm(), "pull where the target covers the source: {}", r.edge_bias);
+}

@@ -57,6 +57,19 @@ pub struct IcpConfig {
     /// at the edge: its residual is the edge's, and all such pairs lean the
     /// same way. Default false.
     pub only_covered: bool,
+    /// Point-to-plane, without `only_covered`: measure how far the pairs
+    /// beyond the target's sampled edge pull the estimate — where the fit
+    /// without them would step from it, linearised at the last pass
+    /// ([`IcpResult::edge_bias`](super::IcpResult::edge_bias)). It changes
+    /// nothing of the match. Default false.
+    pub edge_bias: bool,
+    /// Point-to-plane: also report the estimate's covariance with the
+    /// residuals' variance measured by range from the scanner (bins √2
+    /// apart) instead of one variance for all pairs — far points, which
+    /// carry the rotation, are noisier on real scans
+    /// ([`IcpResult::range_covariance`](super::IcpResult::range_covariance)).
+    /// Nothing else changes. Default false.
+    pub range_noise: bool,
     /// Point-to-plane: what the residuals' own scatter misjudges of the
     /// estimate's variance, as a factor on the reported covariance —
     /// measured on the data by [`crate::noise::calibrate`] (random halves
@@ -107,6 +120,8 @@ impl Default for IcpConfig {
             source_viewpoint: Point3::origin(),
             degeneracy_ratio: None,
             only_covered: false,
+            edge_bias: false,
+            range_noise: false,
             noise_scale: 1.0,
         }
     }

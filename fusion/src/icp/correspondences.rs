@@ -10,7 +10,7 @@ use super::target::{Target, point};
 use crate::se3::{adjoint, skew};
 
 /// Sums over the correspondences of one iteration.
-#[derive(Clone, Copy, Default)]
+#[derive(Clone, Default)]
 pub(crate) struct Sums {
     pub(crate) n: usize,
     /// Σ w (point-to-point; equals n without a kernel).
@@ -22,6 +22,68 @@ pub(crate) struct Sums {
     pub(crate) sq_t: Vector3<f64>,
     pub(crate) spq: Matrix3<f64>,
     pub(crate) spp: Matrix3<f64>,
+    /// Point-to-plane with [`IcpConfig::edge_bias`]: the share of `h` and
+    /// `b` of the pairs beyond the target's sampled edge
+    /// ([`Target::beyond`](super::Target::beyond)), those
+    /// [`IcpConfig::only_covered`] leaves out.
+    pub(crate) edge_h: Matrix6<f64>,
+    pub(crate) edge_b: Vector6<f64>,
+    /// Point-to-plane with [`IcpConfig::range_noise`]: `h` and the squared
+    /// residuals by the source point's range from its scanner (`None`
+    /// otherwise: 9 kB a chunk that the other matches do not carry).
+    pub(crate) ranges: Option<Box<RangeBins>>,
+}
+
+/// Two sums' range bins ([`RangeBins::merge`]), either of them absent.
+fn merged(
+    mine: Option<Box<RangeBins>>,
+    other: Option<&RangeBins>,
+    a: &Matrix6<f64>,
+    half: f64,
+) -> Option<Box<RangeBins>> {
+    match (mine, other) {
+        (Some(m), Some(o)) => Some(m.merge(o, a, half)),
+        (Some(m), None) => Some(m.merge(&RangeBins::default(), a, half)),
+        (None, Some(o)) => Some(Box::new(RangeBins::default()).merge(o, a, half)),
+        (None, None) => None,
+    }
+}
+
+/// Bins of range from the scanner, √2 apart from 2⁻⁸ m (the first and
+/// last bins take everything nearer and farther).
+pub(crate) const RANGE_BINS: usize = 32;
+
+/// Point-to-plane sums by range ([`RANGE_BINS`]).
+#[derive(Clone, Copy)]
+pub(crate) struct RangeBins {
+    pub(crate) h: [Matrix6<f64>; RANGE_BINS],
+    pub(crate) sq: [f64; RANGE_BINS],
+    pub(crate) n: [usize; RANGE_BINS],
+}
+
+impl Default for RangeBins {
+    fn default() -> Self {
+        Self { h: [Matrix6::zeros(); RANGE_BINS], sq: [0.0; RANGE_BINS], n: [0; RANGE_BINS] }
+    }
+}
+
+impl RangeBins {
+    /// The bin of a point `range_m` from its scanner.
+    pub(crate) fn bin(range_m: f64) -> usize {
+        let k = (2.0 * range_m.max(1e-12).log2()).round() + 16.0;
+        k.clamp(0.0, (RANGE_BINS - 1) as f64) as usize
+    }
+
+    /// These and `o`'s, `o.h` carried by `a` (Aᵀ·H·A) and the `h` of both
+    /// multiplied by `half` (½ for a match both ways' mean, 1 for a sum).
+    fn merge(mut self: Box<Self>, o: &RangeBins, a: &Matrix6<f64>, half: f64) -> Box<Self> {
+        for k in 0..RANGE_BINS {
+            self.h[k] = half * (self.h[k] + a.transpose() * o.h[k] * a);
+            self.sq[k] += o.sq[k];
+            self.n[k] += o.n[k];
+        }
+        self
+    }
 }
 
 impl Sums {
@@ -35,6 +97,9 @@ impl Sums {
         self.sq_t += o.sq_t;
         self.spq += o.spq;
         self.spp += o.spp;
+        self.edge_h += o.edge_h;
+        self.edge_b += o.edge_b;
+        self.ranges = merged(self.ranges, o.ranges.as_deref(), &Matrix6::identity(), 1.0);
         self
     }
 
@@ -48,10 +113,13 @@ impl Sums {
     pub(crate) fn both_ways(self, back: &Sums, target_from_source: &Isometry3<f64>) -> Sums {
         let a = -adjoint(&target_from_source.inverse());
         Sums {
+            ranges: merged(self.ranges, back.ranges.as_deref(), &a, 0.5),
             n: self.n + back.n,
             sq: self.sq + back.sq,
             h: 0.5 * (self.h + a.transpose() * back.h * a),
             b: 0.5 * (self.b + a.transpose() * back.b),
+            edge_h: 0.5 * (self.edge_h + a.transpose() * back.edge_h * a),
+            edge_b: 0.5 * (self.edge_b + a.transpose() * back.edge_b),
             ..self
         }
     }
@@ -187,7 +255,8 @@ pub(crate) fn accumulate(
                     Method::PointToPlane => {
                         let n = target.normal(i);
                         let res = n.dot(&(pt - q));
-                        if config.only_covered && target.beyond(i, &(pt - q - res * n)) {
+                        let edge = (config.only_covered || config.edge_bias) && target.beyond(i, &(pt - q - res * n));
+                        if edge && config.only_covered {
                             continue;
                         }
                         s.n += 1;
@@ -195,8 +264,20 @@ pub(crate) fn accumulate(
                         // r = nᵀ(T̂p + ω × T̂p + v − q): ∂r/∂ω = T̂p × n, ∂r/∂v = n.
                         let c = pt.cross(&n);
                         let j = Vector6::new(c.x, c.y, c.z, n.x, n.y, n.z);
-                        s.h += w * j * j.transpose();
-                        s.b += w * res * j;
+                        let (h, b) = (w * j * j.transpose(), w * res * j);
+                        s.h += h;
+                        s.b += b;
+                        if edge {
+                            s.edge_h += h;
+                            s.edge_b += b;
+                        }
+                        if config.range_noise {
+                            let k = RangeBins::bin((p.coords.cast::<f64>() - config.source_viewpoint.coords).norm());
+                            let bins = s.ranges.get_or_insert_with(Box::default);
+                            bins.h[k] += h;
+                            bins.sq[k] += res * res;
+                            bins.n[k] += 1;
+                        }
                         s.sq += res * res;
                     }
                     Method::PointToPoint => {

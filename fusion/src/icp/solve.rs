@@ -6,7 +6,7 @@
 use nalgebra::{Isometry3, Matrix3, Matrix4, Matrix6, Point3, SymmetricEigen, Translation3, UnitQuaternion, Vector6};
 
 use super::config::{IcpConfig, Kernel, Method};
-use super::correspondences::{Partners, Sums, accumulate};
+use super::correspondences::{Partners, RANGE_BINS, RangeBins, Sums, accumulate};
 use super::degeneracy::Observability;
 use super::target::Target;
 use crate::error::{FusionError, Result};
@@ -43,6 +43,19 @@ pub struct IcpResult {
     /// [`information`](Self::information) carries nothing along them);
     /// empty otherwise.
     pub unobservable: Vec<Vector6<f64>>,
+    /// With [`IcpConfig::edge_bias`] (point-to-plane): how the pairs
+    /// beyond the target's sampled edge pull the estimate — the step the
+    /// fit without them would take from it, less the step the fit with
+    /// them would take, both linearised at the last pass (ξ = (ω, v), left,
+    /// target frame; nothing along the unobservable directions). Zero
+    /// otherwise, or when no pair lies beyond the edge.
+    pub edge_bias: Vector6<f64>,
+    /// With [`IcpConfig::range_noise`] (point-to-plane): the estimate's
+    /// covariance with each pair's variance its range bin's, H⁻¹·B·H⁻¹
+    /// ([`IcpConfig::range_noise`]), not scaled by
+    /// [`IcpConfig::noise_scale`] (which calibrates `information`); `None`
+    /// otherwise.
+    pub range_covariance: Option<Matrix6<f64>>,
 }
 
 impl IcpResult {
@@ -234,6 +247,7 @@ fn align_impl(
             sums = sums.both_ways(&back, &estimate);
         }
         last = sums;
+        let sums = &last;
         if forward < 6 {
             return Err(FusionError::TooFewCorrespondences {
                 found: forward,
@@ -254,7 +268,7 @@ fn align_impl(
                 let (h, b) = match prior {
                     None => (sums.h, sums.b),
                     Some(p) => {
-                        let sigma2 = residual_variance(&sums, config.method);
+                        let sigma2 = residual_variance(sums, config.method);
                         let e = crate::se3::left_difference(&estimate, &p.target_from_source);
                         (sums.h / sigma2 + p.information, sums.b / sigma2 + p.information * e)
                     }
@@ -318,6 +332,15 @@ fn align_impl(
         }
         None => measured,
     };
+    let edge_bias = edge_bias(&sums, &unobservable);
+    let range_covariance = sums.ranges.as_deref().filter(|_| config.method == Method::PointToPlane).map(|r| {
+        let mut c = by_range(r, sigma2);
+        for u in &unobservable {
+            let p = Matrix6::identity() - u * u.transpose();
+            c = p * c * p;
+        }
+        c
+    });
     Ok(IcpResult {
         target_from_source: estimate,
         converged,
@@ -327,7 +350,75 @@ fn align_impl(
         information,
         trace,
         unobservable,
+        edge_bias,
+        range_covariance,
     })
+}
+
+/// The fewest pairs a range bin's variance rests on (neighbouring bins
+/// pooled until there are as many).
+const MIN_BIN_PAIRS: usize = 50;
+
+/// The covariance of the match's estimate when each pair's variance is
+/// its range bin's ([`IcpConfig::range_noise`]): the iteration weighs
+/// every pair alike, so it is H⁺·B·H⁺ with B = Σₖ σ̂ₖ²·Hₖ (a sandwich whose
+/// middle is the variance by range, not each pair's own squared
+/// residual). Each bin's variance is its mean squared residual, pooled
+/// with its neighbours until [`MIN_BIN_PAIRS`]; `sigma2` (all pairs')
+/// where there are fewer in all.
+fn by_range(r: &RangeBins, sigma2: f64) -> Matrix6<f64> {
+    let total: usize = r.n.iter().sum();
+    let mut b = Matrix6::zeros();
+    let mut h = Matrix6::zeros();
+    for k in (0..RANGE_BINS).filter(|&k| r.n[k] > 0) {
+        let variance = if total < MIN_BIN_PAIRS {
+            sigma2
+        } else {
+            let (mut lo, mut hi) = (k, k);
+            let (mut n, mut sq) = (r.n[k], r.sq[k]);
+            while n < MIN_BIN_PAIRS {
+                // Widen by a bin on either side.
+                if lo > 0 {
+                    lo -= 1;
+                    n += r.n[lo];
+                    sq += r.sq[lo];
+                }
+                if hi + 1 < RANGE_BINS && n < MIN_BIN_PAIRS {
+                    hi += 1;
+                    n += r.n[hi];
+                    sq += r.sq[hi];
+                }
+            }
+            (sq / n as f64).max(1e-18)
+        };
+        b += r.h[k] * variance;
+        h += r.h[k];
+    }
+    let inverse = pseudo_inverse(&h);
+    let c = inverse * b * inverse;
+    0.5 * (c + c.transpose())
+}
+
+/// [`IcpResult::edge_bias`] of the last pass's sums: H_c⁺(−b_c) − H⁺(−b),
+/// the covered pairs' normal equations (H_c, b_c: the sums less the pairs
+/// beyond the edge) against all pairs', the `unobservable` directions
+/// projected out.
+fn edge_bias(sums: &Sums, unobservable: &[Vector6<f64>]) -> Vector6<f64> {
+    if sums.edge_h == Matrix6::zeros() {
+        return Vector6::zeros();
+    }
+    let (covered, all) = (pseudo_inverse(&(sums.h - sums.edge_h)), pseudo_inverse(&sums.h));
+    let mut d = -(covered * (sums.b - sums.edge_b)) + all * sums.b;
+    for u in unobservable {
+        d -= u * u.dot(&d);
+    }
+    if d.iter().all(|v| v.is_finite()) { d } else { Vector6::zeros() }
+}
+
+/// The pseudo-inverse of a symmetric 6×6, singular values below 1e-12 of
+/// the largest left out (zero when it cannot be formed).
+fn pseudo_inverse(m: &Matrix6<f64>) -> Matrix6<f64> {
+    (0.5 * (m + m.transpose())).pseudo_inverse(1e-12 * m.amax()).unwrap_or_else(|_| Matrix6::zeros())
 }
 
 /// How `now` moved from `last` (both `target_from_source`), as a pass's

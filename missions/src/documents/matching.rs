@@ -75,6 +75,11 @@ pub struct NoiseReport {
     pub halvings: usize,
     /// Halvings left out as mismatches (χ²/dof beyond 25× the median).
     pub left_out: usize,
+    /// The same of the halves' errors against their covariance with the
+    /// residuals' variance by range from the scanner: the factor on the
+    /// links' covariance by range, which the reported covariances carry
+    /// (`variance_scale` calibrates the links' weights).
+    pub range_scale: f64,
     /// Its wall-clock time, seconds (within `seconds`).
     pub seconds: f64,
 }
@@ -340,7 +345,10 @@ pub struct ScanReport {
     pub world_from_scan: [[f64; 4]; 4],
     /// 6×6, order (ωx, ωy, ωz, x, y, z), radians and metres, left
     /// perturbation (as `register`'s) in the world's axes about the first
-    /// scan's origin; zero for the first scan, which holds the frame.
+    /// scan's origin; zero for the first scan, which holds the frame. In
+    /// graph mode it carries the links' noise by range from the scanner
+    /// and each link's pull by its pairs past the other scan's edge
+    /// (docs/match.md).
     pub covariance: [[f64; 6]; 6],
     /// Directions the matches cannot see (unit vectors in the order and
     /// frame of the covariance): held where the start put them, their σ

@@ -69,6 +69,7 @@ pub(super) fn report(
             dof: n.dof,
             halvings: n.halvings,
             left_out: n.left_out,
+            range_scale: n.range_scale,
             seconds: r.noise_seconds,
         }),
         seconds,

@@ -49,8 +49,8 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
     if let Some(n) = &report.noise {
         writeln!(
             out,
-            "covariances calibrated on the scans' halves: ×{:.2} ({} degrees of freedom, {:.3} s)",
-            n.variance_scale, n.dof, n.seconds
+            "covariances calibrated on the scans' halves: ×{:.2}, by range ×{:.2} ({} degrees of freedom, {:.3} s)",
+            n.variance_scale, n.range_scale, n.dof, n.seconds
         )?;
     }
     if let Some(r) = &report.restart {
