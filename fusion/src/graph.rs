@@ -11,7 +11,7 @@
 //!   information Λ in the target frame as [`IcpResult`](crate::icp::IcpResult)
 //!   gives it) contributes ‖ξ(Tₜ⁻¹ · Tₛ · Z⁻¹)‖²_Λ. With Tₛ ← exp(δₛ)Tₛ the
 //!   error moves by Ad(Tₜ⁻¹)·δₛ, with Tₜ ← exp(δₜ)Tₜ by −Ad(Tₜ⁻¹)·δₜ, where
-//!   Ad(R, t) = [[R, 0], [[t]×R, R]] in the (ω, v) order.
+//!   `Ad(R, t) = [[R, 0], [[t]×R, R]]` in the (ω, v) order.
 //!
 //! - or a **joint** prior on all scans ([`JointPrior`]): the stacked
 //!   errors e = (ξ(T₁·P₁⁻¹), …, ξ(T_N·P_N⁻¹)) with a full 6N×6N covariance

@@ -34,6 +34,13 @@
 //!   their covariance — not the start's steps', which hold only what no
 //!   link sees. The redundancy is the links' own: 6 per link less 6 per
 //!   scan they place.
+//! - **Covariances.** The adjustment weighs each link by its information;
+//!   each scan's covariance is that adjustment's with each link's own
+//!   covariance ([`crate::graph::sandwich_covariance`]): its match's with
+//!   the residuals' variance by range from the scanner, times σ̂₀², plus
+//!   its pull by the pairs past the other scan's sampled edge (a bias its
+//!   residuals do not show) — and, when σ̂₀² is below 1, the scans'
+//!   shared noise (`shared_noise`).
 
 use nalgebra::{Isometry3, Matrix6, Point3, Vector6};
 use rayon::prelude::*;

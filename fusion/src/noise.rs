@@ -60,8 +60,10 @@ pub struct Calibration {
 /// `both_ways` (point-to-plane) — with `config`'s ICP settings and no
 /// noise scale. Each halving's error ξ against the turn gives χ² = ξᵀ·I·ξ
 /// with I its reported information, whose mean is the observed degrees
-/// of freedom when I is honest. A half that cannot be matched (too few
-/// points, no more pairs than `min_pairs`) is passed over.
+/// of freedom when I is honest — and the same against its covariance by
+/// range ([`crate::icp::IcpResult::range_covariance`]: `range_scale`). A
+/// half that cannot be matched (too few points, no more pairs than
+/// `min_pairs`) is passed over.
 pub fn calibrate<S: AsRef<[Point3<f32>]> + Sync>(
     scans: &[S],
     config: &MultiviewConfig,

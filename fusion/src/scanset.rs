@@ -164,7 +164,7 @@ impl SetResult {
 /// (coarsest) stage, run when the first registration moved a scan further
 /// from its start than the second stage's correspondence distance (out of
 /// the restart's reach: the first stage decided where it went), and kept
-/// when the scans agree clearly better there ([`crate::agreement`]) — or
+/// when the scans agree clearly better there (`agreement::disagreement`) — or
 /// better at all when the verification names scans of the first and none
 /// of the restart's; or
 /// run when the schedule failed (a stage moved two scans apart that
@@ -192,7 +192,7 @@ pub struct Restart {
     /// The restart's stages.
     pub stages: Vec<StageRun>,
     /// The scans' disagreement at the first registration's poses and at
-    /// the restart's, m² a point ([`crate::agreement`]); `None` for one
+    /// the restart's, m² a point (`agreement::disagreement`); `None` for one
     /// that failed.
     pub disagreement_m2: (Option<f64>, Option<f64>),
     /// The scans' disagreement at their starts, m² a point: a result the
@@ -261,7 +261,7 @@ pub struct Further {
     /// Its stages as they ran (empty when it failed).
     pub stages: Vec<StageRun>,
     /// The scans' disagreement at its poses, m² a point
-    /// ([`crate::agreement`]); `None` when it failed.
+    /// (`agreement::disagreement`); `None` when it failed.
     pub disagreement_m2: Option<f64>,
     /// Why it failed.
     pub error: Option<String>,
@@ -807,8 +807,9 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
         icp: crate::icp::IcpConfig {
             max_correspondence_m: s.max_correspondence_m,
             only_covered: config.only_covered && k == finest_stage,
-            // The graph's links carry their edges' pull into the
-            // covariance (`links`).
+            // The graph's links carry their pull by the pairs past the
+            // other scan's edge and their noise by range into the
+            // covariances (`links`).
             edge_bias: config.mode == Mode::Graph && k == finest_stage,
             range_noise: config.mode == Mode::Graph && k == finest_stage,
             noise_scale: if k == finest_stage { config.link.multiview.icp.noise_scale } else { 1.0 },

@@ -91,7 +91,7 @@ pub struct PairCheck {
     /// most [`MAX_TURN_RAD`], moving them at most [`MAX_WEAK_MOTION`] of
     /// their radius in all — and no scanner's free space
     /// ([`crate::free_space`]) holds more than
-    /// [`MAX_VIOLATION_SHARE`](crate::free_space::MAX_VIOLATION_SHARE) of
+    /// [`MAX_VIOLATION_SHARE`] of
     /// the other scan's points.
     pub consistent: bool,
     /// The free-space test from the pair's scanner whose view the other

@@ -29,7 +29,7 @@ pub struct IcpConfig {
     pub normal_neighbours: usize,
     /// Robust kernel on the residuals. Default none (least squares).
     pub kernel: Kernel,
-    /// Keep the estimate after every iteration in [`IcpResult::trace`]
+    /// Keep the estimate after every iteration in [`IcpResult::trace`](super::IcpResult::trace)
     /// (for viewing the registration). Default false.
     pub trace: bool,
     /// Leave out a pair whose target normal faces away from the source
@@ -37,7 +37,7 @@ pub struct IcpConfig {
     /// cannot have seen that side of the surface, so the pair joins two
     /// faces of a thin object (a door reveal, a pilaster), which pulls a
     /// moving scanner back towards where it came from. Needs a target with
-    /// oriented normals ([`Target::orient_normals_towards`]). Default false.
+    /// oriented normals ([`Target::orient_normals_towards`](super::Target::orient_normals_towards)). Default false.
     pub reject_back_faces: bool,
     /// Where the source's scanner stands in the source frame, for
     /// `reject_back_faces` (a scan kept in a robot's body frame has its

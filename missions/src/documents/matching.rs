@@ -31,8 +31,10 @@ pub struct MatchReport {
     /// Graph mode: the covariance model calibrated on the scans
     /// themselves — each scan's random halves matched under a known turn,
     /// their errors against their own covariances. Its `variance_scale`
-    /// multiplies every link's covariance (before `variance_factor`).
-    /// Null in the other modes.
+    /// multiplies every link's covariance as the adjustment weighs it, its
+    /// `range_scale` every link's covariance by range, which the scans'
+    /// covariances carry (both before `variance_factor`). Null in the
+    /// other modes.
     pub noise: Option<NoiseReport>,
     /// Registration time, seconds (reading the scans and writing excluded).
     pub seconds: f64,
