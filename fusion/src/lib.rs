@@ -10,7 +10,7 @@
 //! - [`links`]: a scan set adjusted over all its overlapping pairs, blind
 //!   directions held by the start ([`links::adjust`]);
 //! - [`noise`]: the covariance model calibrated on the data, by matching
-//!   random halves of each scan ([`noise::calibrate`]);
+//!   random halves and quarters of each scan ([`noise::calibrate`]);
 //! - [`scanset`]: a user's scan set registered coarse to fine by a
 //!   strategy or the link graph ([`scanset::register_set`]);
 //! - [`graph`]: scan poses adjusted to absolute priors (the CPS poses) and

@@ -84,7 +84,8 @@ pub struct LinkConfig {
     pub both_ways: bool,
     /// The factor on the links' covariance by range
     /// ([`crate::icp::IcpResult::range_covariance`]) measured on the scans
-    /// ([`crate::noise::Calibration::range_scale`]). Default 1.
+    /// ([`crate::noise::Calibration::range_scale`]) — in the modes without
+    /// a link graph, on each placing match's. Default 1.
     pub range_scale: f64,
 }
 
@@ -636,7 +637,7 @@ fn solve(
         // - its noise: the match's covariance by range from the scanner
         //   (`IcpResult::range_covariance`: far points are noisier, which
         //   one variance for all pairs hides), calibrated on the scans'
-        //   halves (`LinkConfig::range_scale`) — or, without it, its
+        //   halves and quarters (`LinkConfig::range_scale`) — or, without it, its
         //   information's inverse — times σ̂₀²: above 1 the links disagree
         //   more than their noise says; below 1 they agree better, and
         //   the share of their noise that is each scan's own, in every one

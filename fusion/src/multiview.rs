@@ -431,6 +431,7 @@ pub(crate) fn in_world(mut r: IcpResult, world_from_j: &Isometry3<f64>) -> IcpRe
     r.information = 0.5 * (r.information + r.information.transpose());
     r.unobservable.iter_mut().for_each(|d| *d = (ad * *d).normalize());
     r.edge_bias = ad * r.edge_bias;
+    r.range_covariance = r.range_covariance.map(|c| ad * c * ad.transpose());
     r
 }
 

@@ -133,9 +133,9 @@ pub struct SetResult {
     pub checks: Vec<PairCheck>,
     /// The verification's wall-clock time, seconds.
     pub check_seconds: f64,
-    /// Graph mode: the covariance model calibrated on these scans' halves
-    /// ([`crate::noise::calibrate`]); its factor scales every covariance
-    /// of the links. `None` in the other modes or without a stage.
+    /// The covariance model calibrated on these scans' halves and
+    /// quarters ([`crate::noise::calibrate`]); its factors scale the
+    /// finest matches' covariances. `None` without a stage.
     pub noise: Option<crate::noise::Calibration>,
     /// The calibration's wall-clock time, seconds.
     pub noise_seconds: f64,
@@ -374,16 +374,17 @@ pub fn register_set<S: AsRef<[Point3<f32>]> + Sync>(
     config: &SetConfig,
     progress: &mut dyn FnMut(usize, usize, usize, usize),
 ) -> Result<SetResult> {
-    // Graph mode's links reported with the covariance model calibrated on
-    // these scans (the coarser stages' matches only steer). Not in the
-    // other modes: their covariances add the partners' as independent and
-    // were 1.3–2.7× optimistic with calibrated matches, against 0.55–2.8×
-    // without (BENCHMARKS.md, "Covariances the data calibrate"). The
-    // calibration multiplies the caller's own scale.
+    // The finest matches reported with the covariance model calibrated
+    // on these scans (the coarser stages' matches only steer) — in every
+    // mode since the covariance by range and the edges' pull carry them
+    // (with the information alone the modes without a link graph were
+    // 1.3–2.7× optimistic calibrated, against 0.55–2.8× without:
+    // BENCHMARKS.md, "Covariances the data calibrate"). Matched one way
+    // but in graph mode, as the set's matches are. The calibration
+    // multiplies the caller's own scale.
     let started = std::time::Instant::now();
     let noise = finest_link(config)
-        .filter(|_| config.mode == Mode::Graph)
-        .map(|(_, link)| crate::noise::calibrate(scans, &link.multiview, link.both_ways));
+        .map(|(_, link)| crate::noise::calibrate(scans, &link.multiview, link.both_ways && config.mode == Mode::Graph));
     let noise_seconds = started.elapsed().as_secs_f64();
     let mut calibrated = config.clone();
     calibrated.link.multiview.icp.noise_scale *= noise.map_or(1.0, |n| n.variance_scale);
@@ -431,7 +432,8 @@ fn verified<S: AsRef<[Point3<f32>]> + Sync>(scans: &[S], mut r: SetResult, confi
         let f = crate::links::variance_factor(&r.world_from_scan, &edges, &config.link)?;
         r.variance_factor = Some(f);
         if f > 1.0 {
-            r.covariance = placed_covariances(scans.len(), &r.links, &config.link.step_information(), f);
+            r.covariance =
+                placed_covariances(scans.len(), &r.links, &config.link.step_information(), f, config.link.range_scale);
         }
     }
     r.check_seconds = started.elapsed().as_secs_f64();
@@ -807,11 +809,11 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
         icp: crate::icp::IcpConfig {
             max_correspondence_m: s.max_correspondence_m,
             only_covered: config.only_covered && k == finest_stage,
-            // The graph's links carry their pull by the pairs past the
+            // The finest matches carry their pull by the pairs past the
             // other scan's edge and their noise by range into the
-            // covariances (`links`).
-            edge_bias: config.mode == Mode::Graph && k == finest_stage,
-            range_noise: config.mode == Mode::Graph && k == finest_stage,
+            // covariances (`links`, `placed_covariances`).
+            edge_bias: k == finest_stage,
+            range_noise: k == finest_stage,
             noise_scale: if k == finest_stage { config.link.multiview.icp.noise_scale } else { 1.0 },
             ..config.link.multiview.icp
         },
@@ -885,7 +887,7 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
             })
         })
         .collect();
-    let covariance = placed_covariances(n, &links, &config.link.step_information(), 1.0);
+    let covariance = placed_covariances(n, &links, &config.link.step_information(), 1.0, config.link.range_scale);
     Ok(SetResult {
         world_from_scan: poses,
         covariance,
@@ -908,9 +910,13 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
 }
 
 /// The covariances of `n` scans each placed by its last match (`links`:
-/// the modes without a link graph), its information scaled down by
-/// `factor` (a variance factor, 1 for none) and the start's step
-/// information `step` holding what it cannot see, plus its partners'. A
+/// the modes without a link graph), plus its partners'. A match's own is
+/// graph mode's link model ([`crate::links`]): its covariance by range
+/// (`range_scale`, the calibration's factor on it) times `factor` (a
+/// variance factor, 1 for none) plus its edges' pull δδᵀ, and along what
+/// it cannot see the start's step (`step`, an information); without the
+/// covariance by range (point-to-point), its information scaled down by
+/// `factor` and held by `step` where it sees nothing. A
 /// scan is placed on its partners, which are uncertain themselves: to
 /// first order (independent errors, world-frame left perturbations) a
 /// partner's error moves the scan with it, so its covariance adds to the
@@ -918,15 +924,39 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
 /// (a later partner, in simultaneous mode, with its own match's alone).
 /// The match's alone made the single-strategy modes' covariances 10–100×
 /// optimistic on chains of partial overlaps (mean NEES 86–1,100 on
-/// wedges, BENCHMARKS).
-fn placed_covariances(n: usize, links: &[SetLink], step: &Matrix6<f64>, factor: f64) -> Vec<Matrix6<f64>> {
+/// wedges); with the link model, calibrated, their mean NEES on real
+/// scans' parts came within 1.6× of 6 (BENCHMARKS).
+fn placed_covariances(
+    n: usize,
+    links: &[SetLink],
+    step: &Matrix6<f64>,
+    factor: f64,
+    range_scale: f64,
+) -> Vec<Matrix6<f64>> {
     let mut covariance = vec![Matrix6::zeros(); n];
     // (I/f + held)⁻¹ = f·(I + f·held)⁻¹ along the directions the match
     // sees and the start's step σ along those it cannot.
     let held = step * factor;
     for l in links {
         if let Some(m) = &l.result {
-            covariance[l.source] = m.covariance_held(&held) * factor;
+            covariance[l.source] = match m.range_covariance {
+                Some(c) if m.unobservable.is_empty() => {
+                    c * (range_scale * factor) + m.edge_bias * m.edge_bias.transpose()
+                }
+                // Nothing of it along the blind directions (projected
+                // out): there the start's step, held as the information
+                // is held (`IcpResult::covariance_held`).
+                Some(c) => {
+                    let c = c * (range_scale * factor);
+                    let information = c.pseudo_inverse(1e-12 * c.amax()).unwrap_or_else(|_| Matrix6::zeros());
+                    let blind: Matrix6<f64> = m.unobservable.iter().map(|d| d * d.transpose()).sum();
+                    let held = (information + blind.transpose() * step * blind)
+                        .try_inverse()
+                        .unwrap_or_else(|| m.covariance_held(&held) * factor);
+                    0.5 * (held + held.transpose()) + m.edge_bias * m.edge_bias.transpose()
+                }
+                None => m.covariance_held(&held) * factor,
+            };
         }
     }
     // Scan 0 holds the frame: it inherits nothing.

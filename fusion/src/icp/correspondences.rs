@@ -35,15 +35,20 @@ pub(crate) struct Sums {
 }
 
 /// Two sums' range bins ([`RangeBins::merge`]), either of them absent.
+/// A plain sum (`half` 1, `a` the identity) keeps the present side as it
+/// is; a mean of two ways scales and carries it.
 fn merged(
     mine: Option<Box<RangeBins>>,
     other: Option<&RangeBins>,
     a: &Matrix6<f64>,
     half: f64,
 ) -> Option<Box<RangeBins>> {
+    let plain = half == 1.0 && *a == Matrix6::identity();
     match (mine, other) {
         (Some(m), Some(o)) => Some(m.merge(o, a, half)),
+        (Some(m), None) if plain => Some(m),
         (Some(m), None) => Some(m.merge(&RangeBins::default(), a, half)),
+        (None, Some(o)) if plain => Some(Box::new(*o)),
         (None, Some(o)) => Some(Box::new(RangeBins::default()).merge(o, a, half)),
         (None, None) => None,
     }

@@ -28,13 +28,14 @@ pub struct MatchReport {
     /// covariance (not the start's steps, which hold what no match sees).
     /// In the other modes null when no pair was verified (a single scan).
     pub variance_factor: Option<f64>,
-    /// Graph mode: the covariance model calibrated on the scans
-    /// themselves — each scan's random halves matched under a known turn,
-    /// their errors against their own covariances. Its `variance_scale`
-    /// multiplies every link's covariance as the adjustment weighs it, its
-    /// `range_scale` every link's covariance by range, which the scans'
-    /// covariances carry (both before `variance_factor`). Null in the
-    /// other modes.
+    /// The covariance model calibrated on the scans themselves — each
+    /// scan's random halves, and two quarters, matched under a known turn,
+    /// their errors against their own covariances, carried on to the
+    /// scans' own density. Its `variance_scale` multiplies every finest
+    /// match's covariance from one variance (graph mode: as the adjustment
+    /// weighs the links), its `range_scale` every finest match's
+    /// covariance by range, which the scans' covariances carry (both
+    /// before `variance_factor`). Null when the schedule is empty.
     pub noise: Option<NoiseReport>,
     /// Registration time, seconds (reading the scans and writing excluded).
     pub seconds: f64,
@@ -66,9 +67,12 @@ pub struct MatchReport {
 /// The noise calibration (`fusion::noise`).
 #[derive(Debug, Clone, Serialize, schemars::JsonSchema)]
 pub struct NoiseReport {
-    /// Σχ²/Σdof of the halves' errors: above 1 the match's own covariance
-    /// was optimistic on these data, below 1 pessimistic; 1 when nothing
-    /// could be measured (`dof` 0).
+    /// The factor on the covariances from one variance: the halves'
+    /// Σχ²/Σdof (above 1 the match's own covariance was optimistic on
+    /// these data, below 1 pessimistic) times its step from the quarters'
+    /// (`halves.variance_scale / quarters.variance_scale`, taken between 1
+    /// and 2: denser shares misjudge more, so the scans themselves more
+    /// than their halves); 1 when nothing could be measured (`dof` 0).
     pub variance_scale: f64,
     /// The degrees of freedom it rests on (6 per halving, less its blind
     /// directions).
@@ -77,13 +81,32 @@ pub struct NoiseReport {
     pub halvings: usize,
     /// Halvings left out as mismatches (χ²/dof beyond 25× the median).
     pub left_out: usize,
-    /// The same of the halves' errors against their covariance with the
-    /// residuals' variance by range from the scanner: the factor on the
-    /// links' covariance by range, which the reported covariances carry
-    /// (`variance_scale` calibrates the links' weights).
+    /// The same against the covariance with the residuals' variance by
+    /// range from the scanner: the factor on the finest matches'
+    /// covariance by range, which the reported covariances carry
+    /// (`variance_scale` calibrates graph mode's link weights).
     pub range_scale: f64,
+    /// What the halves measured.
+    pub halves: SharesReport,
+    /// What two quarters of each scan (halves of a half) measured.
+    pub quarters: SharesReport,
     /// Its wall-clock time, seconds (within `seconds`).
     pub seconds: f64,
+}
+
+/// What one density of shares measured in the noise calibration.
+#[derive(Debug, Clone, Serialize, schemars::JsonSchema)]
+pub struct SharesReport {
+    /// Σχ²/Σdof against the covariance from one variance for all pairs.
+    pub variance_scale: f64,
+    /// Σχ²/Σdof against the covariance by range.
+    pub range_scale: f64,
+    /// The degrees of freedom they rest on.
+    pub dof: usize,
+    /// Shares matched.
+    pub matched: usize,
+    /// Shares left out as mismatches (χ²/dof beyond 25× the median).
+    pub left_out: usize,
 }
 
 /// One pair of the verification.

@@ -115,8 +115,20 @@ fn the_3dtk_set_lands_on_the_references_from_its_odometry() {
     assert_eq!(cycle["scans"].as_array().map(Vec::len), Some(3), "{cycle}");
     let miss = cycle["angle_deg"].as_f64().expect("angle");
     assert!((1.0..4.0).contains(&miss), "{cycle}");
+    // The noise calibration: the halves' factors carried on by their step
+    // from the quarters', between 1 and 2.
+    let noise = &v["noise"];
+    for key in ["variance_scale", "range_scale"] {
+        let (h, q) =
+            (noise["halves"][key].as_f64().expect("halves"), noise["quarters"][key].as_f64().expect("quarters"));
+        let carried = h * (h / q).clamp(1.0, 2.0);
+        assert!((noise[key].as_f64().expect(key) - carried).abs() < 1e-12 * carried, "{key}: {noise}");
+    }
+    assert_eq!(noise["halvings"], noise["halves"]["matched"], "{noise}");
+    assert_eq!((noise["halvings"].as_u64(), noise["quarters"]["matched"].as_u64()), (Some(6), Some(6)), "{noise}");
     let text = cps_survey([OsString::from("match"), data("3dtk_dat"), "--out".into(), dir.path().join("text").into()]);
     assert_eq!(text.code, 0, "{}", text.stderr);
+    assert!(text.stdout.contains("covariances calibrated on the scans' halves and quarters: ×"), "{}", text.stdout);
     let kept: Vec<&str> = text.stdout.lines().filter(|l| l.trim_start().starts_with("kept ")).collect();
     assert_eq!(kept.len(), 1, "{}", text.stdout);
     assert!(kept[0].contains("no other cycle tells which of its links is wrong"), "{}", kept[0]);

@@ -70,6 +70,8 @@ pub(super) fn report(
             halvings: n.halvings,
             left_out: n.left_out,
             range_scale: n.range_scale,
+            halves: shares_report(&n.halves),
+            quarters: shares_report(&n.quarters),
             seconds: r.noise_seconds,
         }),
         seconds,
@@ -172,4 +174,14 @@ pub(super) fn stage_reports(stages: &[fusion::scanset::StageRun]) -> Vec<StageRe
             settled: s.settled,
         })
         .collect()
+}
+
+fn shares_report(s: &fusion::noise::Shares) -> SharesReport {
+    SharesReport {
+        variance_scale: s.variance_scale,
+        range_scale: s.range_scale,
+        dof: s.dof,
+        matched: s.matched,
+        left_out: s.left_out,
+    }
 }

@@ -49,8 +49,16 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
     if let Some(n) = &report.noise {
         writeln!(
             out,
-            "covariances calibrated on the scans' halves: ×{:.2}, by range ×{:.2} ({} degrees of freedom, {:.3} s)",
-            n.variance_scale, n.range_scale, n.dof, n.seconds
+            "covariances calibrated on the scans' halves and quarters: ×{:.2}, by range ×{:.2} \
+             (halves ×{:.2}, ×{:.2}; quarters ×{:.2}, ×{:.2}; {} degrees of freedom, {:.3} s)",
+            n.variance_scale,
+            n.range_scale,
+            n.halves.variance_scale,
+            n.halves.range_scale,
+            n.quarters.variance_scale,
+            n.quarters.range_scale,
+            n.dof,
+            n.seconds
         )?;
     }
     if let Some(r) = &report.restart {
