@@ -70,7 +70,11 @@ pub(crate) fn disagreement(prepared: &[Prepared], poses: &[Isometry3<f64>], tau_
                 .sum();
             (cost, prepared[i].source.len())
         })
-        .reduce(|| (0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+        // Summed in scan order, so that a run gives the same cost every
+        // time (a parallel reduction's order follows the threads').
+        .collect::<Vec<(f64, usize)>>()
+        .into_iter()
+        .fold((0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
     if points == 0 { 0.0 } else { cost / points as f64 }
 }
 

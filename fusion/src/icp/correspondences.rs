@@ -300,7 +300,12 @@ pub(crate) fn accumulate(
             }
             s
         })
-        .reduce(Sums::default, Sums::merge)
+        // Merged in chunk order, so that a match gives the same estimate
+        // every time (a parallel reduction associates as the threads
+        // steal work, and a float sum's rounding follows it).
+        .collect::<Vec<Sums>>()
+        .into_iter()
+        .fold(Sums::default(), Sums::merge)
 }
 
 #[cfg(test)]
