@@ -177,8 +177,26 @@ fn shares<S: AsRef<[Point3<f32>]> + Sync>(
             let dof = 6 - r.unobservable.len().min(6);
             let chi2 = (xi.transpose() * r.information * xi)[0];
             let by_range = r.range_covariance.map(|c| {
+                // Judged along what the match sees: the covariance by range
+                // has nothing along its blind directions, but rounding
+                // leaves a trace there that a pseudo-inverse may keep (a
+                // pipe's halves slid along its axis gave 10¹³).
+                let mut seen = xi;
+                let mut blind: Vec<nalgebra::Vector6<f64>> = Vec::new();
+                for u in &r.unobservable {
+                    let mut q = *u;
+                    for b in &blind {
+                        q -= b * b.dot(&q);
+                    }
+                    if q.norm() > 1e-9 {
+                        blind.push(q.normalize());
+                    }
+                }
+                for b in &blind {
+                    seen -= b * b.dot(&seen);
+                }
                 let information = c.pseudo_inverse(1e-12 * c.amax()).unwrap_or_else(|_| nalgebra::Matrix6::zeros());
-                (xi.transpose() * information * xi)[0]
+                (seen.transpose() * information * seen)[0]
             });
             let by_range = by_range.filter(|c| c.is_finite()).unwrap_or(chi2);
             (dof > 0 && chi2.is_finite()).then_some((chi2, by_range, dof))

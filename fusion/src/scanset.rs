@@ -940,20 +940,12 @@ fn placed_covariances(
     for l in links {
         if let Some(m) = &l.result {
             covariance[l.source] = match m.range_covariance {
-                Some(c) if m.unobservable.is_empty() => {
-                    c * (range_scale * factor) + m.edge_bias * m.edge_bias.transpose()
-                }
                 // Nothing of it along the blind directions (projected
-                // out): there the start's step, held as the information
-                // is held (`IcpResult::covariance_held`).
+                // out): there the start's step's variance along each.
                 Some(c) => {
-                    let c = c * (range_scale * factor);
-                    let information = c.pseudo_inverse(1e-12 * c.amax()).unwrap_or_else(|_| Matrix6::zeros());
-                    let blind: Matrix6<f64> = m.unobservable.iter().map(|d| d * d.transpose()).sum();
-                    let held = (information + blind.transpose() * step * blind)
-                        .try_inverse()
-                        .unwrap_or_else(|| m.covariance_held(&held) * factor);
-                    0.5 * (held + held.transpose()) + m.edge_bias * m.edge_bias.transpose()
+                    let blind: Matrix6<f64> =
+                        m.unobservable.iter().map(|d| d * d.transpose() / (d.transpose() * step * d)[0]).sum();
+                    c * (range_scale * factor) + blind + m.edge_bias * m.edge_bias.transpose()
                 }
                 None => m.covariance_held(&held) * factor,
             };

@@ -234,6 +234,45 @@ fn a_match_that_cannot_see_a_turn_gets_the_start_step_there() {
     assert!(c[(3, 3)] > 0.0 && c[(3, 3)] < 1e-4, "along the line the match's: {}", c[(3, 3)]);
 }
 
+/// Point-to-plane on two scans of one pipe (a cylinder along x, r 1.5 m,
+/// 20 m long, 1 mm noise), placed pairwise: the slide along the axis and
+/// the roll about it are unseen — the scan's covariance there is the
+/// start's step σ, along the seen directions its match's covariance by
+/// range (sub-millimetre), and it stays finite.
+#[test]
+fn a_pipe_placed_pairwise_gets_the_start_step_along_its_axis() {
+    use fusion::icp::Stage;
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+    let mut pipe = |frame: &Isometry3<f64>| -> Vec<Point3<f32>> {
+        (0..20_000)
+            .map(|_| {
+                let (x, a): (f64, f64) = (rng.random_range(0.0..20.0), rng.random_range(0.0..std::f64::consts::TAU));
+                let r = 1.5 + 0.001 * (rng.random::<f64>() - 0.5) * 3.46;
+                (frame.inverse() * Point3::new(x, r * a.cos(), r * a.sin())).cast::<f32>()
+            })
+            .collect()
+    };
+    let truth = Isometry3::translation(0.0, 0.01, -0.005);
+    let scans = [pipe(&Isometry3::identity()), pipe(&truth)];
+    let starts = [Isometry3::identity(), Isometry3::translation(0.02, 0.0, 0.0) * truth];
+    let config = SetConfig {
+        mode: Mode::Pairwise,
+        stages: vec![Stage { voxel_m: 0.05, max_correspondence_m: 0.3 }],
+        ..SetConfig::default()
+    };
+    let r = register_set(&scans, &starts, &config, &mut |_, _, _, _| ()).expect("registers");
+    assert_eq!(r.unobservable[1].len(), 2, "{:?}", r.unobservable[1]);
+    let c = r.covariance[1];
+    assert!(c.iter().all(|v| v.is_finite()), "{c}");
+    let (rad, m) = (config.link.step_sigma_rad.powi(2), config.link.step_sigma_m.powi(2));
+    assert!((c[(0, 0)] - rad).abs() < 1e-3 * rad, "σ² of the roll {} against the step's {rad}", c[(0, 0)]);
+    assert!((c[(3, 3)] - m).abs() < 1e-3 * m, "σ² along the axis {} against the step's {m}", c[(3, 3)]);
+    for k in [1, 2, 4, 5] {
+        assert!(c[(k, k)] > 0.0 && c[(k, k)] < 1e-6, "seen direction {k}: σ² {}", c[(k, k)]);
+    }
+}
+
 /// Georeferenced starts — the 3DTK set moved 5,400 km north and turned 30°
 /// (UTM-like coordinates, where f32 keeps half a metre) — register exactly
 /// as in the scans' own frame: every pose moved by the same transform to a
