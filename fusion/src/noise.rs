@@ -25,6 +25,7 @@ use rayon::prelude::*;
 
 use crate::icp::Method;
 use crate::icp::correspondences::Partners;
+use crate::icp::degeneracy::projector_off;
 use crate::icp::solve::{Reverse, align_both, align_from};
 use crate::multiview::MultiviewConfig;
 
@@ -116,8 +117,8 @@ pub fn calibrate<S: AsRef<[Point3<f32>]> + Sync>(
     both_ways: bool,
 ) -> Calibration {
     let icp = crate::icp::IcpConfig { noise_scale: 1.0, trace: false, range_noise: true, ..config.icp };
-    let halves = pooled(&shares(scans, config, both_ways, &icp, 1));
-    let quarters = pooled(&shares(scans, config, both_ways, &icp, 2));
+    let halves = pooled(&shares(scans, config, both_ways, icp, 1));
+    let quarters = pooled(&shares(scans, config, both_ways, icp, 2));
     Calibration {
         variance_scale: at_full_density(halves.variance_scale, quarters.variance_scale),
         dof: halves.dof,
@@ -136,10 +137,9 @@ fn shares<S: AsRef<[Point3<f32>]> + Sync>(
     scans: &[S],
     config: &MultiviewConfig,
     both_ways: bool,
-    icp: &crate::icp::IcpConfig,
+    icp: crate::icp::IcpConfig,
     bits: u32,
 ) -> Vec<(f64, f64, usize)> {
-    let icp = *icp;
     let jobs: Vec<(usize, u64)> = (0..scans.len()).flat_map(|i| (0..HALVINGS).map(move |h| (i, h))).collect();
     jobs.par_iter()
         .filter_map(|&(i, h)| {
@@ -181,20 +181,7 @@ fn shares<S: AsRef<[Point3<f32>]> + Sync>(
                 // has nothing along its blind directions, but rounding
                 // leaves a trace there that a pseudo-inverse may keep (a
                 // pipe's halves slid along its axis gave 10¹³).
-                let mut seen = xi;
-                let mut blind: Vec<nalgebra::Vector6<f64>> = Vec::new();
-                for u in &r.unobservable {
-                    let mut q = *u;
-                    for b in &blind {
-                        q -= b * b.dot(&q);
-                    }
-                    if q.norm() > 1e-9 {
-                        blind.push(q.normalize());
-                    }
-                }
-                for b in &blind {
-                    seen -= b * b.dot(&seen);
-                }
+                let seen = projector_off(&r.unobservable) * xi;
                 let information = c.pseudo_inverse(1e-12 * c.amax()).unwrap_or_else(|_| nalgebra::Matrix6::zeros());
                 (seen.transpose() * information * seen)[0]
             });

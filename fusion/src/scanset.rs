@@ -19,6 +19,7 @@
 use nalgebra::{Isometry3, Matrix6, Point3, Vector6};
 
 use crate::error::{FusionError, Result};
+use crate::icp::degeneracy::orthonormal;
 use crate::icp::{IcpResult, Stage};
 use crate::links::{LinkConfig, LinkGraph};
 use crate::multiview::{MultiviewConfig, Strategy, in_world, register_views};
@@ -941,11 +942,11 @@ fn placed_covariances(
         if let Some(m) = &l.result {
             covariance[l.source] = match m.range_covariance {
                 // Nothing of it along the blind directions (projected
-                // out): there the start's step's variance along each.
+                // out): there the start's step's variance.
                 Some(c) => {
-                    let blind: Matrix6<f64> =
-                        m.unobservable.iter().map(|d| d * d.transpose() / (d.transpose() * step * d)[0]).sum();
-                    c * (range_scale * factor) + blind + m.edge_bias * m.edge_bias.transpose()
+                    c * (range_scale * factor)
+                        + step_within(&m.unobservable, step)
+                        + m.edge_bias * m.edge_bias.transpose()
                 }
                 None => m.covariance_held(&held) * factor,
             };
@@ -957,6 +958,18 @@ fn placed_covariances(
         covariance[l.source] += inherited;
     }
     covariance
+}
+
+/// The start's step variance within the span of the blind `directions`:
+/// Q·(Qᵀ·step·Q)⁻¹·Qᵀ, Q an orthonormal basis of the span (d·dᵀ / dᵀ·step·d
+/// for one direction d) — no inversion of the whole.
+fn step_within(directions: &[Vector6<f64>], step: &Matrix6<f64>) -> Matrix6<f64> {
+    let q = orthonormal(directions);
+    if q.is_empty() {
+        return Matrix6::zeros();
+    }
+    let q = nalgebra::Matrix6xX::from_columns(&q);
+    (q.transpose() * step * &q).try_inverse().map_or_else(Matrix6::zeros, |a| &q * a * q.transpose())
 }
 
 fn from_graph(g: LinkGraph, matches: usize, settled: bool, stages: Vec<StageRun>) -> SetResult {

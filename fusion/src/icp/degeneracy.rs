@@ -45,6 +45,31 @@ pub fn centroid_and_lever_arm(points: &[Point3<f32>]) -> (Point3<f64>, f64) {
 /// u) below this is noise.
 pub const SNAP: f64 = 0.05;
 
+/// An orthonormal basis of the span of `directions` (Gram–Schmidt, in
+/// order; a direction within 1e-6 of the others' span adds nothing).
+/// [`Observability::unobservable`] comes back normalised but not
+/// orthogonal in ξ (the analysis is orthonormal in u about the centroid):
+/// whatever projects off the blind directions goes through this.
+pub fn orthonormal(directions: &[Vector6<f64>]) -> Vec<Vector6<f64>> {
+    let mut basis: Vec<Vector6<f64>> = Vec::with_capacity(directions.len());
+    for d in directions {
+        let mut b = *d;
+        for q in &basis {
+            b -= q * q.dot(&b);
+        }
+        if b.norm() > 1e-6 {
+            basis.push(b.normalize());
+        }
+    }
+    basis
+}
+
+/// I − Q·Qᵀ, Q an [`orthonormal`] basis of `directions`: the projector
+/// off their span (the identity for none).
+pub fn projector_off(directions: &[Vector6<f64>]) -> Matrix6<f64> {
+    orthonormal(directions).iter().fold(Matrix6::identity(), |p, q| p - q * q.transpose())
+}
+
 /// The normal equations' eigen-analysis in u = (L·ω, v_c), the twist
 /// about a centre c (v_c the motion of the point at c).
 #[derive(Debug, Clone)]
@@ -96,22 +121,19 @@ impl Observability {
     /// The blind directions in u: the eigenvectors below the ratio, a
     /// rotation or translation part under [`SNAP`] dropped, orthonormalised.
     fn blind(&self) -> Vec<Vector6<f64>> {
-        let mut basis: Vec<Vector6<f64>> = Vec::new();
-        for i in (0..6).filter(|&i| !self.observed(i)) {
-            let mut b: Vector6<f64> = self.eigen.eigenvectors.column(i).into_owned();
-            for part in [0, 3] {
-                if b.fixed_rows::<3>(part).norm() < SNAP {
-                    b.fixed_rows_mut::<3>(part).fill(0.0);
+        let snapped: Vec<Vector6<f64>> = (0..6)
+            .filter(|&i| !self.observed(i))
+            .map(|i| {
+                let mut b: Vector6<f64> = self.eigen.eigenvectors.column(i).into_owned();
+                for part in [0, 3] {
+                    if b.fixed_rows::<3>(part).norm() < SNAP {
+                        b.fixed_rows_mut::<3>(part).fill(0.0);
+                    }
                 }
-            }
-            for q in &basis {
-                b -= q * q.dot(&b);
-            }
-            if b.norm() > 1e-6 {
-                basis.push(b.normalize());
-            }
-        }
-        basis
+                b
+            })
+            .collect();
+        orthonormal(&snapped)
     }
 
     /// The unobservable directions, each a unit vector of u = (L·ω, v)
@@ -140,10 +162,7 @@ impl Observability {
     /// P·M_u·P in u, P the projector off the blind directions, mapped back
     /// to ξ: H = A⁻ᵀ·S⁻¹·H_u·S⁻¹·A⁻¹, S⁻¹ = scale(1/L).
     fn projected(&self, mu: &Matrix6<f64>) -> Matrix6<f64> {
-        let mut p = Matrix6::identity();
-        for b in self.blind() {
-            p -= b * b.transpose();
-        }
+        let p = projector_off(&self.blind());
         let inv = scale(1.0 / self.lever_arm_m) * self.about_inverse();
         let h = inv.transpose() * (p * mu * p) * inv;
         0.5 * (h + h.transpose())
@@ -291,5 +310,24 @@ mod tests {
         assert_eq!(o.unobservable().len(), 1);
         assert!((o.unobservable()[0].dot(&d)).abs() > 1.0 - 1e-9);
         assert!((o.observed_part() - h).amax() < 1e-9 * h.amax());
+    }
+
+    #[test]
+    fn the_projector_takes_out_the_span_of_directions_that_are_not_orthogonal() {
+        // Two unit directions 60° apart (as a pipe's axis and roll come back
+        // about its centroid), and one that repeats the first's span.
+        let a = Vector6::new(0.0, 0.0, 0.0, 1.0, 0.0, 0.0);
+        let b = Vector6::new(0.0, 0.0, 0.0, 0.5, 0.75f64.sqrt(), 0.0);
+        let p = projector_off(&[a, b, -a]);
+        assert_eq!(orthonormal(&[a, b, -a]).len(), 2);
+        assert!((p * p - p).amax() < 1e-12 && (p - p.transpose()).amax() < 1e-12);
+        assert!((p * a).norm() < 1e-12 && (p * b).norm() < 1e-12);
+        // What lies outside the span is kept whole.
+        let c = Vector6::new(1.0, -2.0, 0.5, 0.0, 0.0, 3.0);
+        assert!((p * c - c).norm() < 1e-12);
+        // Projecting one by one as if orthonormal leaves some of b.
+        let naive = (Matrix6::identity() - a * a.transpose()) * (Matrix6::identity() - b * b.transpose());
+        assert!((naive * b).norm() > 0.1 || (naive * a).norm() > 0.1);
+        assert_eq!(projector_off(&[]), Matrix6::identity());
     }
 }

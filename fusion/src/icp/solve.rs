@@ -7,7 +7,7 @@ use nalgebra::{Isometry3, Matrix3, Matrix4, Matrix6, Point3, SymmetricEigen, Tra
 
 use super::config::{IcpConfig, Kernel, Method};
 use super::correspondences::{Partners, RANGE_BINS, RangeBins, Sums, accumulate};
-use super::degeneracy::Observability;
+use super::degeneracy::{Observability, projector_off};
 use super::target::Target;
 use crate::error::{FusionError, Result};
 use crate::se3::Prior;
@@ -73,8 +73,8 @@ impl IcpResult {
     /// collinear points, the analysis off): always finite for a positive
     /// definite `held`.
     pub fn covariance_held(&self, held: &Matrix6<f64>) -> Matrix6<f64> {
-        let blind: Matrix6<f64> = self.unobservable.iter().map(|d| d * d.transpose()).sum();
-        let filled = self.information + blind.transpose() * held * blind;
+        let blind = Matrix6::identity() - projector_off(&self.unobservable);
+        let filled = self.information + blind * held * blind;
         let c = filled
             .try_inverse()
             .or_else(|| (self.information + held).try_inverse())
@@ -334,12 +334,8 @@ fn align_impl(
     };
     let edge_bias = edge_bias(&sums, &unobservable);
     let range_covariance = sums.ranges.as_deref().filter(|_| config.method == Method::PointToPlane).map(|r| {
-        let mut c = by_range(r, sigma2);
-        for u in &unobservable {
-            let p = Matrix6::identity() - u * u.transpose();
-            c = p * c * p;
-        }
-        c
+        let p = projector_off(&unobservable);
+        p * by_range(r, sigma2) * p
     });
     Ok(IcpResult {
         target_from_source: estimate,
@@ -408,10 +404,7 @@ fn edge_bias(sums: &Sums, unobservable: &[Vector6<f64>]) -> Vector6<f64> {
         return Vector6::zeros();
     }
     let (covered, all) = (pseudo_inverse(&(sums.h - sums.edge_h)), pseudo_inverse(&sums.h));
-    let mut d = -(covered * (sums.b - sums.edge_b)) + all * sums.b;
-    for u in unobservable {
-        d -= u * u.dot(&d);
-    }
+    let d = projector_off(unobservable) * (-(covered * (sums.b - sums.edge_b)) + all * sums.b);
     if d.iter().all(|v| v.is_finite()) { d } else { Vector6::zeros() }
 }
 
