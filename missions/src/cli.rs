@@ -23,7 +23,7 @@ pub struct Cli {
 #[derive(Debug, Subcommand)]
 pub enum Command {
     /// Run a mission — on the simulator, or on real instruments over serial
-    /// ports with [backend] kind = "serial": the dance, a scan at every
+    /// ports with `[backend] kind = "serial"`: the dance, a scan at every
     /// scan station, the fused cloud, the reports and mission.rrd.
     Run(commands::run::RunArgs),
     /// Predict the pose covariance after every dance cycle of a mission's
@@ -45,7 +45,7 @@ pub enum Command {
     /// interval).
     Montecarlo(commands::montecarlo::MontecarloArgs),
     /// Re-fuse a finished (or interrupted) run's scans from its journal into
-    /// RUN_DIR/fusion/<mode>/, without re-running it.
+    /// `RUN_DIR/fusion/<mode>/`, without re-running it.
     Fuse(commands::fuse::FuseArgs),
     /// Adjust a run's whole network from its journal (every station, child
     /// placement and control point from every reading): the global test,

@@ -10,7 +10,7 @@
 //! - [`sparse`]: the sparse Cholesky factor (faer, AMD order) and the
 //!   selected inverse (Takahashi) that gives every covariance needed in
 //!   memory linear in the network;
-//! - [`testing`]: the per-observation statistics.
+//! - [`statistics`]: the per-observation statistics.
 //!
 //! For the chain-shaped dance, an open traverse, the covariance of every
 //! station equals the sequential filter's ([`crate::TeamState`]); control

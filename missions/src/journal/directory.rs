@@ -79,7 +79,7 @@ pub fn guard(dir: &Path, command: &str) -> Result<Option<DirLock>> {
     lock(dir, command).map(Some)
 }
 
-/// Refuses a symbolic link where a run writes: the names of [`WRITTEN`],
+/// Refuses a symbolic link where a run writes: the names of `WRITTEN`,
 /// `cloud.*`, and the entries of `scans/` and `fusion/` (recursively).
 pub fn refuse_links(dir: &Path) -> Result<()> {
     for name in WRITTEN {

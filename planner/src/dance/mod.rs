@@ -11,9 +11,9 @@
 //! A [`Dance`] is a list of [`DanceCycle`]s (one parent move and fix each);
 //! [`Dance::steps`] spells it out as the list of actions the runner executes.
 //!
-//! [`schedule`](mod@schedule): the dance scheduled from the stations and the
-//! formation (its cycles, control sightings, range checks); [`steps`]: the
-//! actions the runner executes; [`execution`]: the dance run through a team
+//! `schedule`: the dance scheduled from the stations and the
+//! formation (its cycles, control sightings, range checks); `steps`: the
+//! actions the runner executes; `execution`: the dance run through a team
 //! state on given readings (prediction, Monte Carlo).
 
 mod execution;

@@ -320,7 +320,7 @@ pub fn write(path: &Path, cloud: &PointCloud, format: Format) -> Result<()> {
     write_file(path, cloud, format).map(|_| ())
 }
 
-/// Writes `cloud` as [`write`] does and returns the CRC-32 (IEEE) of the
+/// Writes `cloud` as [`write()`] does and returns the CRC-32 (IEEE) of the
 /// file's bytes: hashed as they are written for the formats written as one
 /// stream (3DTK, PLY, XYZ, PCD), read back for the others.
 pub fn write_with_crc32(path: &Path, cloud: &PointCloud, format: Format) -> Result<u32> {

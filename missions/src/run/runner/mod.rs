@@ -21,8 +21,8 @@
 //! step, so the run continues exactly where it stopped.
 //!
 //! Here the dance itself (start, cycle, placement, drive, station); in
-//! [`sightings`] the total station's readings tested, measured again or
-//! refused and the fixes; in [`scan`] a station's scan; in [`finish`] the
+//! `sightings` the total station's readings tested, measured again or
+//! refused and the fixes; in `scan` a station's scan; in `finish` the
 //! fusion, the outputs and the reports. Every device command goes through
 //! the [`Dispatch`] (journal, replay, retries), everything shown through
 //! the [`Observer`] (recording, progress, timings).
