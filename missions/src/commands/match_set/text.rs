@@ -154,62 +154,8 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
     }
     let tolerance = report.stages.last().map_or(0.0, |s| s.voxel_m);
     for &i in &report.untrusted {
-        let disagreeing = || report.checks.iter().filter(|c| !c.consistent && (c.source == i || c.target == i));
-        let other = |c: &CheckReport| if c.source == i { c.target } else { c.source };
-        let moved: Vec<String> = disagreeing()
-            .filter(|c| !c.free_space.as_ref().is_some_and(|f| f.violated()))
-            .filter_map(|c| {
-                Some(format!("{} ({:.3} m, {:.2}°)", scans[other(c)].name, c.moved_m?, c.angle_deg.unwrap_or_default()))
-            })
-            .collect();
-        if !moved.is_empty() {
-            writeln!(
-                out,
-                "  not trusted: {}: matched again from the final poses it moves beyond {tolerance:.3} m and 5 % of its \
-                 radius against {}: the poses are not where the data agree (a symmetric fit from rough starts?)",
-                scans[i].name,
-                moved.join(", ")
-            )?;
-        }
-        let seen: Vec<String> = disagreeing()
-            .filter_map(|c| {
-                let f = c.free_space.as_ref().filter(|f| f.violated())?;
-                let (from, of) = (f.seen_from, if f.seen_from == c.source { c.target } else { c.source });
-                Some(format!(
-                    "{:.0} % of {}'s points where {}'s scanner saw through",
-                    100.0 * f.share,
-                    scans[of].name,
-                    scans[from].name
-                ))
-            })
-            .collect();
-        if !seen.is_empty() {
-            writeln!(
-                out,
-                "  not trusted: {}: placed in another scan's free space ({}): a scan of another place, or a fit \
-                 that is not where the scans meet",
-                scans[i].name,
-                seen.join("; ")
-            )?;
-        }
         let undecided = report.restart.iter().flat_map(|r| &r.undecided).any(|u| u.scan == i);
-        let on: Vec<&str> = report
-            .checks
-            .iter()
-            .filter(|c| c.consistent && (c.source == i || c.target == i))
-            .map(other)
-            .filter(|j| report.untrusted.contains(j))
-            .map(|j| scans[j].name.as_str())
-            .collect();
-        if moved.is_empty() && seen.is_empty() && !undecided && !on.is_empty() {
-            writeln!(
-                out,
-                "  not trusted: {}: it agrees only with scans named here ({}): nothing verified ties it to {}",
-                scans[i].name,
-                on.join(", "),
-                scans[0].name
-            )?;
-        }
+        why_untrusted(out, scans, &report.checks, &report.untrusted, i, undecided, tolerance)?;
     }
     for l in report.links.iter().filter(|l| !l.accepted || l.cycle.is_some()) {
         let targets: Vec<&str> = l.targets.iter().map(|&t| scans[t].name.as_str()).collect();
@@ -253,4 +199,120 @@ pub(super) fn unlinked(report: &MatchReport) -> Vec<usize> {
     (1..report.scans.len())
         .filter(|&i| !report.links.iter().any(|l| l.accepted && (l.source == i || l.targets.contains(&i))))
         .collect()
+}
+
+/// Why the verification names scan `i` (`untrusted` all it names): the
+/// pairs that moved it, the free space it was placed in, or — when
+/// neither, and the restart left it not `undecided` — the named scans it
+/// agrees with, nothing verified tying it to the first.
+fn why_untrusted(
+    out: &mut dyn Write,
+    scans: &[InputScan],
+    checks: &[CheckReport],
+    untrusted: &[usize],
+    i: usize,
+    undecided: bool,
+    tolerance: f64,
+) -> std::io::Result<()> {
+    let disagreeing = || checks.iter().filter(|c| !c.consistent && (c.source == i || c.target == i));
+    let other = |c: &CheckReport| if c.source == i { c.target } else { c.source };
+    let moved: Vec<String> = disagreeing()
+        .filter(|c| !c.free_space.as_ref().is_some_and(|f| f.violated()))
+        .filter_map(|c| {
+            Some(format!("{} ({:.3} m, {:.2}°)", scans[other(c)].name, c.moved_m?, c.angle_deg.unwrap_or_default()))
+        })
+        .collect();
+    if !moved.is_empty() {
+        writeln!(
+            out,
+            "  not trusted: {}: matched again from the final poses it moves beyond {tolerance:.3} m and 5 % of its \
+             radius against {}: the poses are not where the data agree (a symmetric fit from rough starts?)",
+            scans[i].name,
+            moved.join(", ")
+        )?;
+    }
+    let seen: Vec<String> = disagreeing()
+        .filter_map(|c| {
+            let f = c.free_space.as_ref().filter(|f| f.violated())?;
+            let (from, of) = (f.seen_from, if f.seen_from == c.source { c.target } else { c.source });
+            Some(format!(
+                "{:.0} % of {}'s points where {}'s scanner saw through",
+                100.0 * f.share,
+                scans[of].name,
+                scans[from].name
+            ))
+        })
+        .collect();
+    if !seen.is_empty() {
+        writeln!(
+            out,
+            "  not trusted: {}: placed in another scan's free space ({}): a scan of another place, or a fit \
+             that is not where the scans meet",
+            scans[i].name,
+            seen.join("; ")
+        )?;
+    }
+    let on: Vec<&str> = checks
+        .iter()
+        .filter(|c| c.consistent && (c.source == i || c.target == i))
+        .map(other)
+        .filter(|j| untrusted.contains(j))
+        .map(|j| scans[j].name.as_str())
+        .collect();
+    if moved.is_empty() && seen.is_empty() && !undecided && !on.is_empty() {
+        writeln!(
+            out,
+            "  not trusted: {}: it agrees only with scans named here ({}): nothing verified ties it to {}",
+            scans[i].name,
+            on.join(", "),
+            scans[0].name
+        )?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn check(target: usize, source: usize, moved_m: f64, consistent: bool) -> CheckReport {
+        CheckReport {
+            source,
+            target,
+            overlap: 1000,
+            moved_m: Some(moved_m),
+            angle_deg: Some(0.0),
+            chi2: None,
+            relative_motion: Some(moved_m / 10.0),
+            seen_motion_m: Some(moved_m),
+            rmse_m: Some(0.01),
+            noise_m: 0.01,
+            consistent,
+            free_space: None,
+        }
+    }
+
+    fn why(checks: &[CheckReport], untrusted: &[usize], i: usize, undecided: bool) -> String {
+        let scans: Vec<InputScan> = ["a", "b", "c", "d"].iter().map(|n| InputScan::empty(n, n)).collect();
+        let mut out = Vec::new();
+        why_untrusted(&mut out, &scans, checks, untrusted, i, undecided, 0.05).expect("written");
+        String::from_utf8(out).expect("UTF-8")
+    }
+
+    #[test]
+    fn a_scan_that_agrees_only_with_named_scans_says_so_and_with_which() {
+        // b moved 1.2 m against a; c agrees with b (named) and nothing else.
+        let checks = [check(0, 1, 1.2, false), check(1, 2, 0.001, true), check(0, 3, 0.001, true)];
+        let named = [1, 2];
+        let b = why(&checks, &named, 1, false);
+        assert!(
+            b.contains("b: matched again from the final poses it moves") && b.contains("against a (1.200 m"),
+            "{b}"
+        );
+        assert!(!b.contains("agrees only"), "{b}");
+        let c = why(&checks, &named, 2, false);
+        assert_eq!(c, "  not trusted: c: it agrees only with scans named here (b): nothing verified ties it to a\n");
+        // Left undecided by the restart, it is said there instead.
+        assert_eq!(why(&checks, &named, 2, true), "");
+    }
 }
