@@ -277,7 +277,8 @@ pub struct FurtherReport {
     /// schedule's put points in another scanner's free space and the
     /// verification names nothing of its, or the verification named scans
     /// of the result before it, names none of its, and the scans disagree
-    /// less there at all.
+    /// less there at all — or 1.05 times less, where the result before it
+    /// was itself such a rescue.
     pub kept: bool,
     /// The scans the verification names at its poses; null when it failed
     /// or was not verified (it is where it may be kept).
