@@ -246,9 +246,16 @@ pub struct RestartReport {
     /// the centroid's displacement plus the turn times the radius) when the
     /// scans' disagreement prefers neither by 1.5× and the verification
     /// names nothing of either: the data cannot tell which is right, so
-    /// they are in `untrusted` (exit 1), and the registration the scans
-    /// agree with better is the result. Empty otherwise.
+    /// they are in `untrusted` (exit 1) — unless `corroborated` —, and the
+    /// registration the scans agree with better is the result. Empty
+    /// otherwise.
     pub undecided: Vec<UndecidedReport>,
+    /// True when the `undecided` scans are not in `untrusted` after all:
+    /// every further restart (at least one ran) landed where the
+    /// registration kept places them (none of them 5 % of its radius
+    /// apart) — the one the scans agree with better is also the one every
+    /// shorter schedule reaches from the starts.
+    pub corroborated: bool,
     /// Further restarts from the starts, each without one more of the
     /// schedule's stages (the first without its first two, …, the last
     /// with the finest stage alone), run in turn while the result is not

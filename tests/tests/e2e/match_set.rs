@@ -1404,11 +1404,14 @@ fn pairwise_wedges_dragged_together_land_by_the_disagreeing_restart() {
 /// wedges 5.9° off together with exit 0; the restart (set off by the
 /// disagreeing matches) landed them within 0.05°, but the scans agreed
 /// with it only 1.42× better — not the 1.5× that keeps a restart. Two
-/// registrations 0.9–1.0 m and 5.9° apart, neither clearly right: the
-/// three wedges are named (`restart.undecided`, `untrusted`), exit 1, and
-/// the registration the scans agree with better is the result.
+/// registrations 0.9–1.0 m and 5.9° apart (`restart.undecided`): from
+/// session 29 the three wedges were named, exit 1, with the right poses.
+/// Every further restart from the starts (three: without the first two
+/// stages, three, four) lands where the restart did — the schedule's is
+/// the one only its coarse first stage reaches: `restart.corroborated`,
+/// nothing named, exit 0 (session 35).
 #[test]
-fn registrations_the_data_cannot_choose_between_are_named_with_exit_1() {
+fn registrations_the_data_barely_choose_between_are_settled_by_the_further_restarts() {
     let dir = tempfile::tempdir().expect("temp dir");
     let truths: [[[f64; 4]; 3]; 3] = [
         [
@@ -1447,7 +1450,7 @@ fn registrations_the_data_cannot_choose_between_are_named_with_exit_1() {
     let (mut inputs, truths) = bench_wedges(dir.path(), STREET, 88.506_831_693_977_05, true, &truths, &starts);
     inputs.extend(["--mode".into(), "pairwise".into()]);
     let (r, v) = run(&inputs, &dir.path().join("out"));
-    assert_eq!(r.code, 1, "{}\n{}", r.stdout, r.stderr);
+    assert_eq!(r.code, 0, "{}\n{}", r.stdout, r.stderr);
     let v = v.expect("JSON");
     let restart = &v["restart"];
     let undecided: Vec<u64> =
@@ -1458,7 +1461,17 @@ fn registrations_the_data_cannot_choose_between_are_named_with_exit_1() {
         let (m, deg) = (u["apart_m"].as_f64().expect("m"), u["apart_deg"].as_f64().expect("deg"));
         assert!(m > 0.5 && deg > 5.0, "{u}");
     }
-    assert_eq!(v["untrusted"], serde_json::json!([1, 2, 3]), "{}", v["untrusted"]);
+    assert_eq!(restart["corroborated"], true, "{restart}");
+    let further = restart["further"].as_array().expect("further restarts");
+    assert_eq!(further.len(), 3, "{restart}");
+    for f in further {
+        // Not kept (no better than the restart), each where it landed.
+        // (Measured 5.5866e-3–5.5871e-3 m² a point.)
+        let a = f["disagreement_m2"].as_f64().expect("further's");
+        let kept = restart["restart_disagreement_m2"].as_f64().expect("restart's");
+        assert!(f["kept"] == false && (a / kept - 1.0).abs() < 1e-3, "{restart}");
+    }
+    assert_eq!(v["untrusted"], serde_json::json!([]), "{}", v["untrusted"]);
     let (schedule, restarted) = (
         restart["schedule_disagreement_m2"].as_f64().expect("schedule's"),
         restart["restart_disagreement_m2"].as_f64().expect("restart's"),
@@ -1477,11 +1490,14 @@ fn registrations_the_data_cannot_choose_between_are_named_with_exit_1() {
     args.extend(inputs.iter().cloned());
     args.extend(["--out".into(), dir.path().join("text").into_os_string()]);
     let text = cps_survey(args);
-    assert_eq!(text.code, 1, "{}", text.stderr);
-    for k in 1..4 {
-        let line = format!("not trusted: part{k}: the schedule's and the restart's registrations place it");
-        assert!(text.stdout.contains(&line), "{}", text.stdout);
-    }
+    assert_eq!(text.code, 0, "{}", text.stderr);
+    assert!(
+        text.stdout.contains("the schedule's and the restart's registrations place part1 (")
+            && text.stdout.contains("every further restart from the starts (3) landed where the one kept does")
+            && !text.stdout.contains("not trusted"),
+        "{}",
+        text.stdout
+    );
 }
 
 /// Issue 38, "no silent failure", a slide along a street: the bench's

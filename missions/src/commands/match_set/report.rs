@@ -101,6 +101,7 @@ pub(super) fn report(
                 .iter()
                 .map(|&(scan, apart_m, angle)| UndecidedReport { scan, apart_m, apart_deg: angle.to_degrees() })
                 .collect(),
+            corroborated: x.corroborated,
             further: x
                 .further
                 .iter()

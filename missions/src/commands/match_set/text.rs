@@ -144,17 +144,36 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
             report.scans[i].degenerate_directions.len()
         )?;
     }
-    for u in report.restart.iter().flat_map(|r| &r.undecided) {
-        writeln!(
-            out,
-            "  not trusted: {}: the schedule's and the restart's registrations place it {:.3} m, {:.2}° apart, and \
-             the scans agree with neither clearly better (1.5×): the data do not tell which is right",
-            scans[u.scan].name, u.apart_m, u.apart_deg
-        )?;
+    for r in report.restart.iter().filter(|r| !r.undecided.is_empty()) {
+        if r.corroborated {
+            let apart: Vec<String> = r
+                .undecided
+                .iter()
+                .map(|u| format!("{} ({:.3} m, {:.2}°)", scans[u.scan].name, u.apart_m, u.apart_deg))
+                .collect();
+            writeln!(
+                out,
+                "  the schedule's and the restart's registrations place {} apart, and the scans agree with neither \
+                 clearly better (1.5×); every further restart from the starts ({}) landed where the one kept does: \
+                 that one is trusted",
+                apart.join(", "),
+                r.further.len()
+            )?;
+            continue;
+        }
+        for u in &r.undecided {
+            writeln!(
+                out,
+                "  not trusted: {}: the schedule's and the restart's registrations place it {:.3} m, {:.2}° apart, \
+                 and the scans agree with neither clearly better (1.5×): the data do not tell which is right",
+                scans[u.scan].name, u.apart_m, u.apart_deg
+            )?;
+        }
     }
     let tolerance = report.stages.last().map_or(0.0, |s| s.voxel_m);
     for &i in &report.untrusted {
-        let undecided = report.restart.iter().flat_map(|r| &r.undecided).any(|u| u.scan == i);
+        let undecided =
+            report.restart.iter().filter(|r| !r.corroborated).flat_map(|r| &r.undecided).any(|u| u.scan == i);
         why_untrusted(out, scans, &report.checks, &report.untrusted, i, undecided, tolerance)?;
     }
     for l in report.links.iter().filter(|l| !l.accepted || l.cycle.is_some()) {
