@@ -229,10 +229,11 @@ pub struct Restart {
     /// the two registrations, that one is reached again from the starts by
     /// every shorter schedule; the other only by the schedule (or the
     /// restart) whose coarse stage dragged it. Measured in every
-    /// undecided case met (the street's and the room's wedges, seeds 7,
-    /// 11 and 13 of the NEES bench): the registration reached again was
-    /// the right one, within 0.05° and 5 mm, and was named before with
-    /// exit 1.
+    /// undecided case met (the street's wedges of the e2e test and of the
+    /// NEES bench's seeds 7 and 17, the room's wedges of its seed 13):
+    /// the registration reached again was the right one (each
+    /// part within 0.1° and 5 mm; seed 7's all-source parts 0.03° and
+    /// 1.6 mm RMS), and was named before with exit 1.
     pub corroborated: bool,
     /// Further restarts from the starts, each without one more of the
     /// schedule's stages (the first without its first two, …, the last
@@ -335,8 +336,9 @@ pub const RESTART_RATIO: f64 = 1.5;
 /// times better there: a rescue is not trusted as a schedule's own
 /// unnamed result is (the 1.5× of [`RESTART_RATIO`]), but the same fit
 /// reached again agrees alike to the sixth digit and a nearby minimum
-/// 1.02× ([`RESTART_RATIO`]'s measurements). Measured: the street's wedges in pairwise mode, a rescue
-/// with two wedges 3.1° off, the right registration 1.19× better.
+/// 1.02× ([`RESTART_RATIO`]'s measurements). Measured: the street's
+/// wedges in pairwise mode, a rescue with two wedges 3.1° off, the right
+/// registration 1.19× better.
 pub const RESCUE_RATIO: f64 = 1.05;
 
 /// Whether a restart set off by the schedule's result ([`Trigger`]:
