@@ -302,6 +302,13 @@ pub enum Trigger {
     /// the verification's matches' in the other modes — above
     /// [`RESTART_VARIANCE_FACTOR`]), and nothing above set it off.
     Disagreeing,
+    /// The verification names scans of the schedule's result
+    /// ([`crate::verify::untrusted`]), and nothing above set it off: a
+    /// street wedge 0.29 m along the street, or two wedges 3.5° off
+    /// together, their links' variance factor below 1 (matched again, a
+    /// pair's residual fell 3.1–3.4×: [`crate::verify::MAX_RESIDUAL_GAIN`]);
+    /// the restart landed them.
+    Named,
 }
 
 /// A set whose variance factor σ̂₀² is above this sets off a restart
@@ -338,7 +345,9 @@ pub const RESTART_RATIO: f64 = 1.5;
 /// reached again agrees alike to the sixth digit and a nearby minimum
 /// 1.02× ([`RESTART_RATIO`]'s measurements). Measured: the street's
 /// wedges in pairwise mode, a rescue with two wedges 3.1° off, the right
-/// registration 1.19× better.
+/// registration 1.19× better (since the verification names that fit
+/// itself, [`crate::verify::MAX_RESIDUAL_GAIN`], a guard no measured case
+/// needs).
 pub const RESCUE_RATIO: f64 = 1.05;
 
 /// Whether a restart set off by the schedule's result ([`Trigger`]:
@@ -587,6 +596,8 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
         Trigger::Untrusted
     } else if first.variance_factor.is_some_and(|f| f > RESTART_VARIANCE_FACTOR) {
         Trigger::Disagreeing
+    } else if !named.is_empty() {
+        Trigger::Named
     } else {
         return Ok(first);
     };

@@ -359,3 +359,65 @@ fn the_checks_report_the_residual_against_the_noise_floor() {
         assert!((3.0..7.0).contains(&ratio), "{}←{}: {ratio}", c.target, c.source);
     }
 }
+
+/// Issue 38, a pair that finds a much closer fit nearby disagrees with the
+/// poses, however little it moves: disjoint thirds of a real scan under
+/// known transforms, checked at their true poses and with one third
+/// shifted 0.15 m — 4 % of its RMS radius, within the motion tiers
+/// (5 % along what a pair sees well, 20 % in all), as the NEES bench's
+/// street wedge placed 0.29 m along the street by a link still creeping at
+/// its cap was (8.9 %, exit 0). Matched again from the shifted poses, its
+/// pairs settle back where their residual is several times lower
+/// (measured 3.3×; the wedge's 3.4×); at the true poses they stay
+/// (within 1.001×).
+#[test]
+fn a_pair_that_finds_a_much_closer_fit_nearby_disagrees_with_the_poses() {
+    use fusion::verify::{MAX_RESIDUAL_GAIN, check_pairs, untrusted};
+    let points = threedtk(1);
+    let truth: Vec<Isometry3<f64>> = (0..3)
+        .map(|k| {
+            let k = k as f64;
+            Isometry3::from_parts(
+                Translation3::new(0.2 * k, -0.1 * k, 0.0),
+                UnitQuaternion::from_euler_angles(0.01 * k, 0.02 * k, 0.5 * k),
+            )
+        })
+        .collect();
+    let shares: Vec<Vec<Point3<f32>>> = (0..3u64)
+        .map(|k| {
+            points
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| *i as u64 % 3 == k)
+                .map(|(_, p)| (truth[k as usize].inverse() * p.cast::<f64>()).cast::<f32>())
+                .collect()
+        })
+        .collect();
+    // The finest stage of the 3DTK schedule: 5 cm cells, 0.2 m reach.
+    let base = fusion::links::LinkConfig::default();
+    let config = fusion::links::LinkConfig {
+        multiview: fusion::multiview::MultiviewConfig {
+            source_voxel_m: 0.05,
+            target_voxel_m: 0.05,
+            icp: fusion::icp::IcpConfig { max_correspondence_m: 0.2, ..base.multiview.icp },
+            ..base.multiview
+        },
+        ..base
+    };
+    let gain = |c: &fusion::verify::PairCheck| c.start_rmse_m.expect("matched") / c.rmse_m.expect("matched");
+    let right = check_pairs(&shares, &truth, &[None; 3], &config, 0.05).expect("checked");
+    assert_eq!(right.len(), 3, "every pair overlaps");
+    for c in &right {
+        assert!(c.consistent && gain(c) < 1.1, "{}←{} at the truth: gain {}, {c:?}", c.target, c.source, gain(c));
+    }
+    let mut off = truth.clone();
+    off[2] = Translation3::new(0.15, 0.0, 0.0) * truth[2];
+    let checks = check_pairs(&shares, &off, &[None; 3], &config, 0.05).expect("checked");
+    for c in checks.iter().filter(|c| c.source == 2 || c.target == 2) {
+        let relative = c.relative_motion.expect("matched");
+        assert!(relative < 0.05 && c.angle_rad.expect("matched") < 0.01, "{}←{}: {relative}", c.target, c.source);
+        assert!(gain(c) > 2.0 * MAX_RESIDUAL_GAIN, "{}←{}: gain {}", c.target, c.source, gain(c));
+        assert!(!c.consistent, "{}←{}", c.target, c.source);
+    }
+    assert_eq!(untrusted(3, &checks), [2]);
+}

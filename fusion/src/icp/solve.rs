@@ -30,6 +30,10 @@ pub struct IcpResult {
     /// distances or point-to-point distances; in a match both ways, of
     /// both ways' residuals), metres.
     pub rmse_m: f64,
+    /// RMS of the residuals at the start (the first pass, at `init`),
+    /// metres: with [`rmse_m`](Self::rmse_m), how much the match improved
+    /// on where it began.
+    pub start_rmse_m: f64,
     /// 6×6 information of ξ = (ω, v) at the last linearisation point, see
     /// the module docs; with [`IcpConfig::degeneracy_ratio`], zero along
     /// the [`unobservable`](Self::unobservable) directions.
@@ -231,6 +235,7 @@ fn align_impl(
     let (mut moved, mut back_moved) = (None, None);
     // The one-way correspondences of the last pass (`inliers`).
     let mut forward = 0;
+    let mut start_rmse_m = None;
     let mut unobservable = Vec::new();
     // Only with blind directions asked for: the analysis runs about the
     // source's centroid (where the estimate puts it in the target's frame:
@@ -248,6 +253,7 @@ fn align_impl(
         }
         last = sums;
         let sums = &last;
+        start_rmse_m.get_or_insert((sums.sq / sums.n.max(1) as f64).sqrt());
         if forward < 6 {
             return Err(FusionError::TooFewCorrespondences {
                 found: forward,
@@ -343,6 +349,7 @@ fn align_impl(
         iterations,
         inliers: forward,
         rmse_m,
+        start_rmse_m: start_rmse_m.unwrap_or(rmse_m),
         information,
         trace,
         unobservable,

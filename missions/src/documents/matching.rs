@@ -136,13 +136,17 @@ pub struct CheckReport {
     pub seen_motion_m: Option<f64>,
     /// The match's point-to-plane RMS residual, metres; null when it failed.
     pub rmse_m: Option<f64>,
+    /// The same residual at the final poses (the match's first pass),
+    /// metres; null when the match failed.
+    pub start_rmse_m: Option<f64>,
     /// What a right registration of the two scans leaves: the RMS of their
     /// noise floors (each scan's two random halves matched at the
     /// identity), metres.
     pub noise_m: f64,
     /// The match moved the points by at most the finest stage's voxel, or
-    /// along what it sees well by at most 5 % of their RMS radius and
-    /// turned them by at most 5°; and no scanner's free space holds more
+    /// along what it sees well by at most 5 % of their RMS radius, turned
+    /// them by at most 5° and lowered its residual (`start_rmse_m` →
+    /// `rmse_m`) at most 1.5-fold; and no scanner's free space holds more
     /// than 12 % of the other scan's points (`free_space`).
     pub consistent: bool,
     /// The free-space test from the pair's scanner whose view the other
@@ -230,8 +234,10 @@ pub struct RestartReport {
     /// What set it off: "moved" (the schedule moved `scan` beyond the
     /// second stage's reach of its start), "failed" (`schedule_error`),
     /// "untrusted" (the schedule's result put points in another scanner's
-    /// free space) or "disagreeing" (the schedule's links disagree more
-    /// than their covariances allow: `variance_factor` above 1).
+    /// free space), "disagreeing" (the schedule's links disagree more
+    /// than their covariances allow: `variance_factor` above 1) or "named"
+    /// (the verification names scans of the schedule's result:
+    /// `schedule_untrusted`).
     pub trigger: String,
     /// The scans the verification names at the schedule's poses (indices
     /// into `scans`); null when the schedule failed.

@@ -92,6 +92,7 @@ pub(super) fn report(
                 fusion::scanset::Trigger::Failed => "failed",
                 fusion::scanset::Trigger::Untrusted => "untrusted",
                 fusion::scanset::Trigger::Disagreeing => "disagreeing",
+                fusion::scanset::Trigger::Named => "named",
             }
             .into(),
             schedule_untrusted: x.untrusted.0.clone(),
@@ -127,6 +128,7 @@ pub(super) fn report(
                 relative_motion: c.relative_motion,
                 seen_motion_m: c.seen_motion_m,
                 rmse_m: c.rmse_m,
+                start_rmse_m: c.start_rmse_m,
                 noise_m: c.noise_m,
                 consistent: c.consistent,
                 free_space: c.free_space.map(|f| FreeSpaceReport {

@@ -78,6 +78,10 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
                 "the schedule's poses put points in another scanner's free space (named: {})",
                 names(r.schedule_untrusted.as_deref().unwrap_or_default())
             ),
+            ("named", ..) => format!(
+                "the verification names scans of the schedule's result ({})",
+                names(r.schedule_untrusted.as_deref().unwrap_or_default())
+            ),
             (_, Some(m), _) => format!(
                 "the schedule moved {} {m:.3} m from its start",
                 r.scan.map_or("a scan", |i| scans[i].name.as_str())
@@ -238,15 +242,24 @@ fn why_untrusted(
     let moved: Vec<String> = disagreeing()
         .filter(|c| !c.free_space.as_ref().is_some_and(|f| f.violated()))
         .filter_map(|c| {
-            Some(format!("{} ({:.3} m, {:.2}°)", scans[other(c)].name, c.moved_m?, c.angle_deg.unwrap_or_default()))
+            Some(format!(
+                "{} ({:.3} m, {:.2}°, residual {:.4} → {:.4} m)",
+                scans[other(c)].name,
+                c.moved_m?,
+                c.angle_deg.unwrap_or_default(),
+                c.start_rmse_m.unwrap_or_default(),
+                c.rmse_m.unwrap_or_default()
+            ))
         })
         .collect();
     if !moved.is_empty() {
         writeln!(
             out,
             "  not trusted: {}: matched again from the final poses it moves beyond {tolerance:.3} m and 5 % of its \
-             radius against {}: the poses are not where the data agree (a symmetric fit from rough starts?)",
+             radius, or to a fit its residual says is {}× closer, against {}: the poses are not where the data agree \
+             (a symmetric fit from rough starts?)",
             scans[i].name,
+            fusion::verify::MAX_RESIDUAL_GAIN,
             moved.join(", ")
         )?;
     }
@@ -305,6 +318,7 @@ mod tests {
             relative_motion: Some(moved_m / 10.0),
             seen_motion_m: Some(moved_m),
             rmse_m: Some(0.01),
+            start_rmse_m: Some(0.01),
             noise_m: 0.01,
             consistent,
             free_space: None,
