@@ -181,7 +181,8 @@ def main():
                             got = np.linalg.inv(np.array(v["scans"][a]["world_from_scan"])) @ np.array(v["scans"][b]["world_from_scan"])
                             e = xi(got, np.linalg.inv(truths[a]) @ truths[b])
                             print(f"  CHECK {label} {mode} {a}<-{b} rmse {c['rmse_m']} noise {c['noise_m']:.4f} "
-                                  f"ratio {(c['rmse_m'] or 0) / c['noise_m']:.2f} moved {c['moved_m']} "
+                                  f"ratio {(c['rmse_m'] or 0) / c['noise_m']:.2f} gain {(c['start_rmse_m'] or 0) / (c['rmse_m'] or 1):.3f} "
+                                  f"moved {c['moved_m']} "
                                   f"relative {c['relative_motion']} consistent {c['consistent']} exit {code} "
                                   f"err {np.linalg.norm(e[:3]) * 180 / math.pi:.3f}° {np.linalg.norm(e[3:]) * 1e3:.1f} mm")
                     for i in range(1, len(parts)):
