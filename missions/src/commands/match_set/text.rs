@@ -348,4 +348,19 @@ mod tests {
         // Left undecided by the restart, it is said there instead.
         assert_eq!(why(&checks, &named, 2, true), "");
     }
+
+    #[test]
+    fn a_pair_that_settles_closer_says_by_how_much() {
+        // d slid 0.3 m against a, within the motion tiers, to a fit with
+        // its residual 25.6 → 7.6 mm.
+        let mut slid = check(0, 3, 0.3, false);
+        (slid.start_rmse_m, slid.rmse_m, slid.angle_deg) = (Some(0.0256), Some(0.0076), Some(0.17));
+        let d = why(&[slid], &[3], 3, false);
+        assert_eq!(
+            d,
+            "  not trusted: d: matched again from the final poses it moves beyond 0.050 m and 5 % of its radius, or \
+             to a fit its residual says is 1.5× closer, against a (0.300 m, 0.17°, residual 0.0256 → 0.0076 m): the \
+             poses are not where the data agree (a symmetric fit from rough starts?)\n"
+        );
+    }
 }
