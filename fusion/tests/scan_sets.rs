@@ -313,16 +313,9 @@ fn georeferenced_starts_register_as_local_ones() {
     }
 }
 
-/// The verification's residual against the data's noise: each check
-/// reports its match's RMS residual and the pair's noise floor (two random
-/// halves of each scan matched at the identity). Disjoint thirds of one
-/// real scan registered under known transforms leave about the floor
-/// (measured 1.30–1.32×: a third is sparser than the floor's halves); the
-/// three 3DTK scans, taken from different places, leave several times it
-/// at their right poses (measured 4.4–5.3×: other samplings, incidence and
-/// occlusions) — which is why the ratio is reported, not judged.
-#[test]
-fn the_checks_report_the_residual_against_the_noise_floor() {
+/// Disjoint thirds of 3DTK scan 1 (every third point), each under a known
+/// transform: (the transforms, the thirds in their own frames).
+fn thirds_of_a_3dtk_scan() -> (Vec<Isometry3<f64>>, Vec<Vec<Point3<f32>>>) {
     let points = threedtk(1);
     let truth: Vec<Isometry3<f64>> = (0..3)
         .map(|k| {
@@ -343,6 +336,20 @@ fn the_checks_report_the_residual_against_the_noise_floor() {
                 .collect()
         })
         .collect();
+    (truth, shares)
+}
+
+/// The verification's residual against the data's noise: each check
+/// reports its match's RMS residual and the pair's noise floor (two random
+/// halves of each scan matched at the identity). Disjoint thirds of one
+/// real scan registered under known transforms leave about the floor
+/// (measured 1.30–1.32×: a third is sparser than the floor's halves); the
+/// three 3DTK scans, taken from different places, leave several times it
+/// at their right poses (measured 4.4–5.3×: other samplings, incidence and
+/// occlusions) — which is why the ratio is reported, not judged.
+#[test]
+fn the_checks_report_the_residual_against_the_noise_floor() {
+    let (truth, shares) = thirds_of_a_3dtk_scan();
     let r = register_set(&shares, &truth, &SetConfig::default(), &mut |_, _, _, _| ()).expect("registers");
     assert_eq!(r.checks.len(), 3, "every pair overlaps");
     for c in &r.checks {
@@ -373,26 +380,7 @@ fn the_checks_report_the_residual_against_the_noise_floor() {
 #[test]
 fn a_pair_that_finds_a_much_closer_fit_nearby_disagrees_with_the_poses() {
     use fusion::verify::{MAX_RESIDUAL_GAIN, check_pairs, untrusted};
-    let points = threedtk(1);
-    let truth: Vec<Isometry3<f64>> = (0..3)
-        .map(|k| {
-            let k = k as f64;
-            Isometry3::from_parts(
-                Translation3::new(0.2 * k, -0.1 * k, 0.0),
-                UnitQuaternion::from_euler_angles(0.01 * k, 0.02 * k, 0.5 * k),
-            )
-        })
-        .collect();
-    let shares: Vec<Vec<Point3<f32>>> = (0..3u64)
-        .map(|k| {
-            points
-                .iter()
-                .enumerate()
-                .filter(|(i, _)| *i as u64 % 3 == k)
-                .map(|(_, p)| (truth[k as usize].inverse() * p.cast::<f64>()).cast::<f32>())
-                .collect()
-        })
-        .collect();
+    let (truth, shares) = thirds_of_a_3dtk_scan();
     // The finest stage of the 3DTK schedule: 5 cm cells, 0.2 m reach.
     let base = fusion::links::LinkConfig::default();
     let config = fusion::links::LinkConfig {
