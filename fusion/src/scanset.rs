@@ -303,11 +303,10 @@ pub enum Trigger {
     /// [`RESTART_VARIANCE_FACTOR`]), and nothing above set it off.
     Disagreeing,
     /// The verification names scans of the schedule's result
-    /// ([`crate::verify::untrusted`]), and nothing above set it off: a
-    /// street wedge 0.29 m along the street, or two wedges 3.5° off
-    /// together, their links' variance factor below 1 (matched again, a
-    /// pair's residual fell 3.1–3.4×: [`crate::verify::MAX_RESIDUAL_GAIN`]);
-    /// the restart landed them.
+    /// ([`crate::verify::untrusted`]), and nothing above set it off: two
+    /// street wedges 3.5° off together, the verification's variance factor
+    /// below 1 (matched again, a pair's residual fell 3.1×:
+    /// [`crate::verify::MAX_RESIDUAL_GAIN`]); the restart landed them.
     Named,
 }
 

@@ -61,9 +61,10 @@ pub const MAX_WEAK_MOTION: f64 = 0.2;
 /// this much closer: its residual at the final poses above this multiple of
 /// the residual its match reaches. Measured: right pairs of the NEES
 /// bench's real scans improve by at most 1.24× (seeds 7, 11, 13, 17; a
-/// room wedge pair 18 mm off), of the 3DTK set's graph solution and of
-/// the simulated corridor at most 1.0× — they slide along what they see
-/// weakly, where the fit hardly changes; a street wedge placed 0.29 m
+/// room wedge pair 18 mm off), the 3DTK set's at its own poses at most
+/// 1.09× in every mode (the simulated corridor's axis slides are not
+/// named either) — they slide along what they see weakly, where the fit
+/// hardly changes; a street wedge placed 0.29 m
 /// along the street by a link still creeping at its iteration cap, and
 /// two wedges left 3.5° off, 3.1–3.4× (their slides 3–9 % of the radius,
 /// within the tiers above).
