@@ -57,11 +57,19 @@ fn room_odometry(dir: &Path) -> std::path::PathBuf {
     init
 }
 
-fn run(args: &[OsString], out: &Path) -> (tests::Run, Option<Value>) {
+/// `cps-survey match ARGS --out OUT`, its text output.
+fn run_text(args: &[OsString], out: &Path) -> tests::Run {
     let mut all: Vec<OsString> = vec!["match".into()];
     all.extend(args.iter().cloned());
-    all.extend(["--out".into(), out.as_os_str().to_owned(), "--json".into()]);
-    let run = cps_survey(all);
+    all.extend(["--out".into(), out.as_os_str().to_owned()]);
+    cps_survey(all)
+}
+
+/// `cps-survey match ARGS --out OUT --json`, and its JSON.
+fn run(args: &[OsString], out: &Path) -> (tests::Run, Option<Value>) {
+    let mut args = args.to_vec();
+    args.push("--json".into());
+    let run = run_text(&args, out);
     let json = serde_json::from_str(&run.stdout).ok();
     (run, json)
 }
@@ -1108,10 +1116,7 @@ fn wedges_from_rough_starts_land_or_are_named_with_exit_1() {
     // The text output names them, and the further restart that ran.
     let mut args = room_wedges(&dir.path().join("text"), 1.0, 10.0);
     args.extend(["--mode".into(), "pairwise".into(), "--schedule".into(), three.into()]);
-    args.extend(["--out".into(), dir.path().join("t").into_os_string()]);
-    let mut all: Vec<OsString> = vec!["match".into()];
-    all.extend(args);
-    let r = cps_survey(all);
+    let r = run_text(&args, &dir.path().join("t"));
     assert_eq!(r.code, 1, "{}", r.stderr);
     assert!(
         r.stdout.contains("not trusted: wedge")
@@ -1479,10 +1484,7 @@ fn registrations_the_data_barely_choose_between_are_settled_by_the_further_resta
     // (Measured 0.005–0.041° / 0.4–1.6 mm; the schedule's 5.9° / 77 mm.)
     assert_parts_land("wedges", &v, &truths, 0.15, 0.01);
     // The text says why.
-    let mut args: Vec<OsString> = vec!["match".into()];
-    args.extend(inputs.iter().cloned());
-    args.extend(["--out".into(), dir.path().join("text").into_os_string()]);
-    let text = cps_survey(args);
+    let text = run_text(&inputs, &dir.path().join("text"));
     assert_eq!(text.code, 0, "{}", text.stderr);
     assert!(
         text.stdout.contains("the schedule's and the restart's registrations place part1 (")
@@ -1795,10 +1797,7 @@ fn a_fit_the_residual_says_is_far_closer_is_named_and_the_restarts_land_it() {
     // (Measured 0.007–0.018° / 0.5–2.1 mm; the schedule's part1 and part2 3.5° off.)
     assert_parts_land("trial 5", &v, &truths, 0.1, 0.01);
     // The text says why the schedule's result was restarted.
-    let mut args: Vec<OsString> = vec!["match".into()];
-    args.extend(inputs.iter().cloned());
-    args.extend(["--out".into(), trial5.join("text").into_os_string()]);
-    let text = cps_survey(args);
+    let text = run_text(&inputs, &trial5.join("text"));
     assert!(
         text.stdout.contains("restart: the verification names scans of the schedule's result (part2, part3)"),
         "{}",
