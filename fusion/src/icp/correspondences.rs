@@ -92,6 +92,11 @@ impl RangeBins {
 }
 
 impl Sums {
+    /// RMS of the residuals summed, metres (zero with none).
+    pub(crate) fn rmse(&self) -> f64 {
+        (self.sq / self.n.max(1) as f64).sqrt()
+    }
+
     pub(crate) fn merge(mut self, o: Sums) -> Sums {
         self.n += o.n;
         self.sw += o.sw;

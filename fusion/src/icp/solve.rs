@@ -253,7 +253,7 @@ fn align_impl(
         }
         last = sums;
         let sums = &last;
-        start_rmse_m.get_or_insert((sums.sq / sums.n.max(1) as f64).sqrt());
+        start_rmse_m.get_or_insert_with(|| sums.rmse());
         if forward < 6 {
             return Err(FusionError::TooFewCorrespondences {
                 found: forward,
@@ -313,7 +313,7 @@ fn align_impl(
         }
     }
     let sums = last;
-    let rmse_m = (sums.sq / sums.n.max(1) as f64).sqrt();
+    let rmse_m = sums.rmse();
     let prior_information = prior.map_or_else(Matrix6::zeros, |p| p.information);
     let sigma2 = residual_variance(&sums, config.method);
     // The pairs taken as independent, H/σ̂², then scaled by what the data's
