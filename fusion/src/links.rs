@@ -437,18 +437,72 @@ fn frame_and_steps(
     (priors, steps)
 }
 
-/// The variance factor σ̂₀² = χ²/redundancy (1 without redundancy) of
+/// What relative measurements between scans placed by a strategy say of
+/// their poses ([`adjust_matches`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Adjusted {
+    /// The measurements' variance factor σ̂₀² = χ²/redundancy (1 without
+    /// redundancy): how much more they disagree with one another than
+    /// their information allows.
+    pub variance_factor: f64,
+    /// How far each pose is from the measurements' adjustment: ξ with
+    /// pose ≈ exp(ξ)·adjusted (world frame; zero for scan 0, the frame).
+    pub departure: Vec<Vector6<f64>>,
+    /// Each pose's covariance (ξ = (ω, v), left, world frame; zero for
+    /// scan 0): the adjustment's, as the link graph's
+    /// ([`adjusted_covariance`]), plus its departure ξξᵀ.
+    pub covariance: Vec<Matrix6<f64>>,
+}
+
 /// `edges` — relative measurements between the scans at `poses`, e.g. the
-/// verification's matches ([`crate::verify::PairCheck::edge`]) — adjusted
-/// from `poses` as [`adjust`] adjusts its links, the poses' own increments
-/// holding what no edge sees: how much more the measurements disagree
-/// with one another than their information allows, whichever strategy
-/// placed the scans.
-pub fn variance_factor(poses: &[Isometry3<f64>], edges: &[Edge], config: &LinkConfig) -> Result<f64> {
+/// verification's matches ([`crate::verify::PairCheck::edge`]), with each
+/// one's `noise` before the variance factor ([`link_noise`]) and edge pull
+/// `bias` — adjusted from `poses` as [`adjust`] adjusts its links, the
+/// poses' own increments holding what no edge sees, whichever strategy
+/// placed the scans. A strategy that places each scan against partners
+/// held stops short of where all its pairs agree (simultaneous matching
+/// re-matches a scan only when a partner moved beyond a tolerance; a chain
+/// never closes its cycles): its poses are the adjustment's plus their
+/// departure from it, which is measured — so their error is the
+/// adjustment's (whose covariance the link graph's model gives) plus the
+/// departure, and their covariance the adjustment's plus ξξᵀ. (With
+/// independent errors and the adjustment the best linear estimate, its
+/// error is uncorrelated with any other estimate's difference from it.)
+pub fn adjust_matches(
+    poses: &[Isometry3<f64>],
+    edges: &[Edge],
+    noise: &[Matrix6<f64>],
+    bias: &[Vector6<f64>],
+    config: &LinkConfig,
+) -> Result<Adjusted> {
+    if noise.len() != edges.len() || bias.len() != edges.len() {
+        return Err(FusionError::OutOfRange {
+            what: "noise and pulls of the matches".into(),
+            value: noise.len().min(bias.len()) as f64,
+            expected: format!("one of each per match: {}", edges.len()),
+        });
+    }
     let (priors, mut all) = frame_and_steps(poses, poses, config);
+    let steps = all.len();
     all.extend_from_slice(edges);
     let g = crate::graph::optimize(poses, &priors, &all, 20)?;
-    Ok(judged(&g.world_from_scan, edges).variance_factor)
+    let variance_factor = judged(&g.world_from_scan, edges).variance_factor;
+    let adjusted = adjusted_covariance(&g.world_from_scan, &priors, &all, steps, noise, bias, variance_factor)?;
+    // Scan 0's prior leaves it within 1e-20 m of its pose: the departures
+    // are the others'.
+    let departure: Vec<Vector6<f64>> = poses
+        .iter()
+        .zip(&g.world_from_scan)
+        .enumerate()
+        .map(|(i, (p, a))| if i == 0 { Vector6::zeros() } else { left_difference(p, a) })
+        .collect();
+    let covariance = adjusted
+        .into_iter()
+        .zip(&departure)
+        .enumerate()
+        .map(|(i, (c, d))| if i == 0 { Matrix6::zeros() } else { c + d * d.transpose() })
+        .collect();
+    Ok(Adjusted { variance_factor, departure, covariance })
 }
 
 /// Links (as graph edges) judged at their adjusted `poses`.
@@ -632,44 +686,17 @@ fn solve(
                 })
                 .collect(),
         };
-        // Each link's covariance, as the adjustment weighs the links by
-        // their information (the poses stay the links' own):
-        // - its noise: the match's covariance by range from the scanner
-        //   (`IcpResult::range_covariance`: far points are noisier, which
-        //   one variance for all pairs hides), calibrated on the scans'
-        //   halves and quarters (`LinkConfig::range_scale`) — or, without it, its
-        //   information's inverse — times σ̂₀²: above 1 the links disagree
-        //   more than their noise says; below 1 they agree better, and
-        //   the share of their noise that is each scan's own, in every one
-        //   of its links, closes the cycles ([`shared_noise`]). (σ̂₀² is
-        //   exactly 1 without redundancy.) The start's steps, which hold
-        //   only what no link sees, are taken as they are weighed.
-        // - its pull by its pairs beyond the other scan's sampled edge
-        //   (`IcpResult::edge_bias`): a bias that its residuals do not
-        //   show, nor — where the pulls close the cycles — σ̂₀²; each
-        //   link's an independent error.
-        let f = if variance_factor == 1.0 { 1.0 } else { variance_factor.max(MIN_INDEPENDENT_SHARE) };
-        let noise: Vec<Matrix6<f64>> = used
+        // Each link's covariance: its noise by range, calibrated, times
+        // σ̂₀², and its edge pull ([`adjusted_covariance`]).
+        let (noise, bias): (Vec<Matrix6<f64>>, Vec<Vector6<f64>>) = used
             .iter()
             .map(|&k| {
                 let r = links[k].result.as_ref().expect("an accepted link has its match");
-                r.range_covariance.map_or_else(
-                    || r.information.pseudo_inverse(1e-12 * r.information.amax()).unwrap_or_else(|_| Matrix6::zeros()),
-                    |c| c * config.range_scale,
-                )
+                (link_noise(&r.information, r.range_covariance, config.range_scale), r.edge_bias)
             })
-            .collect();
-        let mut covariances = vec![None; steps.len()];
-        covariances.extend(used.iter().zip(&noise).map(|(&k, c)| {
-            let d = links[k].result.as_ref().map_or_else(Vector6::zeros, |r| r.edge_bias);
-            Some(c * f + d * d.transpose())
-        }));
-        let covariance = crate::graph::sandwich_covariance(&g.world_from_scan, &priors, &edges, &covariances)?;
-        let covariance = if f < 1.0 {
-            shared_noise(&g.world_from_scan, covariance, &edges[steps.len()..], &noise, f)
-        } else {
-            covariance
-        };
+            .unzip();
+        let covariance =
+            adjusted_covariance(&g.world_from_scan, &priors, &edges, steps.len(), &noise, &bias, variance_factor)?;
         // Scan 0's prior leaves it within 1e-20 m of its pose: put it there.
         let shift = poses[0] * g.world_from_scan[0].inverse();
         return Ok(LinkGraph {
@@ -688,8 +715,64 @@ fn solve(
     }
 }
 
+/// The covariances of `poses` adjusted to `edges` (the start's `steps`
+/// first, then the links) with `priors`, as the adjustment weighs the
+/// links by their information (the poses stay the links' own):
+/// - each link's noise: `noise` (its match's covariance by range from the
+///   scanner, [`crate::icp::IcpResult::range_covariance`] — far points are
+///   noisier, which one variance for all pairs hides — calibrated on the
+///   scans' halves and quarters, `LinkConfig::range_scale`; or, without
+///   it, its information's inverse: [`link_noise`]) times σ̂₀²
+///   (`variance_factor`): above 1 the links disagree more than their
+///   noise says; below 1 they agree better, and the share of their noise
+///   that is each scan's own, in every one of its links, closes the
+///   cycles ([`shared_noise`]). (σ̂₀² is exactly 1 without redundancy.)
+///   The start's steps, which hold only what no link sees, are taken as
+///   they are weighed.
+/// - its pull by its pairs beyond the other scan's sampled edge (`bias`,
+///   [`crate::icp::IcpResult::edge_bias`]): a bias that its residuals do
+///   not show, nor — where the pulls close the cycles — σ̂₀²; each link's
+///   an independent error.
+fn adjusted_covariance(
+    poses: &[Isometry3<f64>],
+    priors: &[Option<Prior>],
+    edges: &[Edge],
+    steps: usize,
+    noise: &[Matrix6<f64>],
+    bias: &[Vector6<f64>],
+    variance_factor: f64,
+) -> Result<Vec<Matrix6<f64>>> {
+    let f = noise_factor(variance_factor);
+    let mut covariances = vec![None; steps];
+    covariances.extend(noise.iter().zip(bias).map(|(c, d)| Some(c * f + d * d.transpose())));
+    let covariance = crate::graph::sandwich_covariance(poses, priors, edges, &covariances)?;
+    Ok(if f < 1.0 { shared_noise(poses, covariance, &edges[steps..], noise, f) } else { covariance })
+}
+
 /// The least share of the links' noise taken as independent ([`shared_noise`]).
 const MIN_INDEPENDENT_SHARE: f64 = 0.05;
+
+/// A match's noise as the link graph takes it, before the variance
+/// factor: its covariance by range (`range_covariance`) times the
+/// calibration's `range_scale`, or without it its `information`'s
+/// inverse (nothing along what it cannot see). Its frame is theirs.
+pub(crate) fn link_noise(
+    information: &Matrix6<f64>,
+    range_covariance: Option<Matrix6<f64>>,
+    range_scale: f64,
+) -> Matrix6<f64> {
+    range_covariance.map_or_else(
+        || information.pseudo_inverse(1e-12 * information.amax()).unwrap_or_else(|_| Matrix6::zeros()),
+        |c| c * range_scale,
+    )
+}
+
+/// The factor on the links' noise for a variance factor σ̂₀²: σ̂₀² itself,
+/// but never below [`MIN_INDEPENDENT_SHARE`] (below 1 the rest is the
+/// scans' own, [`shared_noise`]), and exactly 1 without redundancy.
+fn noise_factor(variance_factor: f64) -> f64 {
+    if variance_factor == 1.0 { 1.0 } else { variance_factor.max(MIN_INDEPENDENT_SHARE) }
+}
 
 /// The covariances of a graph whose links agree better than their
 /// covariances say (σ̂₀² = `independent_share` < 1). A link's error is
@@ -818,6 +901,52 @@ mod tests {
         assert!(!identifiable(&bridged, &[0, 1, 2, 3], 3));
     }
 
+    /// Four scans apart and turned, and the six links between them.
+    fn four_scans() -> Vec<Isometry3<f64>> {
+        (0..4)
+            .map(|i| {
+                let i = f64::from(i);
+                crate::se3::exp(&Vector6::new(0.1 * i, -0.05 * i, 0.3 * i, 2.0 * i, 0.5 * i, -0.2 * i))
+            })
+            .collect()
+    }
+
+    const ALL_PAIRS: [(usize, usize); 6] = [(0, 1), (0, 2), (1, 2), (0, 3), (1, 3), (2, 3)];
+
+    /// Links (target, source) between `truth`'s scans measured with exactly
+    /// the noise their information states: σ 1 mrad and 2–4 mm,
+    /// correlated, a little different link by link.
+    fn measured(rng: &mut rand_chacha::ChaCha8Rng, truth: &[Isometry3<f64>], pairs: &[(usize, usize)]) -> Vec<Edge> {
+        use rand_distr::{Distribution, StandardNormal};
+        pairs
+            .iter()
+            .enumerate()
+            .map(|(k, &(t, s))| {
+                let k = k as f64;
+                let mut l = Matrix6::from_diagonal(&Vector6::new(1e-3, 1e-3, 1e-3, 2e-3 + 4e-4 * k, 3e-3, 4e-3));
+                l[(4, 0)] = 1e-3;
+                l[(5, 1)] = -5e-4;
+                let z = Vector6::from_fn(|_, _| StandardNormal.sample(rng));
+                let exact = truth[t].inverse() * truth[s];
+                Edge {
+                    target: t,
+                    source: s,
+                    target_from_source: crate::se3::exp(&(l * z)) * exact,
+                    information: (l * l.transpose()).try_inverse().expect("positive definite"),
+                }
+            })
+            .collect()
+    }
+
+    /// [`adjust_matches`] of `edges` from `poses`, each link's noise its
+    /// information's inverse, no pull.
+    fn adjusted(poses: &[Isometry3<f64>], edges: &[Edge]) -> Adjusted {
+        let noise: Vec<Matrix6<f64>> =
+            edges.iter().map(|e| e.information.try_inverse().expect("positive definite")).collect();
+        adjust_matches(poses, edges, &noise, &vec![Vector6::zeros(); edges.len()], &LinkConfig::default())
+            .expect("adjusted")
+    }
+
     /// Links measured with exactly the noise their information states give
     /// a variance factor whose mean is 1 (Monte Carlo): the redundancy is
     /// the links' — counting the start's steps as observations halved it
@@ -826,53 +955,61 @@ mod tests {
     #[test]
     fn the_variance_factor_of_honest_links_is_one_on_average() {
         use rand::SeedableRng;
-        use rand_distr::{Distribution, StandardNormal};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(38);
-        let truth: Vec<Isometry3<f64>> = (0..4)
-            .map(|i| {
-                let i = f64::from(i);
-                crate::se3::exp(&Vector6::new(0.1 * i, -0.05 * i, 0.3 * i, 2.0 * i, 0.5 * i, -0.2 * i))
-            })
-            .collect();
-        // Each link's covariance: σ 1 mrad and 2–4 mm, correlated.
-        let sigma = |k: usize| {
-            let k = k as f64;
-            let mut l = nalgebra::Matrix6::from_diagonal(&Vector6::new(1e-3, 1e-3, 1e-3, 2e-3 + 4e-4 * k, 3e-3, 4e-3));
-            l[(4, 0)] = 1e-3;
-            l[(5, 1)] = -5e-4;
-            l
-        };
-        let pairs = [(0, 1), (0, 2), (1, 2), (0, 3), (1, 3), (2, 3)];
+        let truth = four_scans();
+        let pairs = ALL_PAIRS;
         assert_eq!(link_redundancy(4, pairs.iter().copied()), 18);
         assert_eq!(link_redundancy(4, pairs[..3].iter().copied()), 6);
         assert_eq!(link_redundancy(5, pairs[..2].iter().chain(&[(3, 4)]).copied()), 0);
-        let config = LinkConfig::default();
-        let measured = |rng: &mut rand_chacha::ChaCha8Rng, pairs: &[(usize, usize)]| -> Vec<Edge> {
-            pairs
-                .iter()
-                .enumerate()
-                .map(|(k, &(t, s))| {
-                    let l = sigma(k);
-                    let z = Vector6::from_fn(|_, _| StandardNormal.sample(rng));
-                    let exact = truth[t].inverse() * truth[s];
-                    Edge {
-                        target: t,
-                        source: s,
-                        target_from_source: crate::se3::exp(&(l * z)) * exact,
-                        information: (l * l.transpose()).try_inverse().expect("positive definite"),
-                    }
-                })
-                .collect()
-        };
+        let factor = |edges: &[Edge]| adjusted(&truth, edges).variance_factor;
         let trials = 400;
-        let mean = (0..trials)
-            .map(|_| variance_factor(&truth, &measured(&mut rng, &pairs), &config).expect("adjusted"))
-            .sum::<f64>()
-            / f64::from(trials);
+        let mean = (0..trials).map(|_| factor(&measured(&mut rng, &truth, &pairs))).sum::<f64>() / f64::from(trials);
         // σ of the mean: √(2/18/400) = 0.017.
         assert!((mean - 1.0).abs() < 0.06, "mean variance factor {mean}");
         let tree = [(0, 1), (1, 2), (1, 3)];
-        let f = variance_factor(&truth, &measured(&mut rng, &tree), &config).expect("adjusted");
+        let f = factor(&measured(&mut rng, &truth, &tree));
         assert_eq!(f, 1.0);
+    }
+
+    /// A chain (each scan placed on the one before, as pairwise matching
+    /// places it) does not close the links' cycles: its poses are the
+    /// adjustment of all six links plus their departure from it, and over
+    /// 2,000 draws the chain's errors against the adjustment's covariance
+    /// plus the departure's ξξᵀ are as honest as the adjustment's own
+    /// errors against its covariance (mean NEES 5.0 and 4.8 — both a
+    /// little pessimistic, as each draw's σ̂₀² below 1 is read as the
+    /// scans' shared noise, which these links do not have); against the
+    /// adjustment's covariance alone the chain is 3× optimistic (20).
+    #[test]
+    fn a_chain_is_the_adjustment_plus_its_departure() {
+        use rand::SeedableRng;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(39);
+        let truth = four_scans();
+        let draws = 2000;
+        let (mut chained, mut own, mut alone) = (0.0, 0.0, 0.0);
+        let nees =
+            |xi: &Vector6<f64>, c: &Matrix6<f64>| (xi.transpose() * c.try_inverse().expect("invertible") * xi)[(0, 0)];
+        for _ in 0..draws {
+            let edges = measured(&mut rng, &truth, &ALL_PAIRS);
+            // (0, 1), (1, 2), (2, 3): the chain's links.
+            let mut chain = vec![truth[0]];
+            for k in [0, 2, 5] {
+                chain.push(chain[edges[k].target] * edges[k].target_from_source);
+            }
+            let a = adjusted(&chain, &edges);
+            for s in 1..4 {
+                let d = a.departure[s];
+                let adjustment = a.covariance[s] - d * d.transpose();
+                let at = crate::se3::exp(&-d) * chain[s];
+                chained += nees(&left_difference(&chain[s], &truth[s]), &a.covariance[s]);
+                own += nees(&left_difference(&at, &truth[s]), &adjustment);
+                alone += nees(&left_difference(&chain[s], &truth[s]), &adjustment);
+            }
+        }
+        let n = (3 * draws) as f64;
+        let (chained, own, alone) = (chained / n, own / n, alone / n);
+        assert!((chained - own).abs() < 0.4, "the chain's mean NEES {chained}, the adjustment's {own}");
+        assert!((own - 6.0).abs() < 1.2, "the adjustment's mean NEES {own}");
+        assert!(alone > own + 2.0, "against the adjustment's covariance alone: {alone} (its own {own})");
     }
 }

@@ -31,7 +31,7 @@
 //! right scans were named "not trusted", exit 1. The axis is weak, not
 //! blind: its eigenvalue is above the blind-direction threshold.)
 
-use nalgebra::{Isometry3, Point3};
+use nalgebra::{Isometry3, Matrix6, Point3, Vector6};
 use rayon::prelude::*;
 
 use crate::error::Result;
@@ -118,9 +118,19 @@ pub struct PairCheck {
     /// The match as a relative measurement (its `target_from_source` and
     /// information), when it is one a link graph would use: it converged
     /// with more than `min_pairs` correspondences. The set's variance
-    /// factor in the modes without a link graph is theirs
-    /// ([`crate::links::variance_factor`]).
+    /// factor and covariances in the modes without a link graph are
+    /// theirs ([`crate::links::adjust_matches`]).
     pub edge: Option<Edge>,
+    /// The edge's noise as the link graph takes a link's, before the
+    /// variance factor: its covariance by range, calibrated, or its
+    /// information's inverse (target frame; [`crate::links`]). The
+    /// covariances of the modes without a link graph rest on it
+    /// ([`crate::links::adjust_matches`]).
+    pub edge_covariance: Option<Matrix6<f64>>,
+    /// How the pairs beyond the target's sampled edge pull the match
+    /// ([`crate::icp::IcpResult::edge_bias`], target frame): a bias its
+    /// residuals do not show, added to its noise as δδᵀ.
+    pub edge_bias: Vector6<f64>,
 }
 
 impl PairCheck {
@@ -133,7 +143,7 @@ impl PairCheck {
 
 /// Matches every pair of `scans` that overlaps at `poses` (their final
 /// `world_from_scan`) once more from those poses with `config` (the finest
-/// stage's), and judges each: consistent when its match moved the points
+/// stage's, both ways or one as it says), and judges each: consistent when its match moved the points
 /// by at most `tolerance_m` (the finest voxel), or along what it sees well
 /// ([`SEEN_RATIO`]) by at most [`MAX_RELATIVE_MOTION`] of their radius,
 /// in all by at most [`MAX_WEAK_MOTION`] of it, turned them by at most
@@ -151,12 +161,25 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
     check(scans, poses, &config.multiview)?;
     crate::FusionError::require_positive("verification tolerance (m)", tolerance_m)?;
     let prepared = prepare(scans, &config.multiview)?;
-    // One way: the check judges motion at the level of MAX_RELATIVE_MOTION
-    // and MAX_TURN_RAD, where a one-way match's sub-millimetre lean does
-    // not count, its residual compares with the one-way noise floor, and
-    // it costs half (the corridor's 77 scans: 22 s both ways, 15 s one).
-    let one_way = LinkConfig { both_ways: false, ..*config };
-    let links = pair_links(&prepared, poses, &one_way, &mut |_, _| ());
+    // Both ways or one as `config` says: the modes without a link graph
+    // match both ways, as graph mode's links are, for their covariances
+    // rest on these matches ([`crate::links::adjust_matches`]: one way,
+    // the matches' sub-millimetre lean was the strategies' own, and their
+    // covariances 1.3–1.5× optimistic); graph mode one way, where the
+    // check judges motion at the level of MAX_RELATIVE_MOTION and
+    // MAX_TURN_RAD, a lean does not count, and it costs half (the
+    // corridor's 77 scans: 22 s both ways, 15 s one).
+    //
+    // The match reports its noise by range and its pull beyond the edge
+    // (which change nothing of it) for the covariances built on it.
+    let matching = LinkConfig {
+        multiview: crate::multiview::MultiviewConfig {
+            icp: crate::icp::IcpConfig { edge_bias: true, range_noise: true, ..config.multiview.icp },
+            ..config.multiview
+        },
+        ..*config
+    };
+    let links = pair_links(&prepared, poses, &matching, &mut |_, _| ());
     let shape: Vec<(Point3<f64>, f64)> = prepared.iter().map(|p| centroid_and_lever_arm(&p.source)).collect();
     let floors: Vec<f64> = scans.par_iter().map(|s| noise_floor(s.as_ref(), config)).collect();
     let views: Vec<Option<View>> = prepared
@@ -223,6 +246,12 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
                     target_from_source: r.target_from_source,
                     information: r.information,
                 }),
+                edge_covariance: l
+                    .result
+                    .as_ref()
+                    .filter(|_| l.rejected.is_none())
+                    .map(|r| crate::links::link_noise(&r.information, r.range_covariance, config.range_scale)),
+                edge_bias: l.result.as_ref().map_or_else(Vector6::zeros, |r| r.edge_bias),
             };
             check.consistent &= !check.violates_free_space();
             check
@@ -332,6 +361,8 @@ mod tests {
             consistent,
             free_space: None,
             edge: None,
+            edge_covariance: None,
+            edge_bias: Vector6::zeros(),
         }
     }
 

@@ -48,17 +48,21 @@ fn the_three_3dtk_scans_land_on_the_references() {
         }
         assert!(r.unobservable.iter().all(Vec::is_empty), "{mode:?}: {:?}", r.unobservable);
         // The covariances carry the set's variance factor (its three links
-        // miss their cycle: σ̂₀² in the hundreds), so they are of the size
-        // of the errors against the references (up to 0.35° / 3 cm in graph
-        // mode, 1.2° / 5 cm in the others; measured σ 0.55–0.98°, 4–8 cm),
-        // not the matches' own arc seconds.
+        // miss their cycle: σ̂₀² in the hundreds) and, in the single-strategy
+        // modes, the poses' departure from the adjustment of their pairs,
+        // so they are of the size of the errors against the references (up
+        // to 0.35° / 3 cm in graph mode, 1.2° / 5 cm in the others, the
+        // second scan 1.05° / 3.9 cm off in simultaneous mode; measured σ
+        // 0.51–0.56° / 4–5 cm in graph mode, 0.97–1.23° / 7–11 cm in
+        // simultaneous — the second scan's 1° in it — about the first
+        // scan's origin), not the matches' own arc seconds.
         for (i, c) in r.covariance.iter().enumerate().skip(1) {
             let (rot, pos) = ((c[(0, 0)] + c[(1, 1)] + c[(2, 2)]).sqrt(), (c[(3, 3)] + c[(4, 4)] + c[(5, 5)]).sqrt());
             assert!(
                 rot.is_finite() && rot > 0.05f64.to_radians() && rot < 1.5f64.to_radians(),
                 "{mode:?} scan {i}: σ {rot} rad"
             );
-            assert!(pos > 0.002 && pos < 0.1, "{mode:?} scan {i}: σ {pos} m");
+            assert!(pos > 0.002 && pos < 0.15, "{mode:?} scan {i}: σ {pos} m");
         }
         if mode == Mode::Graph {
             assert_eq!(r.links.len(), 3, "every pair overlaps: {:?}", r.links.len());

@@ -1412,9 +1412,13 @@ fn pairwise_wedges_dragged_together_land_by_the_disagreeing_restart() {
 /// Every further restart from the starts (three: without the first two
 /// stages, three, four) lands where the restart did — the schedule's is
 /// the one only its coarse first stage reaches: `restart.corroborated`,
-/// nothing named, exit 0 (session 35).
+/// nothing named, exit 0 (session 35). Since the verification matches
+/// its pairs both ways in the modes without a link graph (session 37,
+/// for the covariances that rest on them), it names the schedule's
+/// part3 itself: the restart is kept as the one nothing names, the
+/// further restarts still land where it did, exit 0.
 #[test]
-fn registrations_the_data_barely_choose_between_are_settled_by_the_further_restarts() {
+fn registrations_the_data_barely_choose_between_are_settled_by_the_verification() {
     let dir = tempfile::tempdir().expect("temp dir");
     let truths: [[[f64; 4]; 3]; 3] = [
         [
@@ -1456,15 +1460,10 @@ fn registrations_the_data_barely_choose_between_are_settled_by_the_further_resta
     assert_eq!(r.code, 0, "{}\n{}", r.stdout, r.stderr);
     let v = v.expect("JSON");
     let restart = &v["restart"];
-    let undecided: Vec<u64> =
-        restart["undecided"].as_array().expect("undecided").iter().map(|u| u["scan"].as_u64().expect("scan")).collect();
-    assert_eq!(undecided, [1, 2, 3], "{restart}");
-    for u in restart["undecided"].as_array().expect("undecided") {
-        // (Measured 0.92–1.00 m, 5.86–5.87°.)
-        let (m, deg) = (u["apart_m"].as_f64().expect("m"), u["apart_deg"].as_f64().expect("deg"));
-        assert!(m > 0.5 && deg > 5.0, "{u}");
-    }
-    assert_eq!(restart["corroborated"], true, "{restart}");
+    assert_eq!(restart["trigger"], "disagreeing", "{restart}");
+    assert_eq!(restart["schedule_untrusted"], serde_json::json!([3]), "{restart}");
+    assert_eq!(restart["restart_untrusted"], serde_json::json!([]), "{restart}");
+    assert_eq!(restart["undecided"], serde_json::json!([]), "{restart}");
     let further = restart["further"].as_array().expect("further restarts");
     assert_eq!(further.len(), 3, "{restart}");
     for f in further {
@@ -1487,8 +1486,7 @@ fn registrations_the_data_barely_choose_between_are_settled_by_the_further_resta
     let text = run_text(&inputs, &dir.path().join("text"));
     assert_eq!(text.code, 0, "{}", text.stderr);
     assert!(
-        text.stdout.contains("the schedule's and the restart's registrations place part1 (")
-            && text.stdout.contains("every further restart from the starts (3) landed where the one kept does")
+        text.stdout.contains("the verification names none there against part3 at the schedule's poses: its poses kept")
             && !text.stdout.contains("not trusted"),
         "{}",
         text.stdout
@@ -2003,7 +2001,12 @@ fn a_links_blind_directions_are_in_the_worlds_axes_in_every_mode() {
             .iter()
             .filter(|l| l["degenerate_directions"].as_array().is_some_and(|d| !d.is_empty()))
             .collect();
-        assert!(!blind.is_empty(), "{mode}: no link is blind in a pipe: {}", v["links"]);
+        // (Simultaneous mode's schedule, its queue abandoned at the cap,
+        // is named by the verification's matches both ways, and a further
+        // restart kept whose metascan matches, each against up to eight
+        // partners along the pipe, see it all — one creeping along the
+        // axis at its cap — so none may be blind there.)
+        assert!(mode == "simultaneous" || !blind.is_empty(), "{mode}: no link is blind in a pipe: {}", v["links"]);
         let c = |d: &Value, i: usize| d[i].as_f64().expect("number").abs();
         for l in blind {
             let d = l["degenerate_directions"].as_array().expect("directions");
