@@ -24,9 +24,10 @@ pub struct MatchReport {
     /// link graph's in graph mode; in the other modes that of the
     /// verification's matches (`checks`) adjusted together from the final
     /// poses. The redundancy is the links' own: 6 per link less 6 per scan
-    /// they place. Above 1 it scales the matches' information in every
-    /// covariance (not the start's steps, which hold what no match sees).
-    /// In the other modes null when no pair was verified (a single scan).
+    /// they place. It scales the matches' noise in every covariance (not
+    /// the start's steps, which hold what no match sees); below 1 the rest
+    /// of it is taken as each scan's own, shared by its links. In the other
+    /// modes null when no pair was verified (a single scan).
     pub variance_factor: Option<f64>,
     /// The covariance model calibrated on the scans themselves — each
     /// scan's random halves, and two quarters, matched under a known turn,
@@ -386,8 +387,10 @@ pub struct ScanReport {
     /// perturbation (as `register`'s) in the world's axes about the first
     /// scan's origin; zero for the first scan, which holds the frame. In
     /// graph mode it carries the links' noise by range from the scanner
-    /// and each link's pull by its pairs past the other scan's edge
-    /// (docs/match.md).
+    /// and each link's pull by its pairs past the other scan's edge; in
+    /// the other modes it is that of the verification's matches
+    /// (`checks`, both ways) adjusted together in the same model, plus the
+    /// pose's departure from that adjustment (docs/match.md).
     pub covariance: [[f64; 6]; 6],
     /// Directions the matches cannot see (unit vectors in the order and
     /// frame of the covariance): held where the start put them, their σ
