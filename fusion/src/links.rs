@@ -449,15 +449,16 @@ pub struct Adjusted {
     /// pose ≈ exp(ξ)·adjusted (world frame; zero for scan 0, the frame).
     pub departure: Vec<Vector6<f64>>,
     /// Each pose's covariance (ξ = (ω, v), left, world frame; zero for
-    /// scan 0): the adjustment's, as the link graph's
-    /// ([`adjusted_covariance`]), plus its departure ξξᵀ.
+    /// scan 0): the adjustment's in the link graph's model ([`adjust`]'s
+    /// covariances), plus its departure ξξᵀ.
     pub covariance: Vec<Matrix6<f64>>,
 }
 
 /// `edges` — relative measurements between the scans at `poses`, e.g. the
 /// verification's matches ([`crate::verify::PairCheck::edge`]), with each
-/// one's `noise` before the variance factor ([`link_noise`]) and edge pull
-/// `bias` — adjusted from `poses` as [`adjust`] adjusts its links, the
+/// one's `noise` before the variance factor
+/// ([`crate::verify::PairCheck::edge_covariance`]) and edge pull `bias` —
+/// adjusted from `poses` as [`adjust`] adjusts its links, the
 /// poses' own increments holding what no edge sees, whichever strategy
 /// placed the scans. A strategy that places each scan against partners
 /// held stops short of where all its pairs agree (simultaneous matching

@@ -111,7 +111,7 @@ pub struct SetResult {
     /// link graph's model) plus the poses' departure from that adjustment
     /// ([`crate::links::adjust_matches`]) — before the verification, or
     /// without a pair to verify, the last match's with its partners'
-    /// ([`placed_covariances`]); zero for the first scan.
+    /// (their mean for a metascan); zero for the first scan.
     pub covariance: Vec<Matrix6<f64>>,
     /// Each scan's directions the matches do not see (unit ξ, world frame).
     pub unobservable: Vec<Vec<Vector6<f64>>>,
@@ -125,8 +125,8 @@ pub struct SetResult {
     /// The set's variance factor σ̂₀²: the link graph's, or in the other
     /// modes that of the verification's matches adjusted together from the
     /// final poses ([`crate::links::adjust_matches`]); it scales the
-    /// covariances (below 1 as the scans' shared noise). `None` before the verification (other
-    /// modes) or without a pair to verify.
+    /// covariances (below 1 as the scans' shared noise). `None` before
+    /// the verification (other modes) or without a pair to verify.
     pub variance_factor: Option<f64>,
     /// Each stage of the schedule: its matches and time.
     pub stages: Vec<StageRun>,
@@ -461,8 +461,10 @@ fn registered<S: AsRef<[Point3<f32>]> + Sync>(
 /// strategy places each scan against partners held and stops short of
 /// where all its pairs agree, and its matches lean one way. With each
 /// scan's last match and its partners' covariances (averaged) instead,
-/// the mean NEES of these modes on real scans' parts was up to 9.3 on
-/// shares and 12.6 on wedges (6 when honest); so, 3.9–6.3 (BENCHMARKS).
+/// the mean NEES of these modes on real scans' parts was up to 10.7 on
+/// shares and 12.6 on wedges (6 when honest; 252 for a simultaneous
+/// compromise 0.68° off); so, 2.6–8.3 over five draws, as graph mode's
+/// 2.8–8.7 (BENCHMARKS).
 fn verified<S: AsRef<[Point3<f32>]> + Sync>(scans: &[S], mut r: SetResult, config: &SetConfig) -> Result<SetResult> {
     let started = std::time::Instant::now();
     r.checks = verify_set(scans, &r.world_from_scan, config)?;

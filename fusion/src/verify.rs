@@ -143,8 +143,9 @@ impl PairCheck {
 
 /// Matches every pair of `scans` that overlaps at `poses` (their final
 /// `world_from_scan`) once more from those poses with `config` (the finest
-/// stage's, both ways or one as it says), and judges each: consistent when its match moved the points
-/// by at most `tolerance_m` (the finest voxel), or along what it sees well
+/// stage's, both ways or one as it says), and judges each: consistent
+/// when its match moved the points by at most `tolerance_m` (the finest
+/// voxel), or along what it sees well
 /// ([`SEEN_RATIO`]) by at most [`MAX_RELATIVE_MOTION`] of their radius,
 /// in all by at most [`MAX_WEAK_MOTION`] of it, turned them by at most
 /// [`MAX_TURN_RAD`] and lowered its residual at most
