@@ -113,6 +113,13 @@ pub struct SetResult {
     /// without a pair to verify, the last match's with its partners'
     /// (their mean for a metascan); zero for the first scan.
     pub covariance: Vec<Matrix6<f64>>,
+    /// In the modes without a link graph, each pose's departure from the
+    /// adjustment of the verification's matches (ξ = (ω, v), world frame,
+    /// pose ≈ exp(ξ)·adjusted; zero for the first scan): how far the
+    /// strategy stopped from where all its pairs agree, and part of
+    /// [`covariance`](Self::covariance) (ξξᵀ). Empty in graph mode, whose
+    /// poses are the adjustment, and without a pair verified.
+    pub departure: Vec<Vector6<f64>>,
     /// Each scan's directions the matches do not see (unit ξ, world frame).
     pub unobservable: Vec<Vec<Vector6<f64>>>,
     /// The final stage's matches: the link graph's pairs, or each scan's
@@ -480,6 +487,7 @@ fn verified<S: AsRef<[Point3<f32>]> + Sync>(scans: &[S], mut r: SetResult, confi
         let a = crate::links::adjust_matches(&r.world_from_scan, &edges, &noise, &bias, &config.link)?;
         r.variance_factor = Some(a.variance_factor);
         r.covariance = a.covariance;
+        r.departure = a.departure;
     }
     r.check_seconds = started.elapsed().as_secs_f64();
     Ok(r)
@@ -843,6 +851,7 @@ fn into_world(mut r: SetResult, world_from_first: &Isometry3<f64>, graph: bool) 
     let ad = adjoint(&Isometry3::from_parts(nalgebra::Translation3::identity(), world_from_first.rotation));
     r.world_from_scan.iter_mut().for_each(|p| *p = world_from_first * *p);
     r.covariance.iter_mut().for_each(|c| *c = ad * *c * ad.transpose());
+    r.departure.iter_mut().for_each(|d| *d = ad * *d);
     r.unobservable.iter_mut().flatten().for_each(|d| *d = (ad * *d).normalize());
     if !graph {
         for l in &mut r.links {
@@ -965,6 +974,7 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
     Ok(SetResult {
         world_from_scan: poses,
         covariance,
+        departure: Vec::new(),
         unobservable: last
             .last_match
             .iter()
@@ -1051,6 +1061,7 @@ fn from_graph(g: LinkGraph, matches: usize, settled: bool, stages: Vec<StageRun>
     SetResult {
         world_from_scan: g.world_from_scan,
         covariance: g.covariance,
+        departure: Vec::new(),
         unobservable: g.unobservable,
         links: g
             .links
@@ -1161,6 +1172,7 @@ mod tests {
         let result = |corroborated: bool| SetResult {
             world_from_scan: vec![Isometry3::identity(); 4],
             covariance: vec![Matrix6::identity(); 4],
+            departure: Vec::new(),
             unobservable: vec![Vec::new(); 4],
             links: Vec::new(),
             matches: 0,

@@ -64,6 +64,19 @@ fn the_three_3dtk_scans_land_on_the_references() {
             );
             assert!(pos > 0.002 && pos < 0.15, "{mode:?} scan {i}: σ {pos} m");
         }
+        // Where the strategy stopped from the adjustment of its pairs:
+        // simultaneous mode's 1.05° miss on 0←1 is mostly that (measured
+        // 0.83°; graph mode, which is the adjustment, misses by 0.21°).
+        if mode == Mode::Graph {
+            assert!(r.departure.is_empty(), "{:?}", r.departure);
+        } else {
+            assert_eq!(r.departure.len(), 3, "{mode:?}");
+            assert_eq!(r.departure[0], nalgebra::Vector6::zeros(), "{mode:?}: the first scan holds the frame");
+        }
+        if mode == Mode::Simultaneous {
+            let turn = r.departure[1].fixed_rows::<3>(0).norm().to_degrees();
+            assert!(turn > 0.5 && turn < 1.2, "simultaneous scan 1 departs {turn}°");
+        }
         if mode == Mode::Graph {
             assert_eq!(r.links.len(), 3, "every pair overlaps: {:?}", r.links.len());
             assert!(

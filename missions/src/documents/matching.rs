@@ -392,6 +392,13 @@ pub struct ScanReport {
     /// (`checks`, both ways) adjusted together in the same model, plus the
     /// pose's departure from that adjustment (docs/match.md).
     pub covariance: [[f64; 6]; 6],
+    /// In the modes without a link graph: how far this pose is from where
+    /// the verification's matches (`checks`) agree — their adjustment —,
+    /// ξ in the order and frame of the covariance (pose ≈ exp(ξ)·adjusted;
+    /// zeros for the first scan); part of the covariance (ξξᵀ). Graph mode
+    /// would put the scan about there. Null in graph mode (its poses are
+    /// the adjustment) or when no pair was verified.
+    pub departure: Option<[f64; 6]>,
     /// Directions the matches cannot see (unit vectors in the order and
     /// frame of the covariance): held where the start put them, their σ
     /// the start's.

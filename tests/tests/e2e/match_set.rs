@@ -96,6 +96,8 @@ fn the_3dtk_set_lands_on_the_references_from_its_odometry() {
     for s in scans {
         assert!(s["degenerate_directions"].as_array().expect("list").is_empty(), "{s}");
         assert_eq!(s["covariance"].as_array().expect("6×6").len(), 6);
+        // Graph mode's poses are the adjustment: no departure from it.
+        assert!(s["departure"].is_null(), "{s}");
     }
     // Verified: every pair matched again from the final poses agrees
     // (within 2.3 % of the scans' radius; issue 38).
@@ -1397,6 +1399,19 @@ fn pairwise_wedges_dragged_together_land_by_the_disagreeing_restart() {
     // verification's: its matches agree.
     let factor = v["variance_factor"].as_f64().expect("a variance factor in pairwise mode");
     assert!(factor.is_finite() && factor > 0.0, "{factor}");
+    // Each pose's departure from where the verification's matches agree:
+    // small for a set that landed, and part of its covariance (ξξᵀ).
+    for (k, s) in v["scans"].as_array().expect("scans").iter().enumerate() {
+        let d: Vec<f64> =
+            s["departure"].as_array().expect("a departure").iter().map(|x| x.as_f64().expect("number")).collect();
+        let c = |i: usize| s["covariance"][i][i].as_f64().expect("number");
+        let (turn, shift) = (d[..3].iter().map(|x| x * x).sum::<f64>(), d[3..].iter().map(|x| x * x).sum::<f64>());
+        if k == 0 {
+            assert_eq!(turn + shift, 0.0, "the first scan holds the frame: {s}");
+        }
+        assert!(turn.sqrt() < 0.15f64.to_radians() && shift.sqrt() < 0.02, "part {k}: {d:?}");
+        assert!(turn <= c(0) + c(1) + c(2) && shift <= c(3) + c(4) + c(5), "part {k}: {d:?} beyond its covariance");
+    }
 }
 
 /// Issue 38, no silent failure when two registrations disagree and the

@@ -35,6 +35,7 @@ pub(super) fn report(
                     number: numbers[i],
                     world_from_scan: rows(&m),
                     covariance: rows(&c),
+                    departure: r.departure.get(i).map(|d| std::array::from_fn(|k| d[k])),
                     degenerate_directions: directions(&r.unobservable[i]),
                 }
             })
