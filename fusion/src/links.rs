@@ -902,7 +902,7 @@ mod tests {
         assert!(!identifiable(&bridged, &[0, 1, 2, 3], 3));
     }
 
-    /// Four scans apart and turned, and the six links between them.
+    /// Four scans apart and turned.
     fn four_scans() -> Vec<Isometry3<f64>> {
         (0..4)
             .map(|i| {
@@ -912,6 +912,7 @@ mod tests {
             .collect()
     }
 
+    /// The six links between four scans, (target, source).
     const ALL_PAIRS: [(usize, usize); 6] = [(0, 1), (0, 2), (1, 2), (0, 3), (1, 3), (2, 3)];
 
     /// Links (target, source) between `truth`'s scans measured with exactly

@@ -970,7 +970,7 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
             })
         })
         .collect();
-    let covariance = placed_covariances(n, &links, &config.link.step_information(), 1.0, config.link.range_scale);
+    let covariance = placed_covariances(n, &links, &config.link.step_information(), config.link.range_scale);
     Ok(SetResult {
         world_from_scan: poses,
         covariance,
@@ -997,11 +997,12 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
 /// the modes without a link graph), plus its partners' — until the
 /// verification gives the pairs' own ([`verified`]). A match's own is
 /// graph mode's link model ([`crate::links`]): its covariance by range
-/// (`range_scale`, the calibration's factor on it) times `factor` (a
-/// variance factor, 1 for none) plus its edges' pull δδᵀ, and along what
-/// it cannot see the start's step (`step`, an information); without the
-/// covariance by range (point-to-point), its information scaled down by
-/// `factor` and held by `step` where it sees nothing. A
+/// (`range_scale`, the calibration's factor on it) plus its edges' pull
+/// δδᵀ, and along what it cannot see the start's step (`step`, an
+/// information); without the covariance by range (point-to-point), its
+/// information held by `step` where it sees nothing. (No variance factor:
+/// the verification's, which judges these matches, replaces these
+/// covariances whole.) A
 /// scan is placed on its partners, which are uncertain themselves: to
 /// first order (independent errors, world-frame left perturbations) a
 /// partner's error moves the scan with it, so its covariance adds to the
@@ -1011,28 +1012,17 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
 /// optimistic on chains of partial overlaps (mean NEES 86–1,100 on
 /// wedges); with the link model, calibrated, their mean NEES on real
 /// scans' parts came within 1.6× of 6 (BENCHMARKS).
-fn placed_covariances(
-    n: usize,
-    links: &[SetLink],
-    step: &Matrix6<f64>,
-    factor: f64,
-    range_scale: f64,
-) -> Vec<Matrix6<f64>> {
+fn placed_covariances(n: usize, links: &[SetLink], step: &Matrix6<f64>, range_scale: f64) -> Vec<Matrix6<f64>> {
     let mut covariance = vec![Matrix6::zeros(); n];
-    // (I/f + held)⁻¹ = f·(I + f·held)⁻¹ along the directions the match
-    // sees and the start's step σ along those it cannot.
-    let held = step * factor;
     for l in links {
         if let Some(m) = &l.result {
             covariance[l.source] = match m.range_covariance {
                 // Nothing of it along the blind directions (projected
                 // out): there the start's step's variance.
-                Some(c) => {
-                    c * (range_scale * factor)
-                        + step_within(&m.unobservable, step)
-                        + m.edge_bias * m.edge_bias.transpose()
-                }
-                None => m.covariance_held(&held) * factor,
+                Some(c) => c * range_scale + step_within(&m.unobservable, step) + m.edge_bias * m.edge_bias.transpose(),
+                // The information's inverse along what it sees, the start's
+                // step σ along what it cannot.
+                None => m.covariance_held(step),
             };
         }
     }

@@ -205,6 +205,8 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
         .map(|l| {
             let (c, radius) = shape[l.source];
             let free_space = free_space(l.target, l.source);
+            // The match as a link graph would use it: converged, enough pairs.
+            let used = l.result.as_ref().filter(|_| l.rejected.is_none());
             let at = poses[l.target].inverse() * poses[l.source];
             let motion = l.result.as_ref().map(|r| {
                 // δ: what the match did to the final relative pose, in the
@@ -241,16 +243,13 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
                             && l.result.as_ref().is_some_and(|r| r.start_rmse_m <= MAX_RESIDUAL_GAIN * r.rmse_m))
                 }),
                 free_space,
-                edge: l.result.as_ref().filter(|_| l.rejected.is_none()).map(|r| Edge {
+                edge: used.map(|r| Edge {
                     target: l.target,
                     source: l.source,
                     target_from_source: r.target_from_source,
                     information: r.information,
                 }),
-                edge_covariance: l
-                    .result
-                    .as_ref()
-                    .filter(|_| l.rejected.is_none())
+                edge_covariance: used
                     .map(|r| crate::links::link_noise(&r.information, r.range_covariance, config.range_scale)),
                 edge_bias: l.result.as_ref().map_or_else(Vector6::zeros, |r| r.edge_bias),
             };
