@@ -21,9 +21,10 @@ Prints one line per scenario and mode: the mean NEES and its 95 %
 interval for the number of errors (χ² with 6·n degrees of freedom, / n),
 the median, the RMS errors, and the parts off by more than 1° or 0.1 m
 while the exit was 0 (a silent failure). Environment: NEES_ONLY=NAME runs one
-source, NEES_VERBOSE=1 prints every part, NEES_CHECKS=1 every verified
-pair (its RMS residual against the noise floor, and its true error),
-NEES_KEEP=DIR keeps each trial's inputs, NEES_PARTS=K deals the shares
+source, NEES_CUT=shares or NEES_CUT=wedges one way of cutting (what is
+not run is still drawn: every run of a seed has the same parts), NEES_VERBOSE=1 prints every part,
+NEES_CHECKS=1 every verified pair (its RMS residual against the noise floor, and its true error),
+NEES_AXES=1 the mean square error over the mean variance along each world axis, NEES_KEEP=DIR keeps each trial's inputs, NEES_PARTS=K deals the shares
 into K parts (4; 2 is one link alone), NEES_ARGS="--only-covered" adds
 arguments to every `match`, NEES_VIEWPOINTS=1 writes the parts as PCD with
 the scanner's position (VIEWPOINT) so that the verification tests free
@@ -145,10 +146,12 @@ def main():
     modes = sys.argv[3].split(",") if len(sys.argv) > 3 else ["graph", "pairwise", "incremental", "simultaneous"]
     rng = np.random.default_rng(int(os.environ.get("NEES_SEED", "7")))
     scenarios = []
-    only = os.environ.get("NEES_ONLY")
+
+    def skipped(label):
+        source, cut = label.split()
+        return os.environ.get("NEES_ONLY", source) not in source or os.environ.get("NEES_CUT", cut) != cut
+
     for name, xyz, up in sources():
-        if only and only not in name:
-            continue
         k = int(os.environ.get("NEES_PARTS", "4"))
         scenarios.append((f"{name} shares", lambda rng, xyz=xyz, k=k: shares(rng, xyz, k), up))
         if name != "3dtk-scan001":  # its scans leave out the quarter behind the robot
@@ -162,6 +165,9 @@ def main():
                 parts = cut(rng)
                 truths = [np.eye(4)] + [random_pose(rng, up, 45, 2, 0.5) for _ in parts[1:]]
                 starts = [np.eye(4)] + [random_pose(rng, up, 2, 2, 0.1 / math.sqrt(3)) @ t for t in truths[1:]]
+                # Another source or cut is drawn and not run: the draws stay the same.
+                if skipped(label):
+                    continue
                 for mode in modes:
                     code, v = run(tool, d, parts, truths, starts, mode)
                     keep = os.environ.get("NEES_KEEP")
@@ -196,6 +202,8 @@ def main():
                                   f"{np.linalg.norm(e[3:]) * 1e3:.1f} mm, NEES {e @ np.linalg.solve(c, e):.1f}, "
                                   f"untrusted {i in v.get('untrusted', [])}")
             for mode in modes:
+                if skipped(label):
+                    continue
                 rows = [r for r in results[mode] if not r[2]]
                 if not rows:
                     print(f"{label:28} {mode:12} no trusted result; exits {exits[mode]}")
@@ -214,6 +222,10 @@ def main():
                       f"error {deg:.4f}° {mm:.2f} mm, σ {sdeg:.4f}° {smm:.2f} mm; untrusted "
                       f"{sum(r[2] for r in results[mode])}, exits {sorted(set(exits[mode]))}, "
                       f"off > 1° or 0.1 m with exit 0: {silent[mode]}")
+                if os.environ.get("NEES_AXES"):
+                    # Per axis of the world (ω x y z, v x y z): the errors' mean square over the reported variance.
+                    ratio = [np.mean([e[k] ** 2 for e, _, _ in rows]) / np.mean([c[k, k] for _, c, _ in rows]) for k in range(6)]
+                    print(f"{'':41} per axis, error² / variance: " + " ".join(f"{r:.2f}" for r in ratio))
                 sys.stdout.flush()
 
 

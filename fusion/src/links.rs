@@ -37,7 +37,8 @@
 //! - **Covariances.** The adjustment weighs each link by its information;
 //!   each scan's covariance is that adjustment's with each link's own
 //!   covariance ([`crate::graph::sandwich_covariance`]): its match's with
-//!   the residuals' variance by range from the scanner, times σ̂₀², plus
+//!   each pair's variance its own squared residual (the covariance by
+//!   pair), times σ̂₀², plus
 //!   its pull by the pairs past the other scan's sampled edge (a bias its
 //!   residuals do not show) — and, when σ̂₀² is below 1, the scans'
 //!   shared noise (`shared_noise`).
@@ -82,7 +83,7 @@ pub struct LinkConfig {
     /// off by about 0.4 mm along the same direction whichever half was the
     /// source: BENCHMARKS, "Matching both ways").
     pub both_ways: bool,
-    /// The factor on the links' covariance by range
+    /// The factor on the links' covariance by pair
     /// ([`crate::icp::IcpResult::range_covariance`]) measured on the scans
     /// ([`crate::noise::Calibration::range_scale`]) — in the modes without
     /// a link graph, on each placing match's. Default 1.
@@ -687,7 +688,7 @@ fn solve(
                 })
                 .collect(),
         };
-        // Each link's covariance: its noise by range, calibrated, times
+        // Each link's covariance: its covariance by pair, calibrated, times
         // σ̂₀², and its edge pull ([`adjusted_covariance`]).
         let (noise, bias): (Vec<Matrix6<f64>>, Vec<Vector6<f64>>) = used
             .iter()
@@ -719,9 +720,10 @@ fn solve(
 /// The covariances of `poses` adjusted to `edges` (the start's `steps`
 /// first, then the links) with `priors`, as the adjustment weighs the
 /// links by their information (the poses stay the links' own):
-/// - each link's noise: `noise` (its match's covariance by range from the
-///   scanner, [`crate::icp::IcpResult::range_covariance`] — far points are
-///   noisier, which one variance for all pairs hides — calibrated on the
+/// - each link's noise: `noise` (its match's covariance by pair, each
+///   pair's variance its own squared residual,
+///   [`crate::icp::IcpResult::range_covariance`] — far points and some
+///   surfaces are noisier, which one variance for all pairs hides — calibrated on the
 ///   scans' halves and quarters, `LinkConfig::range_scale`; or, without
 ///   it, its information's inverse: [`link_noise`]) times σ̂₀²
 ///   (`variance_factor`): above 1 the links disagree more than their
@@ -754,7 +756,7 @@ fn adjusted_covariance(
 const MIN_INDEPENDENT_SHARE: f64 = 0.05;
 
 /// A match's noise as the link graph takes it, before the variance
-/// factor: its covariance by range (`range_covariance`) times the
+/// factor: its covariance by pair (`range_covariance`) times the
 /// calibration's `range_scale`, or without it its `information`'s
 /// inverse (nothing along what it cannot see). Its frame is theirs.
 pub(crate) fn link_noise(

@@ -52,9 +52,11 @@ pub struct Calibration {
     pub halvings: usize,
     /// Halvings left out as gross mismatches (χ²/dof beyond 25× the median).
     pub left_out: usize,
-    /// The same against the covariance by range
-    /// ([`crate::icp::IcpResult::range_covariance`]): the factor on it (1
-    /// when nothing could be measured).
+    /// The same against the covariance by pair
+    /// ([`crate::icp::IcpResult::range_covariance`]: each pair's variance
+    /// its own squared residual; the name is its first model's, by range
+    /// from the scanner): the factor on it (1 when nothing could be
+    /// measured).
     pub range_scale: f64,
     /// What the halves measured.
     pub halves: Shares,
@@ -68,7 +70,7 @@ pub struct Shares {
     /// Σ χ² / Σ degrees of freedom against the covariance from one
     /// variance for all pairs (1 when nothing could be measured).
     pub variance_scale: f64,
-    /// The same against the covariance by range.
+    /// The same against the covariance by pair.
     pub range_scale: f64,
     /// The degrees of freedom they rest on.
     pub dof: usize,
@@ -87,7 +89,7 @@ pub const DENSITY_STEP_MAX: f64 = 2.0;
 /// step from quarters to halves, between 1 and [`DENSITY_STEP_MAX`].
 /// Denser shares misjudge more — the nearest neighbour follows the noise
 /// where the noise is not small beside the spacing: on the boards of
-/// `fusion/tests/covariance.rs` the covariance by range was 1.8, 2.1, 2.4
+/// `fusion/tests/covariance.rs` the covariance by range (the first model of the covariance by pair) was 1.8, 2.1, 2.4
 /// and 2.8× optimistic at 3,000, 6,000, 12,000 and 24,000 points a scan
 /// (no kernel), so halves alone under-calibrate the scans they come from
 /// (real scans' parts: 1.2–1.75× optimistic, BENCHMARKS.md). The step is a
@@ -105,7 +107,7 @@ pub fn at_full_density(halves: f64, quarters: f64) -> f64 {
 /// noise scale. Each halving's error ξ against the turn gives χ² = ξᵀ·I·ξ
 /// with I its reported information, whose mean is the observed degrees
 /// of freedom when I is honest — and the same against its covariance by
-/// range ([`crate::icp::IcpResult::range_covariance`]: `range_scale`). A
+/// pair ([`crate::icp::IcpResult::range_covariance`]: `range_scale`). A
 /// half that cannot be matched (too few points, no more pairs than
 /// `min_pairs`) is passed over. The same again with two quarters of each
 /// scan (halves of a half): the factors are carried from the halves' to
@@ -131,7 +133,7 @@ pub fn calibrate<S: AsRef<[Point3<f32>]> + Sync>(
 }
 
 /// Each scan's shares matched, each share `1 / 2^bits` of its points
-/// (halves: 1; quarters: 2), as [`calibrate`] says: a (χ², χ² by range,
+/// (halves: 1; quarters: 2), as [`calibrate`] says: a (χ², χ² by pair,
 /// degrees of freedom) for each.
 fn shares<S: AsRef<[Point3<f32>]> + Sync>(
     scans: &[S],
@@ -177,7 +179,7 @@ fn shares<S: AsRef<[Point3<f32>]> + Sync>(
             let dof = 6 - r.unobservable.len().min(6);
             let chi2 = (xi.transpose() * r.information * xi)[0];
             let by_range = r.range_covariance.map(|c| {
-                // Judged along what the match sees: the covariance by range
+                // Judged along what the match sees: the covariance by pair
                 // has nothing along its blind directions, but rounding
                 // leaves a trace there that a pseudo-inverse may keep (a
                 // pipe's halves slid along its axis gave 10¹³).
@@ -221,7 +223,7 @@ fn off(source: &[Point3<f32>], truth: &Isometry3<f64>, max_correspondence_m: f64
     crate::se3::exp(&xi) * truth
 }
 
-/// Σ χ² / Σ dof of the samples (χ², χ² by range, dof), those whose χ²/dof
+/// Σ χ² / Σ dof of the samples (χ², χ² by pair, dof), those whose χ²/dof
 /// is beyond [`GROSS`] times the median left out.
 fn pooled(samples: &[(f64, f64, usize)]) -> Shares {
     let mut ratios: Vec<f64> = samples.iter().map(|(c, _, d)| c / *d as f64).collect();

@@ -417,7 +417,7 @@ pub fn register_set<S: AsRef<[Point3<f32>]> + Sync>(
 ) -> Result<SetResult> {
     // The finest matches reported with the covariance model calibrated
     // on these scans (the coarser stages' matches only steer) — in every
-    // mode since the covariance by range and the edges' pull carry them
+    // mode since the covariance by pair and the edges' pull carry them
     // (with the information alone the modes without a link graph were
     // 1.3–2.7× optimistic calibrated, against 0.55–2.8× without:
     // BENCHMARKS.md, "Covariances the data calibrate"). Matched both ways
@@ -893,7 +893,7 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
             max_correspondence_m: s.max_correspondence_m,
             only_covered: config.only_covered && k == finest_stage,
             // The finest matches carry their pull by the pairs past the
-            // other scan's edge and their noise by range into the
+            // other scan's edge and their covariance by pair into the
             // covariances (`links`, `placed_covariances`).
             edge_bias: k == finest_stage,
             range_noise: k == finest_stage,
@@ -996,10 +996,10 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
 /// The covariances of `n` scans each placed by its last match (`links`:
 /// the modes without a link graph), plus its partners' — until the
 /// verification gives the pairs' own ([`verified`]). A match's own is
-/// graph mode's link model ([`crate::links`]): its covariance by range
+/// graph mode's link model ([`crate::links`]): its covariance by pair
 /// (`range_scale`, the calibration's factor on it) plus its edges' pull
 /// δδᵀ, and along what it cannot see the start's step (`step`, an
-/// information); without the covariance by range (point-to-point), its
+/// information); without the covariance by pair (point-to-point), its
 /// information held by `step` where it sees nothing. (No variance factor:
 /// the verification's, which judges these matches, replaces these
 /// covariances whole.) A

@@ -122,7 +122,7 @@ pub struct PairCheck {
     /// theirs ([`crate::links::adjust_matches`]).
     pub edge: Option<Edge>,
     /// The edge's noise as the link graph takes a link's, before the
-    /// variance factor: its covariance by range, calibrated, or its
+    /// variance factor: its covariance by pair, calibrated, or its
     /// information's inverse (target frame; [`crate::links`]). The
     /// covariances of the modes without a link graph rest on it
     /// ([`crate::links::adjust_matches`]).
@@ -171,7 +171,7 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
     // MAX_TURN_RAD, a lean does not count, and it costs half (the
     // corridor's 77 scans: 22 s both ways, 15 s one).
     //
-    // The match reports its noise by range and its pull beyond the edge
+    // The match reports its covariance by pair and its pull beyond the edge
     // (which change nothing of it) for the covariances built on it.
     let matching = LinkConfig {
         multiview: crate::multiview::MultiviewConfig {

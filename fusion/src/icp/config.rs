@@ -63,11 +63,13 @@ pub struct IcpConfig {
     /// ([`IcpResult::edge_bias`](super::IcpResult::edge_bias)). It changes
     /// nothing of the match. Default false.
     pub edge_bias: bool,
-    /// Point-to-plane: also report the estimate's covariance with the
-    /// residuals' variance measured by range from the scanner (bins √2
-    /// apart) instead of one variance for all pairs — far points, which
-    /// carry the rotation, are noisier on real scans
-    /// ([`IcpResult::range_covariance`](super::IcpResult::range_covariance)).
+    /// Point-to-plane: also report the estimate's covariance with each
+    /// pair's variance its own squared residual (the sandwich H⁻¹·B·H⁻¹,
+    /// B = Σ (w·r)²·JJᵀ) instead of one variance for all pairs — on real
+    /// scans far points, which carry the rotation, are noisier, and so are
+    /// some surfaces beside others at the same range
+    /// ([`IcpResult::range_covariance`](super::IcpResult::range_covariance);
+    /// the name is that of its first model, the variance by range bins).
     /// Nothing else changes. Default false.
     pub range_noise: bool,
     /// Point-to-plane: what the residuals' own scatter misjudges of the

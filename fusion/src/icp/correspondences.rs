@@ -28,67 +28,10 @@ pub(crate) struct Sums {
     /// [`IcpConfig::only_covered`] leaves out.
     pub(crate) edge_h: Matrix6<f64>,
     pub(crate) edge_b: Vector6<f64>,
-    /// Point-to-plane with [`IcpConfig::range_noise`]: `h` and the squared
-    /// residuals by the source point's range from its scanner (`None`
-    /// otherwise: 9 kB a chunk that the other matches do not carry).
-    pub(crate) ranges: Option<Box<RangeBins>>,
-}
-
-/// Two sums' range bins ([`RangeBins::merge`]), either of them absent.
-/// A plain sum (`half` 1, `a` the identity) keeps the present side as it
-/// is; a mean of two ways scales and carries it.
-fn merged(
-    mine: Option<Box<RangeBins>>,
-    other: Option<&RangeBins>,
-    a: &Matrix6<f64>,
-    half: f64,
-) -> Option<Box<RangeBins>> {
-    let plain = half == 1.0 && *a == Matrix6::identity();
-    match (mine, other) {
-        (Some(m), Some(o)) => Some(m.merge(o, a, half)),
-        (Some(m), None) if plain => Some(m),
-        (Some(m), None) => Some(m.merge(&RangeBins::default(), a, half)),
-        (None, Some(o)) if plain => Some(Box::new(*o)),
-        (None, Some(o)) => Some(Box::new(RangeBins::default()).merge(o, a, half)),
-        (None, None) => None,
-    }
-}
-
-/// Bins of range from the scanner, √2 apart from 2⁻⁸ m (the first and
-/// last bins take everything nearer and farther).
-pub(crate) const RANGE_BINS: usize = 32;
-
-/// Point-to-plane sums by range ([`RANGE_BINS`]).
-#[derive(Clone, Copy)]
-pub(crate) struct RangeBins {
-    pub(crate) h: [Matrix6<f64>; RANGE_BINS],
-    pub(crate) sq: [f64; RANGE_BINS],
-    pub(crate) n: [usize; RANGE_BINS],
-}
-
-impl Default for RangeBins {
-    fn default() -> Self {
-        Self { h: [Matrix6::zeros(); RANGE_BINS], sq: [0.0; RANGE_BINS], n: [0; RANGE_BINS] }
-    }
-}
-
-impl RangeBins {
-    /// The bin of a point `range_m` from its scanner.
-    pub(crate) fn bin(range_m: f64) -> usize {
-        let k = (2.0 * range_m.max(1e-12).log2()).round() + 16.0;
-        k.clamp(0.0, (RANGE_BINS - 1) as f64) as usize
-    }
-
-    /// These and `o`'s, `o.h` carried by `a` (Aᵀ·H·A) and the `h` of both
-    /// multiplied by `half` (½ for a match both ways' mean, 1 for a sum).
-    fn merge(mut self: Box<Self>, o: &RangeBins, a: &Matrix6<f64>, half: f64) -> Box<Self> {
-        for k in 0..RANGE_BINS {
-            self.h[k] = half * (self.h[k] + a.transpose() * o.h[k] * a);
-            self.sq[k] += o.sq[k];
-            self.n[k] += o.n[k];
-        }
-        self
-    }
+    /// Point-to-plane with [`IcpConfig::range_noise`]: Σ (w·r)²·JJᵀ, each
+    /// pair's score by its own squared residual — the middle of the
+    /// estimate's sandwich covariance (zero otherwise).
+    pub(crate) scores: Matrix6<f64>,
 }
 
 impl Sums {
@@ -109,7 +52,7 @@ impl Sums {
         self.spp += o.spp;
         self.edge_h += o.edge_h;
         self.edge_b += o.edge_b;
-        self.ranges = merged(self.ranges, o.ranges.as_deref(), &Matrix6::identity(), 1.0);
+        self.scores += o.scores;
         self
     }
 
@@ -119,11 +62,12 @@ impl Sums {
     /// (left, on `source_from_target`) is −Ad(T⁻¹)·ξ, so its H′ and b′ enter
     /// as AᵀH′A and Aᵀb′. H and b are the two ways' mean — each pair is seen
     /// about twice, once from either scan, and is one measurement, not two —
-    /// the residuals' count and squares their sum (σ̂² per residual).
+    /// the residuals' count and squares their sum (σ̂² per residual), and
+    /// the scores' squares (Σ (w·r)²·JJᵀ) the two ways' mean as H is.
     pub(crate) fn both_ways(self, back: &Sums, target_from_source: &Isometry3<f64>) -> Sums {
         let a = -adjoint(&target_from_source.inverse());
         Sums {
-            ranges: merged(self.ranges, back.ranges.as_deref(), &a, 0.5),
+            scores: 0.5 * (self.scores + a.transpose() * back.scores * a),
             n: self.n + back.n,
             sq: self.sq + back.sq,
             h: 0.5 * (self.h + a.transpose() * back.h * a),
@@ -282,11 +226,7 @@ pub(crate) fn accumulate(
                             s.edge_b += b;
                         }
                         if config.range_noise {
-                            let k = RangeBins::bin((p.coords.cast::<f64>() - config.source_viewpoint.coords).norm());
-                            let bins = s.ranges.get_or_insert_with(Box::default);
-                            bins.h[k] += h;
-                            bins.sq[k] += res * res;
-                            bins.n[k] += 1;
+                            s.scores += (w * res) * (w * res) * j * j.transpose();
                         }
                         s.sq += res * res;
                     }

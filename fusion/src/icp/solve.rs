@@ -6,7 +6,7 @@
 use nalgebra::{Isometry3, Matrix3, Matrix4, Matrix6, Point3, SymmetricEigen, Translation3, UnitQuaternion, Vector6};
 
 use super::config::{IcpConfig, Kernel, Method};
-use super::correspondences::{Partners, RANGE_BINS, RangeBins, Sums, accumulate};
+use super::correspondences::{Partners, Sums, accumulate};
 use super::degeneracy::{Observability, projector_off};
 use super::target::Target;
 use crate::error::{FusionError, Result};
@@ -55,8 +55,8 @@ pub struct IcpResult {
     /// otherwise, or when no pair lies beyond the edge.
     pub edge_bias: Vector6<f64>,
     /// With [`IcpConfig::range_noise`] (point-to-plane): the estimate's
-    /// covariance with each pair's variance its range bin's, H⁻¹·B·H⁻¹
-    /// ([`IcpConfig::range_noise`]), not scaled by
+    /// covariance with each pair's variance its own squared residual,
+    /// H⁻¹·B·H⁻¹ ([`IcpConfig::range_noise`]), not scaled by
     /// [`IcpConfig::noise_scale`] (which calibrates `information`); `None`
     /// otherwise.
     pub range_covariance: Option<Matrix6<f64>>,
@@ -339,9 +339,9 @@ fn align_impl(
         None => measured,
     };
     let edge_bias = edge_bias(&sums, &unobservable);
-    let range_covariance = sums.ranges.as_deref().filter(|_| config.method == Method::PointToPlane).map(|r| {
+    let range_covariance = (config.range_noise && config.method == Method::PointToPlane && sums.n > 0).then(|| {
         let p = projector_off(&unobservable);
-        p * by_range(r, sigma2) * p
+        p * sandwich(&sums) * p
     });
     Ok(IcpResult {
         target_from_source: estimate,
@@ -358,47 +358,15 @@ fn align_impl(
     })
 }
 
-/// The fewest pairs a range bin's variance rests on (neighbouring bins
-/// pooled until there are as many).
-const MIN_BIN_PAIRS: usize = 50;
-
-/// The covariance of the match's estimate when each pair's variance is
-/// its range bin's ([`IcpConfig::range_noise`]): the iteration weighs
-/// every pair alike, so it is H⁺·B·H⁺ with B = Σₖ σ̂ₖ²·Hₖ (a sandwich whose
-/// middle is the variance by range, not each pair's own squared
-/// residual). Each bin's variance is its mean squared residual, pooled
-/// with its neighbours until [`MIN_BIN_PAIRS`]; `sigma2` (all pairs')
-/// where there are fewer in all.
-fn by_range(r: &RangeBins, sigma2: f64) -> Matrix6<f64> {
-    let total: usize = r.n.iter().sum();
-    let mut b = Matrix6::zeros();
-    let mut h = Matrix6::zeros();
-    for k in (0..RANGE_BINS).filter(|&k| r.n[k] > 0) {
-        let variance = if total < MIN_BIN_PAIRS {
-            sigma2
-        } else {
-            let (mut lo, mut hi) = (k, k);
-            let (mut n, mut sq) = (r.n[k], r.sq[k]);
-            while n < MIN_BIN_PAIRS {
-                // Widen by a bin on either side.
-                if lo > 0 {
-                    lo -= 1;
-                    n += r.n[lo];
-                    sq += r.sq[lo];
-                }
-                if hi + 1 < RANGE_BINS && n < MIN_BIN_PAIRS {
-                    hi += 1;
-                    n += r.n[hi];
-                    sq += r.sq[hi];
-                }
-            }
-            (sq / n as f64).max(1e-18)
-        };
-        b += r.h[k] * variance;
-        h += r.h[k];
-    }
-    let inverse = pseudo_inverse(&h);
-    let c = inverse * b * inverse;
+/// The covariance of the match's estimate with each pair's variance its
+/// own squared residual ([`IcpConfig::range_noise`]): the iteration
+/// weighs every pair alike (but for the kernel), so it is H⁺·B·H⁺ with
+/// B = Σ (w·r)²·JJᵀ, each pair's score by its own residual (the
+/// heteroscedasticity-consistent sandwich) — whatever makes a pair
+/// noisier, its range from the scanner or its surface.
+fn sandwich(sums: &Sums) -> Matrix6<f64> {
+    let inverse = pseudo_inverse(&sums.h);
+    let c = inverse * sums.scores * inverse;
     0.5 * (c + c.transpose())
 }
 

@@ -219,20 +219,39 @@ impl Target {
     /// farther in its direction than any of `i`'s neighbours lie — where a
     /// partial overlap ends or an occlusion begins, `i` is the last sample
     /// at the edge and the source point has no partner in the target.
+    ///
+    /// A scanner that samples in lines (a rotating line scanner's profiles,
+    /// a multi-beam lidar's rings) leaves gaps between them far wider than
+    /// the spacing along them, and `i`'s nearest neighbours all lie on its
+    /// own line: a point in the gap is covered by the next line. So before
+    /// calling it beyond, the target is searched within three times the
+    /// offset of `i` for a sample at least as far along the offset, near
+    /// the surface (within 30° of its tangent plane).
     pub(crate) fn beyond(&self, i: usize, offset: &Vector3<f64>) -> bool {
-        let hood = &self.local(i).hood;
+        let local = self.local(i);
+        let hood = &local.hood;
         let q = point(&self.points[i]);
-        let length = offset.norm();
+        let length_sq = offset.norm_squared();
         let mut nearest_sq = f64::INFINITY;
         for &k in &hood.points[..usize::from(hood.len)] {
             let d = point(&self.points[k as usize]) - q;
             // A neighbour at least as far along the offset: covered.
-            if d.dot(offset) >= length * length {
+            if d.dot(offset) >= length_sq {
                 return false;
             }
             nearest_sq = nearest_sq.min(d.norm_squared());
         }
-        length * length > nearest_sq / 4.0
+        if length_sq <= nearest_sq / 4.0 {
+            return false;
+        }
+        let normal = self.normal(i);
+        let reach = 9.0 * length_sq;
+        !self.tree.query(&self.points[i]).within::<SquaredEuclidean<f32>>(reach as f32).unsorted().execute().iter().any(
+            |r| {
+                let d = point(&self.points[r.item as usize]) - q;
+                d.dot(offset) >= length_sq && d.dot(&normal).abs() <= 0.5 * d.norm()
+            },
+        )
     }
 
     /// Point `j`'s surroundings, queried the first time they are needed.
@@ -368,6 +387,28 @@ mod tests {
         assert!(target.beyond(at(19, 10), &Vector3::new(0.08, 0.0, 0.0)));
         assert!(target.beyond(at(19, 10), &Vector3::new(0.3, 0.1, 0.0)));
         assert!(target.beyond(at(19, 19), &Vector3::new(0.05, 0.05, 0.0)));
+    }
+
+    /// Lines of samples 1 cm apart along them and 0.2 m apart across (a
+    /// lidar's rings on the ground): a point in the gap between two lines
+    /// is covered by the next line, though every one of its sample's
+    /// nearest neighbours lies on the sample's own line; past the last
+    /// line, or out of the lines' end, it is beyond.
+    #[test]
+    fn a_point_between_a_scanners_lines_is_covered() {
+        let lines: Vec<Point3<f32>> =
+            (0..5).flat_map(|i| (0..200).map(move |j| Point3::new(j as f32 * 0.01, i as f32 * 0.2, 0.0))).collect();
+        let up = vec![Vector3::z(); lines.len()];
+        let target = Target::with_normals(&lines, up).expect("target");
+        let at = |i: usize, j: usize| i * 200 + j;
+        // The nearest neighbours alone do not see the next line.
+        let hood = &target.local(at(2, 100)).hood;
+        assert!(hood.points[..usize::from(hood.len)].iter().all(|&k| k as usize / 200 == 2));
+        assert!(!target.beyond(at(2, 100), &Vector3::new(0.0, 0.09, 0.0)));
+        assert!(!target.beyond(at(2, 100), &Vector3::new(0.01, -0.09, 0.0)));
+        // Past the last line, and out of the lines' end.
+        assert!(target.beyond(at(4, 100), &Vector3::new(0.0, 0.09, 0.0)));
+        assert!(target.beyond(at(2, 199), &Vector3::new(0.09, 0.0, 0.0)));
     }
 
     /// `smallest_eigenvector` agrees with nalgebra's `SymmetricEigen` on

@@ -35,7 +35,9 @@ pub struct MatchReport {
     /// scans' own density. Its `variance_scale` multiplies every finest
     /// match's covariance from one variance (graph mode: as the adjustment
     /// weighs the links), its `range_scale` every finest match's
-    /// covariance by range, which the scans' covariances carry (both
+    /// covariance by pair (each pair's variance its own squared residual;
+    /// the name is its first model's, by range from the scanner), which
+    /// the scans' covariances carry (both
     /// before `variance_factor`). Null when the schedule is empty.
     pub noise: Option<NoiseReport>,
     /// Registration time, seconds (reading the scans and writing excluded).
@@ -82,9 +84,10 @@ pub struct NoiseReport {
     pub halvings: usize,
     /// Halvings left out as mismatches (χ²/dof beyond 25× the median).
     pub left_out: usize,
-    /// The same against the covariance with the residuals' variance by
-    /// range from the scanner: the factor on the finest matches'
-    /// covariance by range, which the reported covariances carry
+    /// The same against the covariance with each pair's variance its own
+    /// squared residual (named for its first model, the variance by range
+    /// from the scanner): the factor on the finest matches' covariance by
+    /// pair, which the reported covariances carry
     /// (`variance_scale` calibrates graph mode's link weights).
     pub range_scale: f64,
     /// What the halves measured.
@@ -100,7 +103,7 @@ pub struct NoiseReport {
 pub struct SharesReport {
     /// Σχ²/Σdof against the covariance from one variance for all pairs.
     pub variance_scale: f64,
-    /// Σχ²/Σdof against the covariance by range.
+    /// Σχ²/Σdof against the covariance by pair.
     pub range_scale: f64,
     /// The degrees of freedom they rest on.
     pub dof: usize,
@@ -386,8 +389,8 @@ pub struct ScanReport {
     /// 6×6, order (ωx, ωy, ωz, x, y, z), radians and metres, left
     /// perturbation (as `register`'s) in the world's axes about the first
     /// scan's origin; zero for the first scan, which holds the frame. In
-    /// graph mode it carries the links' noise by range from the scanner
-    /// and each link's pull by its pairs past the other scan's edge; in
+    /// graph mode it carries the links' covariance by pair (each pair's
+    /// variance its own squared residual) and each link's pull by its pairs past the other scan's edge; in
     /// the other modes it is that of the verification's matches
     /// (`checks`, both ways) adjusted together in the same model, plus the
     /// pose's departure from that adjustment (docs/match.md).

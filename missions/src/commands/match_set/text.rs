@@ -49,7 +49,7 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
     if let Some(n) = &report.noise {
         writeln!(
             out,
-            "covariances calibrated on the scans' halves and quarters: ×{:.2}, by range ×{:.2} \
+            "covariances calibrated on the scans' halves and quarters: ×{:.2}, by pair ×{:.2} \
              (halves ×{:.2}, ×{:.2}; quarters ×{:.2}, ×{:.2}; {} degrees of freedom, {:.3} s)",
             n.variance_scale,
             n.range_scale,
