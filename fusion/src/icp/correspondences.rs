@@ -226,7 +226,7 @@ pub(crate) fn accumulate(
                             s.edge_b += b;
                         }
                         if config.range_noise {
-                            s.scores += (w * res) * (w * res) * j * j.transpose();
+                            s.scores += (w * res * res) * h;
                         }
                         s.sq += res * res;
                     }

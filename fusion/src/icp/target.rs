@@ -228,8 +228,7 @@ impl Target {
     /// offset of `i` for a sample at least as far along the offset, near
     /// the surface (within 30° of its tangent plane).
     pub(crate) fn beyond(&self, i: usize, offset: &Vector3<f64>) -> bool {
-        let local = self.local(i);
-        let hood = &local.hood;
+        let hood = &self.local(i).hood;
         let q = point(&self.points[i]);
         let length_sq = offset.norm_squared();
         let mut nearest_sq = f64::INFINITY;
