@@ -22,7 +22,8 @@ interval for the number of errors (χ² with 6·n degrees of freedom, / n),
 the median, the RMS errors, and the parts off by more than 1° or 0.1 m
 while the exit was 0 (a silent failure). Environment: NEES_ONLY=NAME runs one
 source, NEES_CUT=shares or NEES_CUT=wedges one way of cutting (what is
-not run is still drawn: every run of a seed has the same parts), NEES_VERBOSE=1 prints every part,
+not run is still drawn: every run of a seed has the same parts), NEES_VERBOSE=1 prints every part (with its departure from where the
+verified pairs agree, in the modes without a link graph),
 NEES_CHECKS=1 every verified pair (its RMS residual against the noise floor, and its true error),
 NEES_AXES=1 the mean square error over the mean variance along each world axis, NEES_KEEP=DIR keeps each trial's inputs, NEES_PARTS=K deals the shares
 into K parts (4; 2 is one link alone), NEES_ARGS="--only-covered" adds
@@ -117,6 +118,18 @@ def xi(estimate, truth):
     return np.concatenate([w, d[:3, 3]])
 
 
+def departure(scan):
+    """The pose's departure ξ from where the verification's matches agree
+    (the modes without a link graph) and `departure_chi2`, ξᵀ·C⁺·ξ in that
+    adjustment's covariance C: how far the strategy stopped from it."""
+    d = scan.get("departure")
+    if d is None:
+        return ""
+    d = np.array(d)
+    return (f", departure {np.linalg.norm(d[:3]) * 180 / math.pi:.3f}° {np.linalg.norm(d[3:]) * 1e3:.1f} mm "
+            f"({scan['departure_chi2']:.1f} σ²)")
+
+
 def run(tool, d, parts, truths, starts, mode):
     files = []
     for i, p in enumerate(parts):
@@ -200,7 +213,7 @@ def main():
                         if os.environ.get("NEES_VERBOSE"):
                             print(f"  {label} {mode} part {i}: exit {code}, {np.linalg.norm(e[:3]) * 180 / math.pi:.3f}° "
                                   f"{np.linalg.norm(e[3:]) * 1e3:.1f} mm, NEES {e @ np.linalg.solve(c, e):.1f}, "
-                                  f"untrusted {i in v.get('untrusted', [])}")
+                                  f"untrusted {i in v.get('untrusted', [])}{departure(v['scans'][i])}")
             for mode in modes:
                 if skipped(label):
                     continue

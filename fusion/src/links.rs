@@ -453,6 +453,11 @@ pub struct Adjusted {
     /// scan 0): the adjustment's in the link graph's model ([`adjust`]'s
     /// covariances), plus its departure ξξᵀ.
     pub covariance: Vec<Matrix6<f64>>,
+    /// Each departure against the adjustment's covariance C (without
+    /// ξξᵀ): ξᵀ·C⁺·ξ — how far the strategy stopped from where its pairs
+    /// agree, in the σ of that agreement (zero for scan 0;
+    /// [`crate::verify::MAX_DEPARTURE_CHI2`]).
+    pub departure_chi2: Vec<f64>,
 }
 
 /// `edges` — relative measurements between the scans at `poses`, e.g. the
@@ -498,13 +503,23 @@ pub fn adjust_matches(
         .enumerate()
         .map(|(i, (p, a))| if i == 0 { Vector6::zeros() } else { left_difference(p, a) })
         .collect();
+    let departure_chi2 = adjusted
+        .iter()
+        .zip(&departure)
+        .enumerate()
+        .map(|(i, (c, d))| {
+            let inverse =
+                (0.5 * (c + c.transpose())).pseudo_inverse(1e-12 * c.amax()).unwrap_or_else(|_| Matrix6::zeros());
+            if i == 0 { 0.0 } else { (d.transpose() * inverse * d)[(0, 0)] }
+        })
+        .collect();
     let covariance = adjusted
         .into_iter()
         .zip(&departure)
         .enumerate()
         .map(|(i, (c, d))| if i == 0 { Matrix6::zeros() } else { c + d * d.transpose() })
         .collect();
-    Ok(Adjusted { variance_factor, departure, covariance })
+    Ok(Adjusted { variance_factor, departure, covariance, departure_chi2 })
 }
 
 /// Links (as graph edges) judged at their adjusted `poses`.

@@ -120,6 +120,12 @@ pub struct SetResult {
     /// [`covariance`](Self::covariance) (ξξᵀ). Empty in graph mode, whose
     /// poses are the adjustment, and without a pair verified.
     pub departure: Vec<Vector6<f64>>,
+    /// Each departure in the σ of the adjustment it departs from, ξᵀ·C⁺·ξ
+    /// ([`crate::links::Adjusted::departure_chi2`]): above
+    /// [`MAX_DEPARTURE_CHI2`](crate::verify::MAX_DEPARTURE_CHI2) the scan
+    /// is not trusted ([`untrusted`](Self::untrusted)). Empty where
+    /// [`departure`](Self::departure) is.
+    pub departure_chi2: Vec<f64>,
     /// Each scan's directions the matches do not see (unit ξ, world frame).
     pub unobservable: Vec<Vec<Vector6<f64>>>,
     /// The final stage's matches: the link graph's pairs, or each scan's
@@ -157,15 +163,38 @@ pub struct SetResult {
 
 impl SetResult {
     /// The scans not to trust, in order: those the verification names at
-    /// the final poses ([`crate::verify::untrusted`]) and those the
+    /// the final poses ([`crate::verify::untrusted`]), those the
     /// schedule's and the restart's registrations place apart with nothing
-    /// in the data to choose between them ([`Restart::undecided`]).
+    /// in the data to choose between them ([`Restart::undecided`]), and
+    /// those the strategy left apart from where their verified pairs agree
+    /// ([`departed`](Self::departed)).
     pub fn untrusted(&self) -> Vec<usize> {
-        let mut named = crate::verify::untrusted(self.world_from_scan.len(), &self.checks);
+        let mut named = self.named();
         named.extend(self.restart.iter().filter(|x| !x.corroborated).flat_map(|x| x.undecided.iter().map(|u| u.0)));
         named.sort_unstable();
         named.dedup();
         named
+    }
+
+    /// The scans the verification names at these poses: by their pairs
+    /// ([`crate::verify::untrusted`]) or by their departure from where
+    /// those pairs agree ([`departed`](Self::departed)), in order. What
+    /// the restarts judge a registration by ([`Restart`]).
+    pub fn named(&self) -> Vec<usize> {
+        let mut named = crate::verify::untrusted(self.world_from_scan.len(), &self.checks);
+        named.extend(self.departed());
+        named.sort_unstable();
+        named.dedup();
+        named
+    }
+
+    /// In the modes without a link graph, the scans whose departure from
+    /// the adjustment of the verification's matches is beyond
+    /// [`MAX_DEPARTURE_CHI2`](crate::verify::MAX_DEPARTURE_CHI2) in its σ:
+    /// the strategy settled in a compromise of its matches that no pair,
+    /// matched again alone, moves far enough to name.
+    pub fn departed(&self) -> Vec<usize> {
+        (1..self.departure_chi2.len()).filter(|&i| self.departure_chi2[i] > crate::verify::MAX_DEPARTURE_CHI2).collect()
     }
 }
 
@@ -215,7 +244,7 @@ pub struct Restart {
     /// What set it off.
     pub trigger: Trigger,
     /// The scans the verification names at the first registration's poses
-    /// ([`crate::verify::untrusted`]; `None` when it failed) and at the
+    /// ([`SetResult::named`]; `None` when it failed) and at the
     /// restart's (`None` when the restart failed, or was neither kept nor
     /// needed verifying: the first registration was possible, and no scan
     /// was [`undecided`](Self::undecided) between them).
@@ -488,6 +517,7 @@ fn verified<S: AsRef<[Point3<f32>]> + Sync>(scans: &[S], mut r: SetResult, confi
         r.variance_factor = Some(a.variance_factor);
         r.covariance = a.covariance;
         r.departure = a.departure;
+        r.departure_chi2 = a.departure_chi2;
     }
     r.check_seconds = started.elapsed().as_secs_f64();
     Ok(r)
@@ -538,7 +568,7 @@ fn restart_after_failure<S: AsRef<[Point3<f32>]> + Sync>(
         error: None,
         kept: true,
         trigger: Trigger::Failed,
-        untrusted: (None, Some(crate::verify::untrusted(scans.len(), &r.checks))),
+        untrusted: (None, Some(r.named())),
         undecided: Vec::new(),
         corroborated: false,
         further: Vec::new(),
@@ -604,7 +634,7 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     let Some((scan, moved_m)) = (1..scans.len()).map(|i| (i, moved(i))).max_by(|a, b| a.1.total_cmp(&b.1)) else {
         return Ok(first);
     };
-    let named = crate::verify::untrusted(scans.len(), &first.checks);
+    let named = first.named();
     // Points in another scanner's free space: the schedule's poses are
     // physically impossible, not merely in doubt.
     let impossible = first.checks.iter().any(crate::verify::PairCheck::violates_free_space);
@@ -630,7 +660,7 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     // A registration verified, with the scans its verification names.
     let verify = |r: SetResult| -> Result<(SetResult, Vec<usize>)> {
         let r = verified(scans, r, config)?;
-        let named = crate::verify::untrusted(scans.len(), &r.checks);
+        let named = r.named();
         Ok((r, named))
     };
     // The restart is verified where its verdict decides (an impossible
@@ -975,6 +1005,7 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
         world_from_scan: poses,
         covariance,
         departure: Vec::new(),
+        departure_chi2: Vec::new(),
         unobservable: last
             .last_match
             .iter()
@@ -1052,6 +1083,7 @@ fn from_graph(g: LinkGraph, matches: usize, settled: bool, stages: Vec<StageRun>
         world_from_scan: g.world_from_scan,
         covariance: g.covariance,
         departure: Vec::new(),
+        departure_chi2: Vec::new(),
         unobservable: g.unobservable,
         links: g
             .links
@@ -1163,6 +1195,7 @@ mod tests {
             world_from_scan: vec![Isometry3::identity(); 4],
             covariance: vec![Matrix6::identity(); 4],
             departure: Vec::new(),
+            departure_chi2: Vec::new(),
             unobservable: vec![Vec::new(); 4],
             links: Vec::new(),
             matches: 0,
@@ -1177,5 +1210,16 @@ mod tests {
         };
         assert_eq!(result(false).untrusted(), [2, 3]);
         assert!(result(true).untrusted().is_empty());
+        // A scan that departs from where its verified pairs agree beyond
+        // the limit is named — by the verification, as the restarts judge
+        // — whatever the restart says; at the limit it is not, nor is the
+        // first scan (which holds the frame).
+        let mut departed = result(true);
+        departed.departure_chi2 = vec![5e3, 3.0, crate::verify::MAX_DEPARTURE_CHI2, 4744.0];
+        assert_eq!(departed.named(), [3]);
+        assert_eq!(departed.untrusted(), [3]);
+        let mut both = result(false);
+        both.departure_chi2 = departed.departure_chi2.clone();
+        assert_eq!(both.untrusted(), [2, 3]);
     }
 }

@@ -244,7 +244,10 @@ pub struct RestartReport {
     /// `schedule_untrusted`).
     pub trigger: String,
     /// The scans the verification names at the schedule's poses (indices
-    /// into `scans`); null when the schedule failed.
+    /// into `scans`): by their pairs (`checks`), or in the modes without a
+    /// link graph by their departure from where those pairs agree (above
+    /// 1,000 σ², as `scans[].departure_chi2`); null when the schedule
+    /// failed.
     pub schedule_untrusted: Option<Vec<usize>>,
     /// The same at the restart's poses; null when the restart failed, or
     /// was not kept and not verified (only a restart from an impossible
@@ -402,6 +405,12 @@ pub struct ScanReport {
     /// would put the scan about there. Null in graph mode (its poses are
     /// the adjustment) or when no pair was verified.
     pub departure: Option<[f64; 6]>,
+    /// The departure in the σ of the adjustment it departs from:
+    /// ξᵀ·C⁺·ξ, C the adjustment's covariance (this covariance less ξξᵀ).
+    /// Above 1,000 the strategy stopped in a compromise of its matches
+    /// apart from where its pairs agree: the scan is in `untrusted`, exit
+    /// 1 (docs/match.md). Null where `departure` is.
+    pub departure_chi2: Option<f64>,
     /// Directions the matches cannot see (unit vectors in the order and
     /// frame of the covariance): held where the start put them, their σ
     /// the start's.

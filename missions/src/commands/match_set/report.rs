@@ -36,6 +36,7 @@ pub(super) fn report(
                     world_from_scan: rows(&m),
                     covariance: rows(&c),
                     departure: r.departure.get(i).map(|d| std::array::from_fn(|k| d[k])),
+                    departure_chi2: r.departure_chi2.get(i).copied(),
                     degenerate_directions: directions(&r.unobservable[i]),
                 }
             })

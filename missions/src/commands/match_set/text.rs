@@ -178,7 +178,8 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
     for &i in &report.untrusted {
         let undecided =
             report.restart.iter().filter(|r| !r.corroborated).flat_map(|r| &r.undecided).any(|u| u.scan == i);
-        why_untrusted(out, scans, &report.checks, &report.untrusted, i, undecided, tolerance)?;
+        let departed = why_departed(out, scans, report, i)?;
+        why_untrusted(out, scans, &report.checks, &report.untrusted, i, undecided || departed, tolerance)?;
     }
     for l in report.links.iter().filter(|l| !l.accepted || l.cycle.is_some()) {
         let targets: Vec<&str> = l.targets.iter().map(|&t| scans[t].name.as_str()).collect();
@@ -224,9 +225,34 @@ pub(super) fn unlinked(report: &MatchReport) -> Vec<usize> {
         .collect()
 }
 
+/// Whether scan `i` departs from where the verification's matches agree
+/// by more than [`fusion::verify::MAX_DEPARTURE_CHI2`] in their σ (the
+/// modes without a link graph), and if so the message that says so.
+fn why_departed(out: &mut dyn Write, scans: &[InputScan], report: &MatchReport, i: usize) -> std::io::Result<bool> {
+    let Some((d, t)) = report.scans.get(i).and_then(|s| s.departure.zip(s.departure_chi2)) else { return Ok(false) };
+    if t <= fusion::verify::MAX_DEPARTURE_CHI2 {
+        return Ok(false);
+    }
+    let (turn, shift) =
+        (d[..3].iter().map(|x| x * x).sum::<f64>().sqrt(), d[3..].iter().map(|x| x * x).sum::<f64>().sqrt());
+    writeln!(
+        out,
+        "  not trusted: {}: {} matching stopped {:.3}°, {:.1} mm from where its verified pairs agree ({t:.0} σ² of \
+         their adjustment, above {}): a compromise of its matches that no pair alone names; graph mode places the \
+         scans where their pairs agree",
+        scans[i].name,
+        report.mode,
+        turn.to_degrees(),
+        shift * 1e3,
+        fusion::verify::MAX_DEPARTURE_CHI2
+    )?;
+    Ok(true)
+}
+
 /// Why the verification names scan `i` (`untrusted` all it names): the
 /// pairs that moved it, the free space it was placed in, or — when
-/// neither, and the restart left it not `undecided` — the named scans it
+/// neither, and it is not `explained` elsewhere (left undecided by the
+/// restart, departed from its pairs' agreement) — the named scans it
 /// agrees with, nothing verified tying it to the first.
 fn why_untrusted(
     out: &mut dyn Write,
@@ -234,7 +260,7 @@ fn why_untrusted(
     checks: &[CheckReport],
     untrusted: &[usize],
     i: usize,
-    undecided: bool,
+    explained: bool,
     tolerance: f64,
 ) -> std::io::Result<()> {
     let disagreeing = || checks.iter().filter(|c| !c.consistent && (c.source == i || c.target == i));
@@ -291,7 +317,7 @@ fn why_untrusted(
         .filter(|j| untrusted.contains(j))
         .map(|j| scans[j].name.as_str())
         .collect();
-    if moved.is_empty() && seen.is_empty() && !undecided && !on.is_empty() {
+    if moved.is_empty() && seen.is_empty() && !explained && !on.is_empty() {
         writeln!(
             out,
             "  not trusted: {}: it agrees only with scans named here ({}): nothing verified ties it to {}",
