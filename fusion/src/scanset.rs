@@ -17,6 +17,7 @@
 //! covariances their meaning.
 
 use nalgebra::{Isometry3, Matrix6, Point3, Vector6};
+use rayon::prelude::*;
 
 use crate::error::{FusionError, Result};
 use crate::icp::degeneracy::orthonormal;
@@ -126,6 +127,11 @@ pub struct SetResult {
     /// is not trusted ([`untrusted`](Self::untrusted)). Empty where
     /// [`departure`](Self::departure) is.
     pub departure_chi2: Vec<f64>,
+    /// How far each departure moves the scan's points, metres: its
+    /// centroid's displacement plus the turn times their RMS radius (as
+    /// [`crate::verify::PairCheck::moved_m`] measures a pair). Empty where
+    /// [`departure`](Self::departure) is.
+    pub departure_m: Vec<f64>,
     /// Each scan's directions the matches do not see (unit ξ, world frame).
     pub unobservable: Vec<Vec<Vector6<f64>>>,
     /// The final stage's matches: the link graph's pairs, or each scan's
@@ -190,11 +196,16 @@ impl SetResult {
 
     /// In the modes without a link graph, the scans whose departure from
     /// the adjustment of the verification's matches is beyond
-    /// [`MAX_DEPARTURE_CHI2`](crate::verify::MAX_DEPARTURE_CHI2) in its σ:
-    /// the strategy settled in a compromise of its matches that no pair,
-    /// matched again alone, moves far enough to name.
+    /// [`MAX_DEPARTURE_CHI2`](crate::verify::MAX_DEPARTURE_CHI2) in its σ
+    /// *and* moves their points by more than the finest voxel (the
+    /// verification's tolerance for a pair): the strategy settled in a
+    /// compromise of its matches that no pair, matched again alone, moves
+    /// far enough to name.
     pub fn departed(&self) -> Vec<usize> {
-        (1..self.departure_chi2.len()).filter(|&i| self.departure_chi2[i] > crate::verify::MAX_DEPARTURE_CHI2).collect()
+        let tolerance = self.stages.last().map_or(0.0, |s| s.voxel_m);
+        (1..self.departure_chi2.len().min(self.departure_m.len()))
+            .filter(|&i| self.departure_chi2[i] > crate::verify::MAX_DEPARTURE_CHI2 && self.departure_m[i] > tolerance)
+            .collect()
     }
 }
 
@@ -518,6 +529,16 @@ fn verified<S: AsRef<[Point3<f32>]> + Sync>(scans: &[S], mut r: SetResult, confi
         r.covariance = a.covariance;
         r.departure = a.departure;
         r.departure_chi2 = a.departure_chi2;
+        r.departure_m = scans
+            .par_iter()
+            .zip(&r.world_from_scan)
+            .zip(&r.departure)
+            .map(|((s, pose), d)| {
+                let (c, radius) = crate::icp::degeneracy::centroid_and_lever_arm(s.as_ref());
+                let (w, v) = (d.fixed_rows::<3>(0), d.fixed_rows::<3>(3));
+                (w.cross(&(pose * c).coords) + v).norm() + w.norm() * radius
+            })
+            .collect();
     }
     r.check_seconds = started.elapsed().as_secs_f64();
     Ok(r)
@@ -1006,6 +1027,7 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
         covariance,
         departure: Vec::new(),
         departure_chi2: Vec::new(),
+        departure_m: Vec::new(),
         unobservable: last
             .last_match
             .iter()
@@ -1084,6 +1106,7 @@ fn from_graph(g: LinkGraph, matches: usize, settled: bool, stages: Vec<StageRun>
         covariance: g.covariance,
         departure: Vec::new(),
         departure_chi2: Vec::new(),
+        departure_m: Vec::new(),
         unobservable: g.unobservable,
         links: g
             .links
@@ -1196,6 +1219,7 @@ mod tests {
             covariance: vec![Matrix6::identity(); 4],
             departure: Vec::new(),
             departure_chi2: Vec::new(),
+            departure_m: Vec::new(),
             unobservable: vec![Vec::new(); 4],
             links: Vec::new(),
             matches: 0,
@@ -1216,10 +1240,20 @@ mod tests {
         // first scan (which holds the frame).
         let mut departed = result(true);
         departed.departure_chi2 = vec![5e3, 3.0, crate::verify::MAX_DEPARTURE_CHI2, 4744.0];
+        departed.departure_m = vec![1.0; 4];
+        departed.stages =
+            vec![StageRun { voxel_m: 0.05, max_correspondence_m: 0.2, matches: 3, seconds: 0.1, settled: true }];
         assert_eq!(departed.named(), [3]);
         assert_eq!(departed.untrusted(), [3]);
         let mut both = result(false);
         both.departure_chi2 = departed.departure_chi2.clone();
+        both.departure_m = departed.departure_m.clone();
+        both.stages = departed.stages.clone();
         assert_eq!(both.untrusted(), [2, 3]);
+        // Beyond the limit in σ but moving the points less than the finest
+        // voxel (a right pose whose pairs agree far more tightly, as
+        // overlaps that share their samples do): not named.
+        departed.departure_m[3] = 0.004;
+        assert!(departed.named().is_empty());
     }
 }

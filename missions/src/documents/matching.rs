@@ -246,7 +246,8 @@ pub struct RestartReport {
     /// The scans the verification names at the schedule's poses (indices
     /// into `scans`): by their pairs (`checks`), or in the modes without a
     /// link graph by their departure from where those pairs agree (above
-    /// 1,000 σ², as `scans[].departure_chi2`); null when the schedule
+    /// 1,500 σ² and the finest voxel, as `scans[].departure_chi2` and
+    /// `departure_m`); null when the schedule
     /// failed.
     pub schedule_untrusted: Option<Vec<usize>>,
     /// The same at the restart's poses; null when the restart failed, or
@@ -407,10 +408,15 @@ pub struct ScanReport {
     pub departure: Option<[f64; 6]>,
     /// The departure in the σ of the adjustment it departs from:
     /// ξᵀ·C⁺·ξ, C the adjustment's covariance (this covariance less ξξᵀ).
-    /// Above 1,000 the strategy stopped in a compromise of its matches
-    /// apart from where its pairs agree: the scan is in `untrusted`, exit
-    /// 1 (docs/match.md). Null where `departure` is.
+    /// Above 1,500 — with `departure_m` above the finest voxel — the
+    /// strategy stopped in a compromise of its matches apart from where
+    /// its pairs agree: the scan is in `untrusted`, exit 1
+    /// (docs/match.md). Null where `departure` is.
     pub departure_chi2: Option<f64>,
+    /// How far the departure moves the scan's points, metres: its
+    /// centroid's displacement plus the turn times their RMS radius (as
+    /// `checks[].moved_m`). Null where `departure` is.
+    pub departure_m: Option<f64>,
     /// Directions the matches cannot see (unit vectors in the order and
     /// frame of the covariance): held where the start put them, their σ
     /// the start's.

@@ -37,6 +37,7 @@ pub(super) fn report(
                     covariance: rows(&c),
                     departure: r.departure.get(i).map(|d| std::array::from_fn(|k| d[k])),
                     departure_chi2: r.departure_chi2.get(i).copied(),
+                    departure_m: r.departure_m.get(i).copied(),
                     degenerate_directions: directions(&r.unobservable[i]),
                 }
             })

@@ -2,7 +2,7 @@
 
 use std::io::Write;
 
-use crate::documents::matching::{CheckReport, MatchReport, StageReport};
+use crate::documents::matching::{CheckReport, MatchReport, ScanReport, StageReport};
 use crate::scans::inputs::InputScan;
 
 pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &MatchReport) -> std::io::Result<()> {
@@ -178,7 +178,8 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
     for &i in &report.untrusted {
         let undecided =
             report.restart.iter().filter(|r| !r.corroborated).flat_map(|r| &r.undecided).any(|u| u.scan == i);
-        let departed = why_departed(out, scans, report, i)?;
+        let departed =
+            report.scans.get(i).map_or(Ok(false), |s| why_departed(out, &scans[i].name, &report.mode, s, tolerance))?;
         why_untrusted(out, scans, &report.checks, &report.untrusted, i, undecided || departed, tolerance)?;
     }
     for l in report.links.iter().filter(|l| !l.accepted || l.cycle.is_some()) {
@@ -226,11 +227,12 @@ pub(super) fn unlinked(report: &MatchReport) -> Vec<usize> {
 }
 
 /// Whether scan `i` departs from where the verification's matches agree
-/// by more than [`fusion::verify::MAX_DEPARTURE_CHI2`] in their σ (the
-/// modes without a link graph), and if so the message that says so.
-fn why_departed(out: &mut dyn Write, scans: &[InputScan], report: &MatchReport, i: usize) -> std::io::Result<bool> {
-    let Some((d, t)) = report.scans.get(i).and_then(|s| s.departure.zip(s.departure_chi2)) else { return Ok(false) };
-    if t <= fusion::verify::MAX_DEPARTURE_CHI2 {
+/// by more than [`fusion::verify::MAX_DEPARTURE_CHI2`] in their σ and
+/// `tolerance` (the finest voxel) in its points' motion (the modes
+/// without a link graph), and if so the message that says so.
+fn why_departed(out: &mut dyn Write, name: &str, mode: &str, s: &ScanReport, tolerance: f64) -> std::io::Result<bool> {
+    let (Some(d), Some(t), Some(moved)) = (s.departure, s.departure_chi2, s.departure_m) else { return Ok(false) };
+    if t <= fusion::verify::MAX_DEPARTURE_CHI2 || moved <= tolerance {
         return Ok(false);
     }
     let (turn, shift) =
@@ -238,10 +240,10 @@ fn why_departed(out: &mut dyn Write, scans: &[InputScan], report: &MatchReport, 
     writeln!(
         out,
         "  not trusted: {}: {} matching stopped {:.3}°, {:.1} mm from where its verified pairs agree ({t:.0} σ² of \
-         their adjustment, above {}): a compromise of its matches that no pair alone names; graph mode places the \
-         scans where their pairs agree",
-        scans[i].name,
-        report.mode,
+         their adjustment, above {}; its points {moved:.3} m, beyond {tolerance:.3} m): a compromise of its matches \
+         that no pair alone names; graph mode places the scans where their pairs agree",
+        name,
+        mode,
         turn.to_degrees(),
         shift * 1e3,
         fusion::verify::MAX_DEPARTURE_CHI2
@@ -373,6 +375,38 @@ mod tests {
         assert_eq!(c, "  not trusted: c: it agrees only with scans named here (b): nothing verified ties it to a\n");
         // Left undecided by the restart, it is said there instead.
         assert_eq!(why(&checks, &named, 2, true), "");
+    }
+
+    /// A departure beyond the limit in σ² and the voxel in motion is said
+    /// with its size; within either, nothing.
+    #[test]
+    fn a_departure_from_where_the_pairs_agree_says_how_far() {
+        let scan = |chi2: f64, moved: f64| ScanReport {
+            file: "b.ply".into(),
+            name: "b".into(),
+            number: 1,
+            world_from_scan: [[0.0; 4]; 4],
+            covariance: [[0.0; 6]; 6],
+            departure: Some([0.012, 0.0, 0.0, 0.0, 0.016, 0.0]),
+            departure_chi2: Some(chi2),
+            departure_m: Some(moved),
+            degenerate_directions: Vec::new(),
+        };
+        let said = |s: &ScanReport| {
+            let mut out = Vec::new();
+            let departed = why_departed(&mut out, "b", "simultaneous", s, 0.04).expect("written");
+            (departed, String::from_utf8(out).expect("UTF-8"))
+        };
+        let (departed, text) = said(&scan(4744.0, 0.14));
+        assert!(departed);
+        assert_eq!(
+            text,
+            "  not trusted: b: simultaneous matching stopped 0.688°, 16.0 mm from where its verified pairs agree (4744 \
+             σ² of their adjustment, above 1500; its points 0.140 m, beyond 0.040 m): a compromise of its matches \
+             that no pair alone names; graph mode places the scans where their pairs agree\n"
+        );
+        assert_eq!(said(&scan(1400.0, 0.14)), (false, String::new()));
+        assert_eq!(said(&scan(4744.0, 0.004)), (false, String::new()));
     }
 
     #[test]
