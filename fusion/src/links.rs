@@ -226,7 +226,69 @@ pub fn adjust<S: AsRef<[Point3<f32>]> + Sync>(
     let prepared = prepare(scans, &config.multiview)?;
     let links = pair_links(&prepared, poses, config, progress);
     let shape: Vec<(Point3<f64>, f64)> = prepared.iter().map(|p| centroid_and_lever_arm(&p.source)).collect();
-    solve(poses, starts, links, &shape, config)
+    let shared = shared_shares(&prepared, poses, &links, config);
+    solve(poses, starts, links, &shape, &shared, config)
+}
+
+/// Each scan's links' footprint overlap: how much one link's footprint
+/// on the scan — its points within the overlap distance of the partner at
+/// `poses`, counted in cubes of twice that distance in the scan's frame —
+/// its other links share, the mean over its pairs of links of the counts'
+/// cosine Σ a·b / √(Σ a² · Σ b²): 1 for random shares of one scan, whose
+/// every link uses all of it; about 0 for wedges, each of whose links
+/// uses another part; and 1 for a scan with one link. A scan's own noise
+/// is common to its links in that share ([`shared_noise`]).
+fn shared_shares(prepared: &[Prepared], poses: &[Isometry3<f64>], links: &[Link], config: &LinkConfig) -> Vec<f64> {
+    use std::collections::HashMap;
+    type Footprint = HashMap<(i64, i64, i64), f64>;
+    let mv = &config.multiview;
+    let overlap_m = mv.overlap_m.unwrap_or(mv.icp.max_correspondence_m);
+    let cell = 2.0 * overlap_m;
+    let key = |p: &Point3<f64>| -> (i64, i64, i64) {
+        ((p.x / cell).floor() as i64, (p.y / cell).floor() as i64, (p.z / cell).floor() as i64)
+    };
+    // Each link's footprint on its source and on its target.
+    let footprints: Vec<(usize, usize, Footprint, Footprint)> = links
+        .par_iter()
+        .filter(|l| l.rejected.is_none())
+        .map(|l| {
+            let source = &prepared[l.source].source;
+            let target_from_source = poses[l.target].inverse() * poses[l.source];
+            let partners = Partners::at(source, &prepared[l.target].local, &target_from_source);
+            let (mut on_source, mut on_target) = (Footprint::new(), Footprint::new());
+            for (i, p) in source.iter().enumerate() {
+                if partners.is_within(i, overlap_m) {
+                    let p = p.cast::<f64>();
+                    *on_source.entry(key(&p)).or_default() += 1.0;
+                    *on_target.entry(key(&(target_from_source * p))).or_default() += 1.0;
+                }
+            }
+            (l.source, l.target, on_source, on_target)
+        })
+        .collect();
+    let mut of_scan: Vec<Vec<&Footprint>> = vec![Vec::new(); prepared.len()];
+    for (s, t, a, b) in &footprints {
+        of_scan[*s].push(a);
+        of_scan[*t].push(b);
+    }
+    let cosine = |a: &Footprint, b: &Footprint| {
+        let dot: f64 = a.iter().filter_map(|(k, x)| b.get(k).map(|y| x * y)).sum();
+        let norm = (a.values().map(|x| x * x).sum::<f64>() * b.values().map(|x| x * x).sum::<f64>()).sqrt();
+        if norm > 0.0 { dot / norm } else { 0.0 }
+    };
+    of_scan
+        .iter()
+        .map(|sets| {
+            let (mut sum, mut pairs) = (0.0, 0usize);
+            for (k, a) in sets.iter().enumerate() {
+                for b in &sets[k + 1..] {
+                    sum += cosine(a, b);
+                    pairs += 1;
+                }
+            }
+            if pairs == 0 { 1.0 } else { sum / pairs as f64 }
+        })
+        .collect()
 }
 
 /// Every pair of `prepared` scans whose boxes meet at `poses` and that share
@@ -494,7 +556,8 @@ pub fn adjust_matches(
     all.extend_from_slice(edges);
     let g = crate::graph::optimize(poses, &priors, &all, 20)?;
     let variance_factor = judged(&g.world_from_scan, edges).variance_factor;
-    let adjusted = adjusted_covariance(&g.world_from_scan, &priors, &all, steps, noise, bias, variance_factor)?;
+    let agreement = Agreement { variance_factor, shared: &[] };
+    let adjusted = adjusted_covariance(&g.world_from_scan, &priors, &all, steps, noise, bias, &agreement)?;
     // Scan 0's prior leaves it within 1e-20 m of its pose: the departures
     // are the others'.
     let departure: Vec<Vector6<f64>> = poses
@@ -585,6 +648,7 @@ fn solve(
     starts: &[Isometry3<f64>],
     mut links: Vec<Link>,
     shape: &[(Point3<f64>, f64)],
+    shared: &[f64],
     config: &LinkConfig,
 ) -> Result<LinkGraph> {
     let n = poses.len();
@@ -712,8 +776,15 @@ fn solve(
                 (link_noise(&r.information, r.range_covariance, config.range_scale), r.edge_bias)
             })
             .unzip();
-        let covariance =
-            adjusted_covariance(&g.world_from_scan, &priors, &edges, steps.len(), &noise, &bias, variance_factor)?;
+        let covariance = adjusted_covariance(
+            &g.world_from_scan,
+            &priors,
+            &edges,
+            steps.len(),
+            &noise,
+            &bias,
+            &Agreement { variance_factor, shared },
+        )?;
         // Scan 0's prior leaves it within 1e-20 m of its pose: put it there.
         let shift = poses[0] * g.world_from_scan[0].inverse();
         return Ok(LinkGraph {
@@ -758,13 +829,23 @@ fn adjusted_covariance(
     steps: usize,
     noise: &[Matrix6<f64>],
     bias: &[Vector6<f64>],
-    variance_factor: f64,
+    agreement: &Agreement,
 ) -> Result<Vec<Matrix6<f64>>> {
+    let (variance_factor, shared) = (agreement.variance_factor, agreement.shared);
     let f = noise_factor(variance_factor);
     let mut covariances = vec![None; steps];
     covariances.extend(noise.iter().zip(bias).map(|(c, d)| Some(c * f + d * d.transpose())));
     let covariance = crate::graph::sandwich_covariance(poses, priors, edges, &covariances)?;
-    Ok(if f < 1.0 { shared_noise(poses, covariance, &edges[steps..], noise, f) } else { covariance })
+    Ok(if f < 1.0 { shared_noise(poses, covariance, &edges[steps..], noise, f, shared) } else { covariance })
+}
+
+/// What the links' agreement says of their noise ([`adjusted_covariance`]).
+struct Agreement<'a> {
+    /// σ̂₀².
+    variance_factor: f64,
+    /// Each scan's links' footprint overlap ([`shared_shares`]); empty: 1
+    /// for every scan.
+    shared: &'a [f64],
 }
 
 /// The least share of the links' noise taken as independent ([`shared_noise`]).
@@ -805,13 +886,17 @@ fn noise_factor(variance_factor: f64) -> f64 {
 /// share S_k — the mean over its links of ½(1 − σ̂₀²)·C, in world axes — passes
 /// through it whole, as does the first scan's, against which every pose
 /// is: P_k = independent_k + S_k + S_0. Four parts of one scan, all
-/// linked, were up to 2× optimistic without it (BENCHMARKS.md).
+/// linked, were up to 2× optimistic without it (BENCHMARKS.md). S_k is
+/// weighed by `shared[k]` (1 where missing): how far scan k's links use
+/// the same part of it ([`shared_shares`]) — wedges' links use each
+/// another part, and their whole S_k made them 2.35× pessimistic.
 fn shared_noise(
     poses: &[Isometry3<f64>],
     independent: Vec<Matrix6<f64>>,
     links: &[Edge],
     noise: &[Matrix6<f64>],
     independent_share: f64,
+    shared: &[f64],
 ) -> Vec<Matrix6<f64>> {
     let n = poses.len();
     let mut own = vec![Matrix6::zeros(); n];
@@ -826,8 +911,8 @@ fn shared_noise(
             count[k] += 1;
         }
     }
-    for (s, &c) in own.iter_mut().zip(&count) {
-        *s /= c.max(1) as f64;
+    for (k, (s, &c)) in own.iter_mut().zip(&count).enumerate() {
+        *s *= shared.get(k).copied().unwrap_or(1.0) / c.max(1) as f64;
     }
     independent.into_iter().enumerate().map(|(k, p)| if k == 0 { p } else { p + own[k] + own[0] }).collect()
 }
@@ -883,7 +968,7 @@ mod tests {
         let noise = vec![information.try_inverse().expect("invertible"); edges.len()];
         let scaled: Vec<Option<Matrix6<f64>>> = noise.iter().map(|c| Some(c * factor)).collect();
         let independent = crate::graph::sandwich_covariance(&poses, &priors, &edges, &scaled).expect("adjusts");
-        let shared = shared_noise(&poses, independent, &edges, &noise, factor);
+        let shared = shared_noise(&poses, independent, &edges, &noise, factor, &[]);
         for k in 1..n {
             for d in 0..6 {
                 let (mc, model, naive) = (scatter[k][(d, d)], shared[k][(d, d)], plain[k][(d, d)]);
@@ -971,6 +1056,74 @@ mod tests {
     /// the links' — counting the start's steps as observations halved it
     /// on four fully linked scans. A tree of links has none: its factor is
     /// 1 whatever the measurements.
+    /// A room's walls, floor and ceiling (8 × 6 × 3 m) sampled every 5 cm
+    /// about the scanner at its centre.
+    fn room() -> Vec<Point3<f32>> {
+        let mut points = Vec::new();
+        let step = 0.05;
+        let (hx, hy, hz) = (4.0f32, 3.0f32, 1.5f32);
+        let grid = |a: f32, b: f32| {
+            let (na, nb) = ((2.0 * a / step) as i32, (2.0 * b / step) as i32);
+            (0..=na).flat_map(move |i| (0..=nb).map(move |j| (-a + i as f32 * step, -b + j as f32 * step)))
+        };
+        for (y, z) in grid(hy, hz) {
+            points.extend([Point3::new(-hx, y, z), Point3::new(hx, y, z)]);
+        }
+        for (x, z) in grid(hx, hz) {
+            points.extend([Point3::new(x, -hy, z), Point3::new(x, hy, z)]);
+        }
+        for (x, y) in grid(hx, hy) {
+            points.extend([Point3::new(x, y, -hz), Point3::new(x, y, hz)]);
+        }
+        points
+    }
+
+    /// Random shares of one scan share their footprints wholly — every
+    /// link uses all of the scan — and wedges hardly: each link of a wedge
+    /// uses the side it shares with that neighbour.
+    #[test]
+    fn shares_share_their_links_footprints_and_wedges_do_not() {
+        let points = room();
+        let config = LinkConfig::default();
+        let poses = vec![Isometry3::identity(); 4];
+        let all_pairs: Vec<(usize, usize)> = (0..4).flat_map(|j| (j + 1..4).map(move |i| (j, i))).collect();
+        let shares: Vec<Vec<Point3<f32>>> = (0..4)
+            .map(|k| {
+                points
+                    .iter()
+                    .enumerate()
+                    .filter(|(i, _)| (*i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 62 == k)
+                    .map(|(_, p)| *p)
+                    .collect()
+            })
+            .collect();
+        let prepared = prepare(&shares, &config.multiview).expect("prepared");
+        let rho = shared_shares(&prepared, &poses, &links(&all_pairs), &config);
+        assert!(rho.iter().all(|&r| r > 0.9), "{rho:?}");
+        // Four 150° wedges about the vertical, centred 90° apart: each
+        // overlaps its two neighbours, on either side.
+        let wedges: Vec<Vec<Point3<f32>>> = (0..4)
+            .map(|k| {
+                let centre = std::f32::consts::FRAC_PI_2 * k as f32;
+                points
+                    .iter()
+                    .filter(|p| {
+                        let d = p.y.atan2(p.x) - centre;
+                        d.sin().atan2(d.cos()).abs() <= 75f32.to_radians()
+                    })
+                    .copied()
+                    .collect()
+            })
+            .collect();
+        let prepared = prepare(&wedges, &config.multiview).expect("prepared");
+        let rho = shared_shares(&prepared, &poses, &links(&[(0, 1), (1, 2), (2, 3), (0, 3)]), &config);
+        assert!(rho.iter().all(|&r| r < 0.2), "{rho:?}");
+        // A scan with one link has nothing to share it with: 1.
+        let rho = shared_shares(&prepared, &poses, &links(&[(0, 1), (1, 2)]), &config);
+        assert_eq!((rho[0], rho[2]), (1.0, 1.0), "{rho:?}");
+        assert!(rho[1] < 0.2, "{rho:?}");
+    }
+
     #[test]
     fn the_variance_factor_of_honest_links_is_one_on_average() {
         use rand::SeedableRng;

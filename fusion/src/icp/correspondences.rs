@@ -141,6 +141,14 @@ impl Partners {
         self.known_sq.as_ref().map_or(0, |k| k.iter().filter(|&&d2| f64::from(d2) <= max_sq).count())
     }
 
+    /// Whether source point `i`'s nearest target point lies within
+    /// `max_distance_m` (false when not known).
+    pub(crate) fn is_within(&self, i: usize, max_distance_m: f64) -> bool {
+        self.known_sq
+            .as_ref()
+            .is_some_and(|k| k.get(i).is_some_and(|&d2| f64::from(d2) <= max_distance_m * max_distance_m))
+    }
+
     /// Number of source points.
     pub(crate) fn len(&self) -> usize {
         self.nearest.len()
