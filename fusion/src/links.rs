@@ -1051,11 +1051,6 @@ mod tests {
             .expect("adjusted")
     }
 
-    /// Links measured with exactly the noise their information states give
-    /// a variance factor whose mean is 1 (Monte Carlo): the redundancy is
-    /// the links' — counting the start's steps as observations halved it
-    /// on four fully linked scans. A tree of links has none: its factor is
-    /// 1 whatever the measurements.
     /// A room's walls, floor and ceiling (8 × 6 × 3 m) sampled every 5 cm
     /// about the scanner at its centre.
     fn room() -> Vec<Point3<f32>> {
@@ -1124,6 +1119,11 @@ mod tests {
         assert!(rho[1] < 0.2, "{rho:?}");
     }
 
+    /// Links measured with exactly the noise their information states give
+    /// a variance factor whose mean is 1 (Monte Carlo): the redundancy is
+    /// the links' — counting the start's steps as observations halved it
+    /// on four fully linked scans. A tree of links has none: its factor is
+    /// 1 whatever the measurements.
     #[test]
     fn the_variance_factor_of_honest_links_is_one_on_average() {
         use rand::SeedableRng;

@@ -132,6 +132,13 @@ pub struct SetResult {
     /// [`crate::verify::PairCheck::moved_m`] measures a pair). Empty where
     /// [`departure`](Self::departure) is.
     pub departure_m: Vec<f64>,
+    /// The scans whose departure is beyond
+    /// [`MAX_DEPARTURE_CHI2`](crate::verify::MAX_DEPARTURE_CHI2) in its σ
+    /// *and* moves their points by more than the finest voxel (the
+    /// verification's tolerance for a pair): the
+    /// strategy settled in a compromise of its matches that no pair,
+    /// matched again alone, moves far enough to name. Empty in graph mode.
+    pub departed: Vec<usize>,
     /// Each scan's directions the matches do not see (unit ξ, world frame).
     pub unobservable: Vec<Vec<Vector6<f64>>>,
     /// The final stage's matches: the link graph's pairs, or each scan's
@@ -188,24 +195,10 @@ impl SetResult {
     /// the restarts judge a registration by ([`Restart`]).
     pub fn named(&self) -> Vec<usize> {
         let mut named = crate::verify::untrusted(self.world_from_scan.len(), &self.checks);
-        named.extend(self.departed());
+        named.extend(&self.departed);
         named.sort_unstable();
         named.dedup();
         named
-    }
-
-    /// In the modes without a link graph, the scans whose departure from
-    /// the adjustment of the verification's matches is beyond
-    /// [`MAX_DEPARTURE_CHI2`](crate::verify::MAX_DEPARTURE_CHI2) in its σ
-    /// *and* moves their points by more than the finest voxel (the
-    /// verification's tolerance for a pair): the strategy settled in a
-    /// compromise of its matches that no pair, matched again alone, moves
-    /// far enough to name.
-    pub fn departed(&self) -> Vec<usize> {
-        let tolerance = self.stages.last().map_or(0.0, |s| s.voxel_m);
-        (1..self.departure_chi2.len().min(self.departure_m.len()))
-            .filter(|&i| self.departure_chi2[i] > crate::verify::MAX_DEPARTURE_CHI2 && self.departure_m[i] > tolerance)
-            .collect()
     }
 }
 
@@ -539,9 +532,22 @@ fn verified<S: AsRef<[Point3<f32>]> + Sync>(scans: &[S], mut r: SetResult, confi
                 (w.cross(&(pose * c).coords) + v).norm() + w.norm() * radius
             })
             .collect();
+        let tolerance = finest_link(config).map_or(0.0, |(finest, _)| finest.voxel_m);
+        r.departed = departed_scans(&r.departure_chi2, &r.departure_m, tolerance);
     }
     r.check_seconds = started.elapsed().as_secs_f64();
     Ok(r)
+}
+
+/// The scans (after the first, which holds the frame) whose departure
+/// from where their verified pairs agree is beyond
+/// [`MAX_DEPARTURE_CHI2`](crate::verify::MAX_DEPARTURE_CHI2) in that
+/// agreement's σ (`chi2`) and moves their points (`moved_m`) by more than
+/// `tolerance_m` ([`SetResult::departed`]).
+fn departed_scans(chi2: &[f64], moved_m: &[f64], tolerance_m: f64) -> Vec<usize> {
+    (1..chi2.len().min(moved_m.len()))
+        .filter(|&i| chi2[i] > crate::verify::MAX_DEPARTURE_CHI2 && moved_m[i] > tolerance_m)
+        .collect()
 }
 
 /// The set's final poses checked against its data at the finest stage,
@@ -1028,6 +1034,7 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
         departure: Vec::new(),
         departure_chi2: Vec::new(),
         departure_m: Vec::new(),
+        departed: Vec::new(),
         unobservable: last
             .last_match
             .iter()
@@ -1107,6 +1114,7 @@ fn from_graph(g: LinkGraph, matches: usize, settled: bool, stages: Vec<StageRun>
         departure: Vec::new(),
         departure_chi2: Vec::new(),
         departure_m: Vec::new(),
+        departed: Vec::new(),
         unobservable: g.unobservable,
         links: g
             .links
@@ -1220,6 +1228,7 @@ mod tests {
             departure: Vec::new(),
             departure_chi2: Vec::new(),
             departure_m: Vec::new(),
+            departed: Vec::new(),
             unobservable: vec![Vec::new(); 4],
             links: Vec::new(),
             matches: 0,
@@ -1238,22 +1247,18 @@ mod tests {
         // the limit is named — by the verification, as the restarts judge
         // — whatever the restart says; at the limit it is not, nor is the
         // first scan (which holds the frame).
+        let (chi2, moved) = ([5e3, 3.0, crate::verify::MAX_DEPARTURE_CHI2, 4744.0], [1.0; 4]);
+        assert_eq!(departed_scans(&chi2, &moved, 0.05), [3]);
         let mut departed = result(true);
-        departed.departure_chi2 = vec![5e3, 3.0, crate::verify::MAX_DEPARTURE_CHI2, 4744.0];
-        departed.departure_m = vec![1.0; 4];
-        departed.stages =
-            vec![StageRun { voxel_m: 0.05, max_correspondence_m: 0.2, matches: 3, seconds: 0.1, settled: true }];
+        departed.departed = departed_scans(&chi2, &moved, 0.05);
         assert_eq!(departed.named(), [3]);
         assert_eq!(departed.untrusted(), [3]);
         let mut both = result(false);
-        both.departure_chi2 = departed.departure_chi2.clone();
-        both.departure_m = departed.departure_m.clone();
-        both.stages = departed.stages.clone();
+        both.departed = departed.departed.clone();
         assert_eq!(both.untrusted(), [2, 3]);
         // Beyond the limit in σ but moving the points less than the finest
         // voxel (a right pose whose pairs agree far more tightly, as
         // overlaps that share their samples do): not named.
-        departed.departure_m[3] = 0.004;
-        assert!(departed.named().is_empty());
+        assert!(departed_scans(&chi2, &[1.0, 1.0, 1.0, 0.004], 0.05).is_empty());
     }
 }
