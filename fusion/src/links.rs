@@ -570,11 +570,9 @@ pub fn adjust_matches(
         .iter()
         .zip(&departure)
         .enumerate()
-        .map(|(i, (c, d))| {
-            let inverse =
-                (0.5 * (c + c.transpose())).pseudo_inverse(1e-12 * c.amax()).unwrap_or_else(|_| Matrix6::zeros());
-            if i == 0 { 0.0 } else { (d.transpose() * inverse * d)[(0, 0)] }
-        })
+        .map(
+            |(i, (c, d))| if i == 0 { 0.0 } else { (d.transpose() * crate::icp::solve::pseudo_inverse(c) * d)[(0, 0)] },
+        )
         .collect();
     let covariance = adjusted
         .into_iter()

@@ -545,9 +545,15 @@ fn verified<S: AsRef<[Point3<f32>]> + Sync>(scans: &[S], mut r: SetResult, confi
 /// agreement's σ (`chi2`) and moves their points (`moved_m`) by more than
 /// `tolerance_m` ([`SetResult::departed`]).
 fn departed_scans(chi2: &[f64], moved_m: &[f64], tolerance_m: f64) -> Vec<usize> {
-    (1..chi2.len().min(moved_m.len()))
-        .filter(|&i| chi2[i] > crate::verify::MAX_DEPARTURE_CHI2 && moved_m[i] > tolerance_m)
-        .collect()
+    (1..chi2.len().min(moved_m.len())).filter(|&i| departs(chi2[i], moved_m[i], tolerance_m)).collect()
+}
+
+/// Whether a departure of `chi2` in its adjustment's σ, moving the scan's
+/// points by `moved_m`, names the scan: beyond
+/// [`MAX_DEPARTURE_CHI2`](crate::verify::MAX_DEPARTURE_CHI2) and beyond
+/// `tolerance_m` (the finest voxel).
+pub fn departs(chi2: f64, moved_m: f64, tolerance_m: f64) -> bool {
+    chi2 > crate::verify::MAX_DEPARTURE_CHI2 && moved_m > tolerance_m
 }
 
 /// The set's final poses checked against its data at the finest stage,

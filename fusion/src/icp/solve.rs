@@ -385,7 +385,7 @@ fn edge_bias(sums: &Sums, unobservable: &[Vector6<f64>]) -> Vector6<f64> {
 
 /// The pseudo-inverse of a symmetric 6×6, singular values below 1e-12 of
 /// the largest left out (zero when it cannot be formed).
-fn pseudo_inverse(m: &Matrix6<f64>) -> Matrix6<f64> {
+pub(crate) fn pseudo_inverse(m: &Matrix6<f64>) -> Matrix6<f64> {
     (0.5 * (m + m.transpose())).pseudo_inverse(1e-12 * m.amax()).unwrap_or_else(|_| Matrix6::zeros())
 }
 

@@ -232,7 +232,7 @@ pub(super) fn unlinked(report: &MatchReport) -> Vec<usize> {
 /// without a link graph), and if so the message that says so.
 fn why_departed(out: &mut dyn Write, name: &str, mode: &str, s: &ScanReport, tolerance: f64) -> std::io::Result<bool> {
     let (Some(d), Some(t), Some(moved)) = (s.departure, s.departure_chi2, s.departure_m) else { return Ok(false) };
-    if t <= fusion::verify::MAX_DEPARTURE_CHI2 || moved <= tolerance {
+    if !fusion::scanset::departs(t, moved, tolerance) {
         return Ok(false);
     }
     let (turn, shift) =
