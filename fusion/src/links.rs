@@ -224,52 +224,63 @@ pub fn adjust<S: AsRef<[Point3<f32>]> + Sync>(
         return Err(FusionError::OutOfRange { what: "partners per scan".into(), value: 0.0, expected: "≥ 1".into() });
     }
     let prepared = prepare(scans, &config.multiview)?;
-    let links = pair_links(&prepared, poses, config, progress);
+    let Paired { links, footprints } = pair_links(&prepared, poses, config, progress);
     let shape: Vec<(Point3<f64>, f64)> = prepared.iter().map(|p| centroid_and_lever_arm(&p.source)).collect();
-    let shared = shared_shares(&prepared, poses, &links, config);
+    let shared = shared_shares(prepared.len(), &links, &footprints);
     solve(poses, starts, links, &shape, &shared, config)
 }
 
-/// Each scan's links' footprint overlap: how much one link's footprint
-/// on the scan — its points within the overlap distance of the partner at
-/// `poses`, counted in cubes of twice that distance in the scan's frame —
-/// its other links share, the mean over its pairs of links of the counts'
-/// cosine Σ a·b / √(Σ a² · Σ b²): 1 for random shares of one scan, whose
-/// every link uses all of it; about 0 for wedges, each of whose links
-/// uses another part; and 1 for a scan with one link. A scan's own noise
-/// is common to its links in that share ([`shared_noise`]).
-fn shared_shares(prepared: &[Prepared], poses: &[Isometry3<f64>], links: &[Link], config: &LinkConfig) -> Vec<f64> {
-    use std::collections::HashMap;
-    type Footprint = HashMap<(i64, i64, i64), f64>;
-    let mv = &config.multiview;
-    let overlap_m = mv.overlap_m.unwrap_or(mv.icp.max_correspondence_m);
+/// A link's footprint on one of its scans: the scan's points within the
+/// overlap distance of the partner, counted in cubes of twice that
+/// distance in the scan's frame ([`shared_shares`]).
+pub(crate) type Footprint = std::collections::HashMap<(i64, i64, i64), f64>;
+
+/// What [`pair_links`] returns.
+pub(crate) struct Paired {
+    /// The links, in order of (source, target).
+    pub links: Vec<Link>,
+    /// Each link's footprints on its source and on its target, at the
+    /// poses they were paired at.
+    pub footprints: Vec<[Footprint; 2]>,
+}
+
+/// The footprints of a link on its source and its target
+/// (`target_from_source`), from the source points' nearest target points
+/// (`partners`) found there: the source points within `overlap_m`, in
+/// the source's frame and in the target's.
+fn footprints(
+    source: &[Point3<f32>],
+    target_from_source: &Isometry3<f64>,
+    partners: &Partners,
+    overlap_m: f64,
+) -> [Footprint; 2] {
     let cell = 2.0 * overlap_m;
     let key = |p: &Point3<f64>| -> (i64, i64, i64) {
         ((p.x / cell).floor() as i64, (p.y / cell).floor() as i64, (p.z / cell).floor() as i64)
     };
-    // Each link's footprint on its source and on its target.
-    let footprints: Vec<(usize, usize, Footprint, Footprint)> = links
-        .par_iter()
-        .filter(|l| l.rejected.is_none())
-        .map(|l| {
-            let source = &prepared[l.source].source;
-            let target_from_source = poses[l.target].inverse() * poses[l.source];
-            let partners = Partners::at(source, &prepared[l.target].local, &target_from_source);
-            let (mut on_source, mut on_target) = (Footprint::new(), Footprint::new());
-            for (i, p) in source.iter().enumerate() {
-                if partners.is_within(i, overlap_m) {
-                    let p = p.cast::<f64>();
-                    *on_source.entry(key(&p)).or_default() += 1.0;
-                    *on_target.entry(key(&(target_from_source * p))).or_default() += 1.0;
-                }
-            }
-            (l.source, l.target, on_source, on_target)
-        })
-        .collect();
-    let mut of_scan: Vec<Vec<&Footprint>> = vec![Vec::new(); prepared.len()];
-    for (s, t, a, b) in &footprints {
-        of_scan[*s].push(a);
-        of_scan[*t].push(b);
+    let (mut on_source, mut on_target) = (Footprint::new(), Footprint::new());
+    for (i, p) in source.iter().enumerate() {
+        if partners.is_within(i, overlap_m) {
+            let p = p.cast::<f64>();
+            *on_source.entry(key(&p)).or_default() += 1.0;
+            *on_target.entry(key(&(target_from_source * p))).or_default() += 1.0;
+        }
+    }
+    [on_source, on_target]
+}
+
+/// Each of `n` scans' links' footprint overlap: how much one used link's
+/// footprint on the scan (`footprints`, [`pair_links`]) its other used
+/// links share, the mean over its pairs of links of the counts' cosine
+/// Σ a·b / √(Σ a² · Σ b²): 1 for random shares of one scan, whose every
+/// link uses all of it; about 0 for wedges, each of whose links uses
+/// another part; and 1 for a scan with one link. A scan's own noise is
+/// common to its links in that share ([`shared_noise`]).
+pub(crate) fn shared_shares(n: usize, links: &[Link], footprints: &[[Footprint; 2]]) -> Vec<f64> {
+    let mut of_scan: Vec<Vec<&Footprint>> = vec![Vec::new(); n];
+    for (l, [on_source, on_target]) in links.iter().zip(footprints).filter(|(l, _)| l.rejected.is_none()) {
+        of_scan[l.source].push(on_source);
+        of_scan[l.target].push(on_target);
     }
     let cosine = |a: &Footprint, b: &Footprint| {
         let dot: f64 = a.iter().filter_map(|(k, x)| b.get(k).map(|y| x * y)).sum();
@@ -294,14 +305,14 @@ fn shared_shares(prepared: &[Prepared], poses: &[Isometry3<f64>], links: &[Link]
 /// Every pair of `prepared` scans whose boxes meet at `poses` and that share
 /// more than `min_pairs` correspondences there (each scan with its
 /// `max_partners` best-overlapping earlier scans), matched from those poses:
-/// the links, in order of (source, target). `progress(done, total)` as in
-/// [`adjust`].
+/// the links, in order of (source, target), with their footprints there
+/// ([`footprints`]). `progress(done, total)` as in [`adjust`].
 pub(crate) fn pair_links(
     prepared: &[Prepared],
     poses: &[Isometry3<f64>],
     config: &LinkConfig,
     progress: &mut dyn FnMut(usize, usize),
-) -> Vec<Link> {
+) -> Paired {
     let mv = &config.multiview;
     let n = prepared.len();
     let overlap_m = mv.overlap_m.unwrap_or(mv.icp.max_correspondence_m);
@@ -342,7 +353,7 @@ pub(crate) fn pair_links(
     let total: usize = earlier.iter().map(Vec::len).sum();
     let mut done = 0;
     progress(0, total);
-    let mut links = Vec::new();
+    let (mut links, mut prints) = (Vec::new(), Vec::new());
     // Scan by scan: the overlap with every earlier scan counted (each
     // source point's nearest neighbour searched once and kept), then the
     // best-overlapping ones matched from those same neighbours.
@@ -359,10 +370,11 @@ pub(crate) fn pair_links(
         found.sort_by_key(|&(j, overlap, _)| std::cmp::Reverse((overlap, j)));
         found.truncate(config.max_partners);
         found.sort_by_key(|&(j, _, _)| j);
-        let matched: Vec<Link> = found
+        let matched: Vec<(Link, [Footprint; 2])> = found
             .into_par_iter()
             .map(|(j, overlap, partners)| {
                 let init = poses[j].inverse() * poses[c];
+                let footprints = footprints(source, &init, &partners, overlap_m);
                 let target = &prepared[j].local;
                 let r = if config.both_ways && mv.icp.method == Method::PointToPlane {
                     let reverse = Reverse { points: &prepared[j].source, model: &prepared[c].local };
@@ -392,14 +404,16 @@ pub(crate) fn pair_links(
                     Ok(r) => (Some(r), None),
                     Err(e) => (None, Some(format!("the match failed: {e}"))),
                 };
-                Link { target: j, source: c, overlap, result, rejected, cycle: None }
+                (Link { target: j, source: c, overlap, result, rejected, cycle: None }, footprints)
             })
             .collect();
-        links.extend(matched);
+        let (l, f): (Vec<_>, Vec<_>) = matched.into_iter().unzip();
+        links.extend(l);
+        prints.extend(f);
         done += earlier.len();
         progress(done, total);
     }
-    links
+    Paired { links, footprints: prints }
 }
 
 /// The shortest path of `used` links other than `k` from link `k`'s target
@@ -525,7 +539,9 @@ pub struct Adjusted {
 /// `edges` — relative measurements between the scans at `poses`, e.g. the
 /// verification's matches ([`crate::verify::PairCheck::edge`]), with each
 /// one's `noise` before the variance factor
-/// ([`crate::verify::PairCheck::edge_covariance`]) and edge pull `bias` —
+/// ([`crate::verify::PairCheck::edge_covariance`]) and edge pull `bias`,
+/// and each scan's `shared` footprint overlap of its edges
+/// ([`crate::verify::PairChecks::shared`]; empty: 1 for every scan) —
 /// adjusted from `poses` as [`adjust`] adjusts its links, the
 /// poses' own increments holding what no edge sees, whichever strategy
 /// placed the scans. A strategy that places each scan against partners
@@ -542,6 +558,7 @@ pub fn adjust_matches(
     edges: &[Edge],
     noise: &[Matrix6<f64>],
     bias: &[Vector6<f64>],
+    shared: &[f64],
     config: &LinkConfig,
 ) -> Result<Adjusted> {
     if noise.len() != edges.len() || bias.len() != edges.len() {
@@ -556,7 +573,7 @@ pub fn adjust_matches(
     all.extend_from_slice(edges);
     let g = crate::graph::optimize(poses, &priors, &all, 20)?;
     let variance_factor = judged(&g.world_from_scan, edges).variance_factor;
-    let agreement = Agreement { variance_factor, shared: &[] };
+    let agreement = Agreement { variance_factor, shared };
     let adjusted = adjusted_covariance(&g.world_from_scan, &priors, &all, steps, noise, bias, &agreement)?;
     // Scan 0's prior leaves it within 1e-20 m of its pose: the departures
     // are the others'.
@@ -1045,7 +1062,7 @@ mod tests {
     fn adjusted(poses: &[Isometry3<f64>], edges: &[Edge]) -> Adjusted {
         let noise: Vec<Matrix6<f64>> =
             edges.iter().map(|e| e.information.try_inverse().expect("positive definite")).collect();
-        adjust_matches(poses, edges, &noise, &vec![Vector6::zeros(); edges.len()], &LinkConfig::default())
+        adjust_matches(poses, edges, &noise, &vec![Vector6::zeros(); edges.len()], &[], &LinkConfig::default())
             .expect("adjusted")
     }
 
@@ -1076,9 +1093,22 @@ mod tests {
     /// uses the side it shares with that neighbour.
     #[test]
     fn shares_share_their_links_footprints_and_wedges_do_not() {
+        // Each scan's shares for links between `scans` (all at the
+        // identity) given as (target, source).
+        let shares_of = |scans: &[Vec<Point3<f32>>], pairs: &[(usize, usize)]| {
+            let config = LinkConfig::default();
+            let overlap_m = config.multiview.overlap_m.unwrap_or(config.multiview.icp.max_correspondence_m);
+            let prepared = prepare(scans, &config.multiview).expect("prepared");
+            let prints: Vec<[Footprint; 2]> = pairs
+                .iter()
+                .map(|&(t, s)| {
+                    let partners = Partners::at(&prepared[s].source, &prepared[t].local, &Isometry3::identity());
+                    footprints(&prepared[s].source, &Isometry3::identity(), &partners, overlap_m)
+                })
+                .collect();
+            shared_shares(scans.len(), &links(pairs), &prints)
+        };
         let points = room();
-        let config = LinkConfig::default();
-        let poses = vec![Isometry3::identity(); 4];
         let all_pairs: Vec<(usize, usize)> = (0..4).flat_map(|j| (j + 1..4).map(move |i| (j, i))).collect();
         let shares: Vec<Vec<Point3<f32>>> = (0..4)
             .map(|k| {
@@ -1090,8 +1120,7 @@ mod tests {
                     .collect()
             })
             .collect();
-        let prepared = prepare(&shares, &config.multiview).expect("prepared");
-        let rho = shared_shares(&prepared, &poses, &links(&all_pairs), &config);
+        let rho = shares_of(&shares, &all_pairs);
         assert!(rho.iter().all(|&r| r > 0.9), "{rho:?}");
         // Four 150° wedges about the vertical, centred 90° apart: each
         // overlaps its two neighbours, on either side.
@@ -1108,11 +1137,10 @@ mod tests {
                     .collect()
             })
             .collect();
-        let prepared = prepare(&wedges, &config.multiview).expect("prepared");
-        let rho = shared_shares(&prepared, &poses, &links(&[(0, 1), (1, 2), (2, 3), (0, 3)]), &config);
+        let rho = shares_of(&wedges, &[(0, 1), (1, 2), (2, 3), (0, 3)]);
         assert!(rho.iter().all(|&r| r < 0.2), "{rho:?}");
         // A scan with one link has nothing to share it with: 1.
-        let rho = shared_shares(&prepared, &poses, &links(&[(0, 1), (1, 2)]), &config);
+        let rho = shares_of(&wedges, &[(0, 1), (1, 2)]);
         assert_eq!((rho[0], rho[2]), (1.0, 1.0), "{rho:?}");
         assert!(rho[1] < 0.2, "{rho:?}");
     }

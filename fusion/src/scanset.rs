@@ -25,7 +25,7 @@ use crate::icp::{IcpResult, Stage};
 use crate::links::{LinkConfig, LinkGraph};
 use crate::multiview::{MultiviewConfig, Strategy, in_world, register_views};
 use crate::se3::adjoint;
-use crate::verify::PairCheck;
+use crate::verify::{PairCheck, PairChecks};
 
 /// How the set is registered.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -507,7 +507,8 @@ fn registered<S: AsRef<[Point3<f32>]> + Sync>(
 /// 2.8–8.7 (BENCHMARKS).
 fn verified<S: AsRef<[Point3<f32>]> + Sync>(scans: &[S], mut r: SetResult, config: &SetConfig) -> Result<SetResult> {
     let started = std::time::Instant::now();
-    r.checks = verify_set(scans, &r.world_from_scan, config)?;
+    let PairChecks { pairs, shared } = verify_set(scans, &r.world_from_scan, config)?;
+    r.checks = pairs;
     if config.mode != Mode::Graph && !r.checks.is_empty() {
         let (mut edges, mut noise, mut bias) = (Vec::new(), Vec::new(), Vec::new());
         for c in &r.checks {
@@ -517,7 +518,7 @@ fn verified<S: AsRef<[Point3<f32>]> + Sync>(scans: &[S], mut r: SetResult, confi
                 bias.push(c.edge_bias);
             }
         }
-        let a = crate::links::adjust_matches(&r.world_from_scan, &edges, &noise, &bias, &config.link)?;
+        let a = crate::links::adjust_matches(&r.world_from_scan, &edges, &noise, &bias, &shared, &config.link)?;
         r.variance_factor = Some(a.variance_factor);
         r.covariance = a.covariance;
         r.departure = a.departure;
@@ -527,9 +528,11 @@ fn verified<S: AsRef<[Point3<f32>]> + Sync>(scans: &[S], mut r: SetResult, confi
             .zip(&r.world_from_scan)
             .zip(&r.departure)
             .map(|((s, pose), d)| {
+                // pose = exp(ξ)·adjusted: exp(ξ) moves the points from the
+                // adjustment's place to the pose's, in the world's frame.
                 let (c, radius) = crate::icp::degeneracy::centroid_and_lever_arm(s.as_ref());
-                let (w, v) = (d.fixed_rows::<3>(0), d.fixed_rows::<3>(3));
-                (w.cross(&(pose * c).coords) + v).norm() + w.norm() * radius
+                let step = crate::se3::exp(d);
+                crate::se3::motion(&step, &(step.inverse() * (pose * c)), radius)
             })
             .collect();
         let tolerance = finest_link(config).map_or(0.0, |(finest, _)| finest.voxel_m);
@@ -562,8 +565,8 @@ fn verify_set<S: AsRef<[Point3<f32>]> + Sync>(
     scans: &[S],
     poses: &[Isometry3<f64>],
     config: &SetConfig,
-) -> Result<Vec<PairCheck>> {
-    let Some((finest, link)) = finest_link(config) else { return Ok(Vec::new()) };
+) -> Result<PairChecks> {
+    let Some((finest, link)) = finest_link(config) else { return Ok(PairChecks::default()) };
     // Both ways where the covariances rest on these matches, one way
     // where the link graph's carry them ([`crate::verify::check_pairs`]).
     let link = LinkConfig { both_ways: link.both_ways && config.mode != Mode::Graph, ..link };
@@ -662,7 +665,7 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     let moved = |i: usize| {
         let (c, radius) = crate::icp::degeneracy::centroid_and_lever_arm(scans[i].as_ref());
         let delta = starts[i].inverse() * first.world_from_scan[i];
-        (delta * c - c).norm() + delta.rotation.angle() * radius
+        crate::se3::motion(&delta, &c, radius)
     };
     let Some((scan, moved_m)) = (1..scans.len()).map(|i| (i, moved(i))).max_by(|a, b| a.1.total_cmp(&b.1)) else {
         return Ok(first);
@@ -897,7 +900,7 @@ fn apart<S: AsRef<[Point3<f32>]> + Sync>(
             let (c, radius) = crate::icp::degeneracy::centroid_and_lever_arm(scans[i].as_ref());
             let delta = a[i].inverse() * b[i];
             let angle = delta.rotation.angle();
-            let moved = (delta * c - c).norm() + angle * radius;
+            let moved = crate::se3::motion(&delta, &c, radius);
             (moved > crate::verify::MAX_RELATIVE_MOTION * radius).then_some((i, moved, angle))
         })
         .collect()

@@ -3,7 +3,7 @@
 //! perturbation, `T_true = exp(ξ) · T̂`; and a Gaussian prior on a pose in
 //! that convention.
 
-use nalgebra::{Isometry3, Matrix3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
+use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, Translation3, UnitQuaternion, Vector3, Vector6};
 
 /// A prior on `target_from_source` — typically the CPS pose of the scan
 /// and its covariance — with its 6×6 information in the same convention as
@@ -26,6 +26,14 @@ pub fn left_difference(a: &Isometry3<f64>, b: &Isometry3<f64>) -> Vector6<f64> {
     let d = a * b.inverse();
     let w = d.rotation.scaled_axis();
     Vector6::new(w.x, w.y, w.z, d.translation.x, d.translation.y, d.translation.z)
+}
+
+/// How far `delta` moves points whose centroid is `centroid` and whose
+/// RMS distance from it is `radius` (in the frame `delta` acts in): the
+/// centroid's displacement plus the turn times the radius — the same
+/// wherever the frame's origin is, and at least the points' RMS motion.
+pub fn motion(delta: &Isometry3<f64>, centroid: &Point3<f64>, radius: f64) -> f64 {
+    (delta * centroid - centroid).norm() + delta.rotation.angle() * radius
 }
 
 /// exp of ξ = (ω, v) as an isometry (rotation exp(ω), translation v).

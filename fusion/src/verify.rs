@@ -38,7 +38,7 @@ use crate::error::Result;
 use crate::free_space::{FreeSpace, MAX_VIOLATION_SHARE, View};
 use crate::graph::Edge;
 use crate::icp::degeneracy::{Observability, centroid_and_lever_arm};
-use crate::links::{LinkConfig, pair_links};
+use crate::links::{LinkConfig, Paired, pair_links, shared_shares};
 pub use crate::links::{MAX_RELATIVE_MOTION, MAX_TURN_RAD};
 use crate::multiview::{check, prepare};
 
@@ -80,14 +80,30 @@ pub const MAX_RESIDUAL_GAIN: f64 = 1.5;
 /// incremental and simultaneous), right poses (within 0.15° and 10 mm)
 /// departed by at most 768 (a street wedge 0.029° off; the next 451,
 /// 299), the 3DTK set's by 3–15 (0.36–1.14°: its links are weak and
-/// disagree).
+/// disagree). With the scans' shared noise weighed by the matches'
+/// footprints (smaller covariances) two right street wedges reached
+/// 2,400 and 2,720 — 0.014° and 1.5–1.7 mm from the adjustment, their
+/// points moving a few millimetres: the finest voxel, the other half of
+/// the verdict ([`crate::scanset::departs`]), keeps them.
 /// Simultaneous matching settled in a compromise of its metascan
 /// matches on seed 23's street wedges — 0.19–0.68° and 16–25 mm off, each
 /// pair matched again alone moving under 2.4 % of its radius, so no pair
 /// names it — departs by 3,022–4,744; two wedges left 2.9° off in the
-/// other modes by 2·10⁵ and more. The limit sits between, 2× from
+/// other modes by 2·10⁵ and more; the compromise's points moved
+/// 35–130 mm. The limit sits between the first measurements, 2× from
 /// either.
 pub const MAX_DEPARTURE_CHI2: f64 = 1500.0;
+
+/// What [`check_pairs`] returns.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct PairChecks {
+    /// Every overlapping pair, in order of (source, target).
+    pub pairs: Vec<PairCheck>,
+    /// Each scan's used matches' footprint overlap on it: how far they use
+    /// the same part of the scan (1 with one match or none;
+    /// [`crate::links::adjust_matches`]).
+    pub shared: Vec<f64>,
+}
 
 /// One overlapping pair matched again from the final poses.
 #[derive(Debug, Clone, PartialEq)]
@@ -170,14 +186,15 @@ impl PairCheck {
 /// [`MAX_TURN_RAD`] and lowered its residual at most
 /// [`MAX_RESIDUAL_GAIN`]-fold; and, where `viewpoints` gives a scanner's
 /// position in its scan's frame, by the free space it saw (margin: the
-/// finest correspondence distance).
+/// finest correspondence distance). With them, each scan's matches'
+/// footprint overlap on it.
 pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
     scans: &[S],
     poses: &[Isometry3<f64>],
     viewpoints: &[Option<Point3<f64>>],
     config: &LinkConfig,
     tolerance_m: f64,
-) -> Result<Vec<PairCheck>> {
+) -> Result<PairChecks> {
     check(scans, poses, &config.multiview)?;
     crate::FusionError::require_positive("verification tolerance (m)", tolerance_m)?;
     let prepared = prepare(scans, &config.multiview)?;
@@ -199,7 +216,8 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
         },
         ..*config
     };
-    let links = pair_links(&prepared, poses, &matching, &mut |_, _| ());
+    let Paired { links, footprints } = pair_links(&prepared, poses, &matching, &mut |_, _| ());
+    let shared = shared_shares(prepared.len(), &links, &footprints);
     let shape: Vec<(Point3<f64>, f64)> = prepared.iter().map(|p| centroid_and_lever_arm(&p.source)).collect();
     let floors: Vec<f64> = scans.par_iter().map(|s| noise_floor(s.as_ref(), config)).collect();
     let views: Vec<Option<View>> = prepared
@@ -219,7 +237,7 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
             .flatten()
             .max_by(|a, b| a.share().total_cmp(&b.share()))
     };
-    Ok(links
+    let pairs = links
         .into_iter()
         .map(|l| {
             let (c, radius) = shape[l.source];
@@ -234,7 +252,7 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
                 let angle = delta.rotation.angle();
                 let e = crate::se3::left_difference(&at, &r.target_from_source);
                 let chi2 = (e.transpose() * r.information * e)[(0, 0)];
-                let moved = (delta * c - c).norm() + angle * radius;
+                let moved = crate::se3::motion(&delta, &c, radius);
                 // e and the information are the target frame's; the source's
                 // centroid is at `at · c` there.
                 let seen = Observability::about(&r.information, &(at * c), radius, 0.0).seen_motion(&e, SEEN_RATIO);
@@ -275,7 +293,8 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
             check.consistent &= !check.violates_free_space();
             check
         })
-        .collect())
+        .collect();
+    Ok(PairChecks { pairs, shared })
 }
 
 /// The point-to-plane RMS residual between two random halves of `points`

@@ -330,6 +330,57 @@ fn georeferenced_starts_register_as_local_ones() {
     }
 }
 
+/// The finest stage of the 3DTK schedule as the verification matches:
+/// 5 cm cells, 0.2 m reach.
+fn finest_3dtk_link() -> fusion::links::LinkConfig {
+    let base = fusion::links::LinkConfig::default();
+    fusion::links::LinkConfig {
+        multiview: fusion::multiview::MultiviewConfig {
+            source_voxel_m: 0.05,
+            target_voxel_m: 0.05,
+            icp: fusion::icp::IcpConfig { max_correspondence_m: 0.2, ..base.multiview.icp },
+            ..base.multiview
+        },
+        ..base
+    }
+}
+
+/// The verification's matches say how far they use the same part of each
+/// scan — the footprint overlap by which the modes without a link graph
+/// weigh a scan's noise common to its matches: all of it for disjoint
+/// thirds of one real scan dealt point by point (every match uses the
+/// whole scan); none for the middle one of three 100° wedges of it 70°
+/// apart, which overlaps its two neighbours on opposite sides (the scan
+/// spans −120° to 90° of azimuth: the outer two do not meet, and a scan
+/// with one match has nothing to share it with: 1).
+#[test]
+fn the_verifications_matches_share_the_thirds_footprints_and_not_a_wedges() {
+    use fusion::verify::check_pairs;
+    let config = finest_3dtk_link();
+    let (truth, thirds) = thirds_of_a_3dtk_scan();
+    let shared = check_pairs(&thirds, &truth, &[None; 3], &config, 0.05).expect("checked").shared;
+    assert!(shared.iter().all(|&s| s > 0.8), "thirds: {shared:?}");
+    let points = threedtk(1);
+    let wedges: Vec<Vec<Point3<f32>>> = [-70f32, 0.0, 70.0]
+        .iter()
+        .map(|centre| {
+            points
+                .iter()
+                .filter(|p| {
+                    let d = p.y.atan2(p.x) - centre.to_radians();
+                    d.sin().atan2(d.cos()).abs() <= 50f32.to_radians()
+                })
+                .copied()
+                .collect()
+        })
+        .collect();
+    let checked = check_pairs(&wedges, &[Isometry3::identity(); 3], &[None; 3], &config, 0.05).expect("checked");
+    let pairs: Vec<(usize, usize)> = checked.pairs.iter().map(|c| (c.target, c.source)).collect();
+    assert_eq!(pairs, [(0, 1), (1, 2)], "the middle wedge overlaps both others");
+    assert!(checked.shared[1] < 0.2, "wedges: {:?}", checked.shared);
+    assert_eq!((checked.shared[0], checked.shared[2]), (1.0, 1.0), "wedges: {:?}", checked.shared);
+}
+
 /// Disjoint thirds of 3DTK scan 1 (every third point), each under a known
 /// transform: (the transforms, the thirds in their own frames).
 fn thirds_of_a_3dtk_scan() -> (Vec<Isometry3<f64>>, Vec<Vec<Point3<f32>>>) {
@@ -398,26 +449,16 @@ fn the_checks_report_the_residual_against_the_noise_floor() {
 fn a_pair_that_finds_a_much_closer_fit_nearby_disagrees_with_the_poses() {
     use fusion::verify::{MAX_RESIDUAL_GAIN, check_pairs, untrusted};
     let (truth, shares) = thirds_of_a_3dtk_scan();
-    // The finest stage of the 3DTK schedule: 5 cm cells, 0.2 m reach.
-    let base = fusion::links::LinkConfig::default();
-    let config = fusion::links::LinkConfig {
-        multiview: fusion::multiview::MultiviewConfig {
-            source_voxel_m: 0.05,
-            target_voxel_m: 0.05,
-            icp: fusion::icp::IcpConfig { max_correspondence_m: 0.2, ..base.multiview.icp },
-            ..base.multiview
-        },
-        ..base
-    };
+    let config = finest_3dtk_link();
     let gain = |c: &fusion::verify::PairCheck| c.start_rmse_m.expect("matched") / c.rmse_m.expect("matched");
-    let right = check_pairs(&shares, &truth, &[None; 3], &config, 0.05).expect("checked");
+    let right = check_pairs(&shares, &truth, &[None; 3], &config, 0.05).expect("checked").pairs;
     assert_eq!(right.len(), 3, "every pair overlaps");
     for c in &right {
         assert!(c.consistent && gain(c) < 1.1, "{}←{} at the truth: gain {}, {c:?}", c.target, c.source, gain(c));
     }
     let mut off = truth.clone();
     off[2] = Translation3::new(0.15, 0.0, 0.0) * truth[2];
-    let checks = check_pairs(&shares, &off, &[None; 3], &config, 0.05).expect("checked");
+    let checks = check_pairs(&shares, &off, &[None; 3], &config, 0.05).expect("checked").pairs;
     for c in checks.iter().filter(|c| c.source == 2 || c.target == 2) {
         let relative = c.relative_motion.expect("matched");
         assert!(relative < 0.05 && c.angle_rad.expect("matched") < 0.01, "{}←{}: {relative}", c.target, c.source);
