@@ -1066,6 +1066,38 @@ mod tests {
             .expect("adjusted")
     }
 
+    /// A scan's noise common to its matches is weighed by how far they use
+    /// the same part of it (`shared`): none where they use other parts,
+    /// all of it with no footprints given, and linearly between. Four
+    /// scans all linked, whose links agree 10× better than their
+    /// covariances say (σ̂₀² ≈ 0.1: most of their noise the scans').
+    #[test]
+    fn a_scans_shared_noise_is_weighed_by_its_matches_footprint_overlap() {
+        use rand::SeedableRng;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(40);
+        let truth: Vec<Isometry3<f64>> =
+            (0..4).map(|k| crate::se3::exp(&Vector6::new(0.0, 0.0, 0.3 * k as f64, k as f64, 0.5, 0.0))).collect();
+        let edges: Vec<Edge> = measured(&mut rng, &truth, &ALL_PAIRS)
+            .into_iter()
+            .map(|e| Edge { information: e.information * 0.1, ..e })
+            .collect();
+        let noise: Vec<Matrix6<f64>> =
+            edges.iter().map(|e| e.information.try_inverse().expect("positive definite")).collect();
+        let at = |shared: &[f64]| {
+            adjust_matches(&truth, &edges, &noise, &vec![Vector6::zeros(); edges.len()], shared, &LinkConfig::default())
+                .expect("adjusted")
+        };
+        let (whole, given, none, half) = (at(&[]), at(&[1.0; 4]), at(&[0.0; 4]), at(&[0.5; 4]));
+        assert!(whole.variance_factor < 0.3, "σ̂₀² {}", whole.variance_factor);
+        for k in 1..4 {
+            assert_eq!(whole.covariance[k], given.covariance[k], "scan {k}");
+            // The shared share is most of these poses' variance.
+            assert!(none.covariance[k].trace() < 0.5 * whole.covariance[k].trace(), "scan {k}");
+            let middle = (none.covariance[k] + whole.covariance[k]) * 0.5;
+            assert!((half.covariance[k] - middle).amax() <= 1e-12 * middle.amax(), "scan {k}");
+        }
+    }
+
     /// A room's walls, floor and ceiling (8 × 6 × 3 m) sampled every 5 cm
     /// about the scanner at its centre.
     fn room() -> Vec<Point3<f32>> {
