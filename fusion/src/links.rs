@@ -315,7 +315,7 @@ pub(crate) fn pair_links(
 ) -> Paired {
     let mv = &config.multiview;
     let n = prepared.len();
-    let overlap_m = mv.overlap_m.unwrap_or(mv.icp.max_correspondence_m);
+    let overlap_m = mv.overlap_distance();
     // Pairs whose world boxes (grown by the overlap distance) meet: the
     // correspondences are counted only for those.
     let boxes: Vec<(Point3<f64>, Point3<f64>)> = prepared
@@ -1129,7 +1129,7 @@ mod tests {
         // identity) given as (target, source).
         let shares_of = |scans: &[Vec<Point3<f32>>], pairs: &[(usize, usize)]| {
             let config = LinkConfig::default();
-            let overlap_m = config.multiview.overlap_m.unwrap_or(config.multiview.icp.max_correspondence_m);
+            let overlap_m = config.multiview.overlap_distance();
             let prepared = prepare(scans, &config.multiview).expect("prepared");
             let prints: Vec<[Footprint; 2]> = pairs
                 .iter()

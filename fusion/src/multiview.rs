@@ -102,6 +102,14 @@ pub struct MultiviewConfig {
     pub overlap_m: Option<f64>,
 }
 
+impl MultiviewConfig {
+    /// The distance correspondences are counted within for overlap:
+    /// [`overlap_m`](Self::overlap_m), or the ICP distance without it.
+    pub fn overlap_distance(&self) -> f64 {
+        self.overlap_m.unwrap_or(self.icp.max_correspondence_m)
+    }
+}
+
 impl Default for MultiviewConfig {
     fn default() -> Self {
         Self {
@@ -184,9 +192,7 @@ pub fn register_views<S: AsRef<[Point3<f32>]> + Sync>(
         matches: 0,
         settled: true,
         traces: Vec::new(),
-        occupancy: crate::candidates::Occupancy::empty(
-            2.0 * config.overlap_m.unwrap_or(config.icp.max_correspondence_m),
-        ),
+        occupancy: crate::candidates::Occupancy::empty(2.0 * config.overlap_distance()),
     };
     progress(1, n);
     for i in 1..n {
@@ -259,7 +265,7 @@ pub(crate) struct Matcher<'a> {
 impl Matcher<'_> {
     /// The distance correspondences are counted within for overlap.
     pub(crate) fn overlap_distance(&self) -> f64 {
-        self.config.overlap_m.unwrap_or(self.config.icp.max_correspondence_m)
+        self.config.overlap_distance()
     }
 
     /// Correspondences of scan `c`'s reduced points with scan `j`'s model

@@ -82,7 +82,7 @@ pub fn register_with_priors<S: AsRef<[Point3<f32>]> + Sync>(
     for (round, distance) in schedule.iter().enumerate() {
         let round_config = MultiviewConfig {
             icp: IcpConfig { max_correspondence_m: *distance, ..config.icp },
-            overlap_m: Some(config.overlap_m.unwrap_or(config.icp.max_correspondence_m)),
+            overlap_m: Some(config.overlap_distance()),
             ..*config
         };
         let m = Matcher {
@@ -94,9 +94,7 @@ pub fn register_with_priors<S: AsRef<[Point3<f32>]> + Sync>(
             matches: 0,
             settled: true,
             traces: Vec::new(),
-            occupancy: crate::candidates::Occupancy::empty(
-                2.0 * round_config.overlap_m.unwrap_or(round_config.icp.max_correspondence_m),
-            ),
+            occupancy: crate::candidates::Occupancy::empty(2.0 * round_config.overlap_distance()),
         };
         let mut matches = Vec::new();
         let mut failed = Vec::new();
