@@ -79,7 +79,8 @@ def main():
         "register --json",
     )
     with tempfile.TemporaryDirectory() as out:
-        check("match", command(cps, "match", DATA / "3dtk_dat", "--out", out, "--json"), "match --json")
+        check("match", command(cps, "match", DATA / "3dtk_dat", "--out", out, "--json", "--joint-covariance"),
+              "match --json --joint-covariance")
         poses = pathlib.Path(out) / "poses.json"
         check("match", json.loads(poses.read_text()), poses)
     check("emulate", command(cps, "emulate", hall, "--json", "--seconds", "1"), "emulate --json")

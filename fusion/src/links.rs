@@ -47,7 +47,7 @@ use nalgebra::{Isometry3, Matrix6, Point3, Vector6};
 use rayon::prelude::*;
 
 use crate::error::{FusionError, Result};
-use crate::graph::Edge;
+use crate::graph::{Edge, JointCovariance};
 use crate::icp::correspondences::Partners;
 use crate::icp::degeneracy::{Observability, centroid_and_lever_arm};
 use crate::icp::solve::{Reverse, align_both, align_from};
@@ -188,6 +188,9 @@ pub struct LinkGraph {
     /// information scaled down by the variance factor when it exceeds 1
     /// (the start's steps, which hold what no link sees, are not).
     pub covariance: Vec<Matrix6<f64>>,
+    /// The poses' joint covariance, [`covariance`](Self::covariance) its
+    /// diagonal (scan 0's rows and columns zero).
+    pub joint_covariance: JointCovariance,
     /// Every candidate pair, used or not, in order of (source, target).
     pub links: Vec<Link>,
     /// Each scan's directions its links do not see (unit ξ = (ω, v), world
@@ -529,6 +532,10 @@ pub struct Adjusted {
     /// scan 0): the adjustment's in the link graph's model ([`adjust`]'s
     /// covariances), plus its departure ξξᵀ.
     pub covariance: Vec<Matrix6<f64>>,
+    /// The poses' joint covariance, [`covariance`](Self::covariance) its
+    /// diagonal: the adjustment's, plus the stacked departures' ξξᵀ (scan
+    /// 0's rows and columns zero).
+    pub joint_covariance: JointCovariance,
     /// Each departure against the adjustment's covariance C (without
     /// ξξᵀ): ξᵀ·C⁺·ξ — how far the strategy stopped from where its pairs
     /// agree, in the σ of that agreement (zero for scan 0;
@@ -574,7 +581,9 @@ pub fn adjust_matches(
     let g = crate::graph::optimize(poses, &priors, &all, 20)?;
     let variance_factor = judged(&g.world_from_scan, edges).variance_factor;
     let agreement = Agreement { variance_factor, shared };
-    let adjusted = adjusted_covariance(&g.world_from_scan, &priors, &all, steps, noise, bias, &agreement)?;
+    let mut joint = adjusted_covariance(&g.world_from_scan, &priors, &all, steps, noise, bias, &agreement)?;
+    joint.hold(0);
+    let adjusted = joint.diagonal();
     // Scan 0's prior leaves it within 1e-20 m of its pose: the departures
     // are the others'.
     let departure: Vec<Vector6<f64>> = poses
@@ -591,13 +600,13 @@ pub fn adjust_matches(
             |(i, (c, d))| if i == 0 { 0.0 } else { (d.transpose() * crate::icp::solve::pseudo_inverse(c) * d)[(0, 0)] },
         )
         .collect();
-    let covariance = adjusted
-        .into_iter()
-        .zip(&departure)
-        .enumerate()
-        .map(|(i, (c, d))| if i == 0 { Matrix6::zeros() } else { c + d * d.transpose() })
-        .collect();
-    Ok(Adjusted { variance_factor, departure, covariance, departure_chi2 })
+    // The departures as one stacked error: each pair's ξᵢξⱼᵀ.
+    for i in 1..poses.len() {
+        for j in 1..=i {
+            joint.add(i, j, &(departure[i] * departure[j].transpose()));
+        }
+    }
+    Ok(Adjusted { variance_factor, departure, covariance: joint.diagonal(), joint_covariance: joint, departure_chi2 })
 }
 
 /// Links (as graph edges) judged at their adjusted `poses`.
@@ -791,7 +800,7 @@ fn solve(
                 (link_noise(&r.information, r.range_covariance, config.range_scale), r.edge_bias)
             })
             .unzip();
-        let covariance = adjusted_covariance(
+        let mut joint = adjusted_covariance(
             &g.world_from_scan,
             &priors,
             &edges,
@@ -800,16 +809,14 @@ fn solve(
             &bias,
             &Agreement { variance_factor, shared },
         )?;
+        // Scan 0 is the frame: the others' covariances are relative to it.
+        joint.hold(0);
         // Scan 0's prior leaves it within 1e-20 m of its pose: put it there.
         let shift = poses[0] * g.world_from_scan[0].inverse();
         return Ok(LinkGraph {
             world_from_scan: g.world_from_scan.iter().map(|p| shift * p).collect(),
-            // Scan 0 is the frame: the others' covariances are relative to it.
-            covariance: covariance
-                .into_iter()
-                .enumerate()
-                .map(|(i, c)| if i == 0 { Matrix6::zeros() } else { c })
-                .collect(),
+            covariance: joint.diagonal(),
+            joint_covariance: joint,
             links,
             unobservable,
             variance_factor,
@@ -845,12 +852,12 @@ fn adjusted_covariance(
     noise: &[Matrix6<f64>],
     bias: &[Vector6<f64>],
     agreement: &Agreement,
-) -> Result<Vec<Matrix6<f64>>> {
+) -> Result<JointCovariance> {
     let (variance_factor, shared) = (agreement.variance_factor, agreement.shared);
     let f = noise_factor(variance_factor);
     let mut covariances = vec![None; steps];
     covariances.extend(noise.iter().zip(bias).map(|(c, d)| Some(c * f + d * d.transpose())));
-    let covariance = crate::graph::sandwich_covariance(poses, priors, edges, &covariances)?;
+    let covariance = crate::graph::sandwich_joint(poses, priors, edges, &covariances)?;
     Ok(if f < 1.0 { shared_noise(poses, covariance, &edges[steps..], noise, f, shared) } else { covariance })
 }
 
@@ -900,19 +907,20 @@ fn noise_factor(variance_factor: f64) -> f64 {
 /// (the pairs' share, which the adjustment averages down); a scan's own
 /// share S_k — the mean over its links of ½(1 − σ̂₀²)·C, in world axes — passes
 /// through it whole, as does the first scan's, against which every pose
-/// is: P_k = independent_k + S_k + S_0. Four parts of one scan, all
+/// is: P_k = independent_k + S_k + S_0 — and S_0 is what any two poses
+/// share: P_kl = independent_kl + S_0. Four parts of one scan, all
 /// linked, were up to 2× optimistic without it (BENCHMARKS.md). S_k is
 /// weighed by `shared[k]` (1 where missing): how far scan k's links use
 /// the same part of it ([`shared_shares`]) — wedges' links use each
 /// another part, and their whole S_k made them 2.35× pessimistic.
 fn shared_noise(
     poses: &[Isometry3<f64>],
-    independent: Vec<Matrix6<f64>>,
+    mut independent: JointCovariance,
     links: &[Edge],
     noise: &[Matrix6<f64>],
     independent_share: f64,
     shared: &[f64],
-) -> Vec<Matrix6<f64>> {
+) -> JointCovariance {
     let n = poses.len();
     let mut own = vec![Matrix6::zeros(); n];
     let mut count = vec![0usize; n];
@@ -929,7 +937,13 @@ fn shared_noise(
     for (k, (s, &c)) in own.iter_mut().zip(&count).enumerate() {
         *s *= shared.get(k).copied().unwrap_or(1.0) / c.max(1) as f64;
     }
-    independent.into_iter().enumerate().map(|(k, p)| if k == 0 { p } else { p + own[k] + own[0] }).collect()
+    for k in 1..n {
+        independent.add(k, k, &own[k]);
+        for l in 1..=k {
+            independent.add(k, l, &own[0]);
+        }
+    }
+    independent
 }
 
 #[cfg(test)]
@@ -940,7 +954,8 @@ mod tests {
     /// scans' own shifts (σ 1 mrad / 1 mm each, the same in all of a
     /// scan's links) plus the pair's own (σ 0.5): the graph that takes the
     /// links as independent is 2× optimistic, the covariance with the
-    /// scans' shared noise what 4,000 draws scatter.
+    /// scans' shared noise what 4,000 draws scatter — each pose's, and
+    /// what any two share (scan 0's own noise moves them all alike).
     #[test]
     fn the_scans_shared_noise_is_what_monte_carlo_scatters() {
         use rand::SeedableRng;
@@ -955,7 +970,7 @@ mod tests {
         let mut priors = vec![None; n];
         priors[0] = Some(Prior { target_from_source: Isometry3::identity(), information: Matrix6::identity() * 1e12 });
         let draws = 4000;
-        let mut scatter = vec![Matrix6::zeros(); n];
+        let mut scatter = vec![vec![Matrix6::zeros(); n]; n];
         let mut factor = 0.0;
         for _ in 0..draws {
             let shift: Vec<Vector6<f64>> = (0..n).map(|_| Vector6::from_fn(|_, _| own.sample(&mut rng))).collect();
@@ -968,9 +983,12 @@ mod tests {
                 .collect();
             let g = crate::graph::optimize(&poses, &priors, &edges, 20).expect("adjusts");
             factor += judged(&g.world_from_scan, &edges).variance_factor / draws as f64;
-            for (s, pose) in scatter.iter_mut().zip(&g.world_from_scan).skip(1) {
-                let xi = left_difference(pose, &Isometry3::identity());
-                *s += xi * xi.transpose() / draws as f64;
+            let xi: Vec<Vector6<f64>> =
+                g.world_from_scan.iter().map(|pose| left_difference(pose, &Isometry3::identity())).collect();
+            for k in 1..n {
+                for l in 1..n {
+                    scatter[k][l] += xi[k] * xi[l].transpose() / draws as f64;
+                }
             }
         }
         // The pairs' share of a link's variance: 0.25 of 2.25.
@@ -982,13 +1000,26 @@ mod tests {
         let plain = crate::graph::optimize(&poses, &priors, &edges, 1).expect("adjusts").covariance;
         let noise = vec![information.try_inverse().expect("invertible"); edges.len()];
         let scaled: Vec<Option<Matrix6<f64>>> = noise.iter().map(|c| Some(c * factor)).collect();
-        let independent = crate::graph::sandwich_covariance(&poses, &priors, &edges, &scaled).expect("adjusts");
+        let independent = crate::graph::sandwich_joint(&poses, &priors, &edges, &scaled).expect("adjusts");
         let shared = shared_noise(&poses, independent, &edges, &noise, factor, &[]);
         for k in 1..n {
             for d in 0..6 {
-                let (mc, model, naive) = (scatter[k][(d, d)], shared[k][(d, d)], plain[k][(d, d)]);
+                let (mc, model, naive) = (scatter[k][k][(d, d)], shared.block(k, k)[(d, d)], plain[k][(d, d)]);
                 assert!((model / mc - 1.0).abs() < 0.08, "scan {k} [{d}]: {model:e} against Monte Carlo {mc:e}");
                 assert!(mc / naive > 1.8, "scan {k} [{d}]: independent links {naive:e}, Monte Carlo {mc:e}");
+            }
+            // Two poses' errors: correlated by about a half here (scan
+            // 0's noise in both, and the links they share).
+            for l in 1..k {
+                for d in 0..6 {
+                    let scale = (scatter[k][k][(d, d)] * scatter[l][l][(d, d)]).sqrt();
+                    let (mc, model) = (scatter[k][l][(d, d)] / scale, shared.block(k, l)[(d, d)] / scale);
+                    assert!(
+                        (model - mc).abs() < 0.06,
+                        "scans {k}, {l} [{d}]: correlation {model:.3}, Monte Carlo {mc:.3}"
+                    );
+                    assert!(mc > 0.3, "scans {k}, {l} [{d}]: Monte Carlo correlation {mc:.3}");
+                }
             }
         }
     }
@@ -1217,6 +1248,10 @@ mod tests {
         let truth = four_scans();
         let draws = 2000;
         let (mut chained, mut own, mut alone) = (0.0, 0.0, 0.0);
+        // Each pair of poses relative to each other, against the joint
+        // covariance's Cᵢ + Cⱼ − Cᵢⱼ − Cⱼᵢ: the adjustment's own poses and
+        // the chain's; and, as if the poses shared nothing, Cᵢ + Cⱼ.
+        let (mut own_relative, mut chained_relative, mut unshared) = (0.0, 0.0, 0.0);
         let nees =
             |xi: &Vector6<f64>, c: &Matrix6<f64>| (xi.transpose() * c.try_inverse().expect("invertible") * xi)[(0, 0)];
         for _ in 0..draws {
@@ -1235,11 +1270,37 @@ mod tests {
                 own += nees(&left_difference(&at, &truth[s]), &adjustment);
                 alone += nees(&left_difference(&chain[s], &truth[s]), &adjustment);
             }
+            let own_error: Vec<Vector6<f64>> =
+                (0..4).map(|s| left_difference(&(crate::se3::exp(&-a.departure[s]) * chain[s]), &truth[s])).collect();
+            let chain_error: Vec<Vector6<f64>> = (0..4).map(|s| left_difference(&chain[s], &truth[s])).collect();
+            let c = &a.joint_covariance;
+            for (i, j) in [(1, 2), (1, 3), (2, 3)] {
+                let (di, dj) = (a.departure[i], a.departure[j]);
+                let relative = c.block(i, i) + c.block(j, j) - c.block(i, j) - c.block(j, i);
+                let own_relative_covariance = relative - (dj - di) * (dj - di).transpose();
+                own_relative += nees(&(own_error[j] - own_error[i]), &own_relative_covariance);
+                chained_relative += nees(&(chain_error[j] - chain_error[i]), &relative);
+                let alone = c.block(i, i) - di * di.transpose() + c.block(j, j) - dj * dj.transpose();
+                unshared += nees(&(own_error[j] - own_error[i]), &alone);
+            }
         }
         let n = (3 * draws) as f64;
         let (chained, own, alone) = (chained / n, own / n, alone / n);
         assert!((chained - own).abs() < 0.4, "the chain's mean NEES {chained}, the adjustment's {own}");
         assert!((own - 6.0).abs() < 1.2, "the adjustment's mean NEES {own}");
         assert!(alone > own + 2.0, "against the adjustment's covariance alone: {alone} (its own {own})");
+        // Relative poses: as honest as each pose alone (the adjustment's
+        // cross-covariances), the chain's departures carried as one
+        // stacked error; taken as sharing nothing, about 2× pessimistic.
+        let (own_relative, chained_relative, unshared) = (own_relative / n, chained_relative / n, unshared / n);
+        assert!((own_relative - own).abs() < 0.5, "relative poses' mean NEES {own_relative}, each pose's {own}");
+        assert!(
+            (chained_relative - own_relative).abs() < 0.5,
+            "the chain's relative {chained_relative}, the adjustment's {own_relative}"
+        );
+        assert!(
+            unshared < 0.6 * own,
+            "relative poses without the cross-covariances: {unshared} (with them {own_relative})"
+        );
     }
 }

@@ -114,6 +114,13 @@ pub struct SetResult {
     /// without a pair to verify, the last match's with its partners'
     /// (their mean for a metascan); zero for the first scan.
     pub covariance: Vec<Matrix6<f64>>,
+    /// The poses' joint covariance (the same ξ, frame and model),
+    /// [`covariance`](Self::covariance) its diagonal: what two poses'
+    /// errors share — the relative pose of two scans placed by the same
+    /// links is known better than either alone. `None` where the
+    /// covariances are not an adjustment's (the last matches', before the
+    /// verification or without a pair to verify).
+    pub joint_covariance: Option<crate::graph::JointCovariance>,
     /// In the modes without a link graph, each pose's departure from the
     /// adjustment of the verification's matches (ξ = (ω, v), world frame,
     /// pose ≈ exp(ξ)·adjusted; zero for the first scan): how far the
@@ -521,6 +528,7 @@ fn verified<S: AsRef<[Point3<f32>]> + Sync>(scans: &[S], mut r: SetResult, confi
         let a = crate::links::adjust_matches(&r.world_from_scan, &edges, &noise, &bias, &shared, &config.link)?;
         r.variance_factor = Some(a.variance_factor);
         r.covariance = a.covariance;
+        r.joint_covariance = Some(a.joint_covariance);
         r.departure = a.departure;
         r.departure_chi2 = a.departure_chi2;
         r.departure_m = scans
@@ -917,6 +925,7 @@ fn into_world(mut r: SetResult, world_from_first: &Isometry3<f64>, graph: bool) 
     let ad = adjoint(&Isometry3::from_parts(nalgebra::Translation3::identity(), world_from_first.rotation));
     r.world_from_scan.iter_mut().for_each(|p| *p = world_from_first * *p);
     r.covariance.iter_mut().for_each(|c| *c = ad * *c * ad.transpose());
+    r.joint_covariance = r.joint_covariance.map(|j| j.turned(&ad));
     r.departure.iter_mut().for_each(|d| *d = ad * *d);
     r.unobservable.iter_mut().flatten().for_each(|d| *d = (ad * *d).normalize());
     if !graph {
@@ -1040,6 +1049,7 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
     Ok(SetResult {
         world_from_scan: poses,
         covariance,
+        joint_covariance: None,
         departure: Vec::new(),
         departure_chi2: Vec::new(),
         departure_m: Vec::new(),
@@ -1120,6 +1130,7 @@ fn from_graph(g: LinkGraph, matches: usize, settled: bool, stages: Vec<StageRun>
     SetResult {
         world_from_scan: g.world_from_scan,
         covariance: g.covariance,
+        joint_covariance: Some(g.joint_covariance),
         departure: Vec::new(),
         departure_chi2: Vec::new(),
         departure_m: Vec::new(),
@@ -1234,6 +1245,7 @@ mod tests {
         let result = |corroborated: bool| SetResult {
             world_from_scan: vec![Isometry3::identity(); 4],
             covariance: vec![Matrix6::identity(); 4],
+            joint_covariance: None,
             departure: Vec::new(),
             departure_chi2: Vec::new(),
             departure_m: Vec::new(),

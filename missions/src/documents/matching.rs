@@ -29,6 +29,17 @@ pub struct MatchReport {
     /// of it is taken as each scan's own, shared by its links. In the other
     /// modes null when no pair was verified (a single scan).
     pub variance_factor: Option<f64>,
+    /// With `--joint-covariance`: the poses' joint covariance, 6N×6N for
+    /// the N `scans` in their order, row by row — block (i, j) is
+    /// cov(ξᵢ, ξⱼ) in the order and frame of `scans[].covariance`, which
+    /// is its diagonal (the first scan's rows and columns zero). What two
+    /// poses' errors share: the covariance of scan j relative to scan i
+    /// is Cᵢ + Cⱼ − Cᵢⱼ − Cⱼᵢ (to first order, in the world's axes),
+    /// which Cᵢ + Cⱼ overstates where the same links place both. Null
+    /// without the flag, and where the covariances are not an
+    /// adjustment's (the modes without a link graph when no pair was
+    /// verified).
+    pub joint_covariance: Option<Vec<Vec<f64>>>,
     /// The covariance model calibrated on the scans themselves — each
     /// scan's random halves, and two quarters, matched under a known turn,
     /// their errors against their own covariances, carried on to the

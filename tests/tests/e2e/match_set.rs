@@ -196,6 +196,48 @@ fn the_room_scans_land_on_the_reference_from_their_odometry_guess() {
         v["scans"].as_array().expect("scans").iter().map(|s| pose(&s["world_from_scan"])).collect();
     let (deg, m) = error(&(poses[0].inverse() * poses[1]), &reference);
     assert!(deg < 0.3 && m < 0.02, "{deg}° {m} m off the reference");
+    // Without `--joint-covariance`, no joint covariance.
+    assert!(v["joint_covariance"].is_null(), "{}", v["joint_covariance"]);
+}
+
+/// `--joint-covariance`: the 3DTK set's poses' 18×18 joint covariance in
+/// graph mode and in a mode without a link graph (there with the stacked
+/// departures) — symmetric, positive semi-definite, each scan's own
+/// covariance its diagonal block, the first scan's rows zero, and what two
+/// poses share off it: each checked pair's relative covariance
+/// Cᵢ + Cⱼ − Cᵢⱼ − Cⱼᵢ positive semi-definite and not Cᵢ + Cⱼ. (Its
+/// numbers rest on the adjustment's, checked by Monte Carlo in
+/// `fusion::links`' tests.)
+#[test]
+fn the_joint_covariance_holds_each_poses_own_and_what_two_share() {
+    use nalgebra::{DMatrix, Matrix6};
+    let dir = tempfile::tempdir().expect("temp dir");
+    for mode in ["graph", "pairwise"] {
+        let (run, v) =
+            run(&[data("3dtk_dat"), "--mode".into(), mode.into(), "--joint-covariance".into()], &dir.path().join(mode));
+        assert_eq!(run.code, 0, "{mode}: {}", run.stderr);
+        let v = v.expect("JSON");
+        let rows: Vec<Vec<f64>> = serde_json::from_value(v["joint_covariance"].clone()).expect("rows of numbers");
+        assert_eq!(rows.len(), 18, "{mode}");
+        assert!(rows.iter().all(|r| r.len() == 18), "{mode}");
+        let joint = DMatrix::from_fn(18, 18, |r, c| rows[r][c]);
+        let block = |i: usize, j: usize| Matrix6::from_fn(|r, c| joint[(6 * i + r, 6 * j + c)]);
+        let largest = joint.amax();
+        assert!(largest > 0.0, "{mode}");
+        assert!((&joint - joint.transpose()).amax() <= 1e-12 * largest, "{mode}: not symmetric");
+        let least = joint.clone().symmetric_eigen().eigenvalues.min();
+        assert!(least >= -1e-12 * largest, "{mode}: eigenvalue {least:e} of {largest:e}");
+        assert!(joint.rows(0, 6).iter().all(|x| *x == 0.0), "{mode}: the first scan holds the frame");
+        for (i, s) in v["scans"].as_array().expect("scans").iter().enumerate() {
+            let own: Vec<Vec<f64>> = serde_json::from_value(s["covariance"].clone()).expect("6×6");
+            assert_eq!(block(i, i), Matrix6::from_fn(|r, c| own[r][c]), "{mode}: scan {i}");
+        }
+        let (one, two) = (block(1, 1), block(2, 2));
+        let relative = one + two - block(1, 2) - block(2, 1);
+        let least = relative.symmetric_eigen().eigenvalues.min();
+        assert!(least >= -1e-12 * relative.amax(), "{mode}: the relative covariance's eigenvalue {least:e}");
+        assert!((relative - (one + two)).amax() > 1e-3 * (one + two).amax(), "{mode}: scans 1 and 2 share nothing");
+    }
 }
 
 #[test]

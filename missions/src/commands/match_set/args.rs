@@ -106,6 +106,11 @@ pub struct MatchArgs {
     /// Print one JSON object instead of the tables.
     #[arg(long)]
     pub json: bool,
+    /// Also report the poses' joint covariance (`joint_covariance` in
+    /// poses.json, 6N×6N for N scans): what two poses' errors share, from
+    /// which the relative pose of any two scans gets its covariance.
+    #[arg(long)]
+    pub joint_covariance: bool,
     /// A rosbag2 input: the sensor_msgs/msg/PointCloud2 topic to read
     /// (default: the bag's only one).
     #[arg(long, value_name = "TOPIC")]

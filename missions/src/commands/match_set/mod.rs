@@ -128,7 +128,7 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
     bar.finish_and_clear();
     let result = result.map_err(|e| named(e, &scans))?;
     let seconds = started.elapsed().as_secs_f64();
-    let mut report = report(args.mode, &crs, &scans, &result, seconds, settings);
+    let mut report = report(args.mode, &crs, &scans, &result, seconds, settings, args.joint_covariance);
     if args.init == Some(InitArg::Global) {
         // A start found from the scans' shape says nothing along what no
         // match sees: a scan blind there has no pose the data confirm.

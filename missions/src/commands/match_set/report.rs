@@ -16,6 +16,7 @@ pub(super) fn report(
     r: &SetResult,
     seconds: f64,
     settings: SettingsReport,
+    joint: bool,
 ) -> MatchReport {
     use clap::ValueEnum;
     let numbers = crate::scans::inputs::scan_numbers(scans);
@@ -67,6 +68,9 @@ pub(super) fn report(
             .collect(),
         matches: r.matches,
         variance_factor: r.variance_factor,
+        joint_covariance: joint
+            .then(|| r.joint_covariance.as_ref().map(fusion::graph::JointCovariance::rows))
+            .flatten(),
         noise: r.noise.map(|n| NoiseReport {
             variance_scale: n.variance_scale,
             dof: n.dof,
