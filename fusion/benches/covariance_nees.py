@@ -20,7 +20,11 @@ its rotation or its translation block alone).
 Prints one line per scenario and mode: the mean NEES and its 95 %
 interval for the number of errors (χ² with 6·n degrees of freedom, / n),
 the median, the RMS errors, and the parts off by more than 1° or 0.1 m
-while the exit was 0 (a silent failure). Environment: NEES_ONLY=NAME runs one
+while the exit was 0 (a silent failure); and each trial's trusted parts
+judged together against their joint covariance (`--joint-covariance`:
+χ² with 6 per part when honest), per part — the parts of one trial share
+links, so their separate NEES are not independent and the interval is
+exact only for the joint one. Environment: NEES_ONLY=NAME runs one
 source, NEES_CUT=shares or NEES_CUT=wedges one way of cutting (what is
 not run is still drawn: every run of a seed has the same parts), NEES_VERBOSE=1 prints every part (with its departure from where the
 verified pairs agree, in the modes without a link graph),
@@ -146,7 +150,8 @@ def run(tool, d, parts, truths, starts, mode):
     with open(os.path.join(d, "init.json"), "w") as out:
         json.dump([{"file": os.path.basename(f), "world_from_scan": s.tolist()} for f, s in zip(files, starts)], out)
     r = subprocess.run([tool, "match", *files, "--init-poses", os.path.join(d, "init.json"), "--mode", mode,
-                        "--out", os.path.join(d, "out"), "--json", *os.environ.get("NEES_ARGS", "").split()],
+                        "--out", os.path.join(d, "out"), "--json", "--joint-covariance",
+                        *os.environ.get("NEES_ARGS", "").split()],
                        capture_output=True, text=True)
     try:
         return r.returncode, json.loads(r.stdout)
@@ -172,6 +177,7 @@ def main():
     with tempfile.TemporaryDirectory() as d:
         for label, cut, up in scenarios:
             results = {m: [] for m in modes}
+            joint = {m: [] for m in modes}
             exits = {m: [] for m in modes}
             silent = {m: 0 for m in modes}
             for trial in range(trials):
@@ -204,6 +210,13 @@ def main():
                                   f"moved {c['moved_m']} "
                                   f"relative {c['relative_motion']} consistent {c['consistent']} exit {code} "
                                   f"err {np.linalg.norm(e[:3]) * 180 / math.pi:.3f}° {np.linalg.norm(e[3:]) * 1e3:.1f} mm")
+                    # The trial's trusted parts together, against their joint covariance.
+                    kept = [i for i in range(1, len(parts)) if i not in v.get("untrusted", [])]
+                    if kept and v.get("joint_covariance") is not None:
+                        big = np.array(v["joint_covariance"])
+                        rows_ = np.concatenate([np.arange(6 * i, 6 * i + 6) for i in kept])
+                        e = np.concatenate([xi(np.array(v["scans"][i]["world_from_scan"]), truths[i]) for i in kept])
+                        joint[mode].append((e @ np.linalg.solve(big[np.ix_(rows_, rows_)], e), len(kept)))
                     for i in range(1, len(parts)):
                         e = xi(np.array(v["scans"][i]["world_from_scan"]), truths[i])
                         c = np.array(v["scans"][i]["covariance"])
@@ -235,6 +248,16 @@ def main():
                       f"error {deg:.4f}° {mm:.2f} mm, σ {sdeg:.4f}° {smm:.2f} mm; untrusted "
                       f"{sum(r[2] for r in results[mode])}, exits {sorted(set(exits[mode]))}, "
                       f"off > 1° or 0.1 m with exit 0: {silent[mode]}")
+                if joint[mode]:
+                    # The parts of one trial share links, so their NEES are
+                    # not independent and the interval above holds only for
+                    # independent parts; the trials are independent: each
+                    # trial's parts against their joint covariance (χ² with
+                    # 6 per part when honest), per part.
+                    total, poses = sum(j for j, _ in joint[mode]), sum(k for _, k in joint[mode])
+                    jlo, jhi = chi2_interval(6 * poses)
+                    print(f"{'':41} joint NEES per part {total / poses:8.2f} [{jlo / poses:.2f}, {jhi / poses:.2f}] "
+                          f"over {len(joint[mode])} trials")
                 if os.environ.get("NEES_AXES"):
                     # Per axis of the world (ω x y z, v x y z): the errors' mean square over the reported variance.
                     ratio = [np.mean([e[k] ** 2 for e, _, _ in rows]) / np.mean([c[k, k] for _, c, _ in rows]) for k in range(6)]
