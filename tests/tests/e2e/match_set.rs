@@ -196,8 +196,11 @@ fn the_room_scans_land_on_the_reference_from_their_odometry_guess() {
         v["scans"].as_array().expect("scans").iter().map(|s| pose(&s["world_from_scan"])).collect();
     let (deg, m) = error(&(poses[0].inverse() * poses[1]), &reference);
     assert!(deg < 0.3 && m < 0.02, "{deg}° {m} m off the reference");
-    // Without `--joint-covariance`, no joint covariance.
+    // Without `--joint-covariance`, no joint covariance — but the verified
+    // pair's relative σ.
     assert!(v["joint_covariance"].is_null(), "{}", v["joint_covariance"]);
+    let check = &v["checks"][0];
+    assert!(check["relative_sigma_xyz_m"].as_f64().is_some_and(|m| m > 0.0 && m < 0.01), "{check}");
 }
 
 /// `--joint-covariance`: the 3DTK set's poses' 18×18 joint covariance in
@@ -237,6 +240,17 @@ fn the_joint_covariance_holds_each_poses_own_and_what_two_share() {
         let least = relative.symmetric_eigen().eigenvalues.min();
         assert!(least >= -1e-12 * relative.amax(), "{mode}: the relative covariance's eigenvalue {least:e}");
         assert!((relative - (one + two)).amax() > 1e-3 * (one + two).amax(), "{mode}: scans 1 and 2 share nothing");
+        // Each verified pair's relative σ (`checks[]`, with or without
+        // the flag) is that of this relative covariance.
+        for c in v["checks"].as_array().expect("checks") {
+            let (a, b) = (c["source"].as_u64().expect("index") as usize, c["target"].as_u64().expect("index") as usize);
+            let r = block(a, a) + block(b, b) - block(a, b) - block(b, a);
+            let sigma = |k: usize| (r[(k, k)] + r[(k + 1, k + 1)] + r[(k + 2, k + 2)]).sqrt();
+            let (m, deg) =
+                (c["relative_sigma_xyz_m"].as_f64().expect("σ"), c["relative_sigma_rot_deg"].as_f64().expect("σ"));
+            assert!((m - sigma(3)).abs() <= 1e-9 * m && m > 0.0, "{mode}: {c}");
+            assert!((deg - sigma(0).to_degrees()).abs() <= 1e-9 * deg && deg > 0.0, "{mode}: {c}");
+        }
     }
 }
 

@@ -125,31 +125,45 @@ pub(super) fn report(
         checks: r
             .checks
             .iter()
-            .map(|c| CheckReport {
-                source: c.source,
-                target: c.target,
-                overlap: c.overlap,
-                moved_m: c.moved_m,
-                angle_deg: c.angle_rad.map(f64::to_degrees),
-                chi2: c.chi2,
-                relative_motion: c.relative_motion,
-                seen_motion_m: c.seen_motion_m,
-                rmse_m: c.rmse_m,
-                start_rmse_m: c.start_rmse_m,
-                noise_m: c.noise_m,
-                consistent: c.consistent,
-                free_space: c.free_space.map(|f| FreeSpaceReport {
-                    seen_from: f.seen_from,
-                    violations: f.violations,
-                    agreements: f.agreements,
-                    share: f.share(),
-                }),
+            .map(|c| {
+                let relative = r.joint_covariance.as_ref().map(|j| relative_sigma(j, c.source, c.target));
+                CheckReport {
+                    source: c.source,
+                    target: c.target,
+                    overlap: c.overlap,
+                    moved_m: c.moved_m,
+                    angle_deg: c.angle_rad.map(f64::to_degrees),
+                    chi2: c.chi2,
+                    relative_motion: c.relative_motion,
+                    seen_motion_m: c.seen_motion_m,
+                    rmse_m: c.rmse_m,
+                    start_rmse_m: c.start_rmse_m,
+                    noise_m: c.noise_m,
+                    relative_sigma_xyz_m: relative.map(|(_, m)| m),
+                    relative_sigma_rot_deg: relative.map(|(rad, _)| rad.to_degrees()),
+                    consistent: c.consistent,
+                    free_space: c.free_space.map(|f| FreeSpaceReport {
+                        seen_from: f.seen_from,
+                        violations: f.violations,
+                        agreements: f.agreements,
+                        share: f.share(),
+                    }),
+                }
             })
             .collect(),
         check_seconds: r.check_seconds,
         untrusted: r.untrusted(),
         blind_without_start: Vec::new(),
     }
+}
+
+/// The σ of scan `a`'s pose relative to scan `b`'s — √ of the traces of
+/// the rotation and translation blocks of Cₐ + C_b − C_ab − C_ba, radians
+/// and metres (first order, the world's axes).
+fn relative_sigma(joint: &fusion::graph::JointCovariance, a: usize, b: usize) -> (f64, f64) {
+    let c = joint.block(a, a) + joint.block(b, b) - joint.block(a, b) - joint.block(b, a);
+    let trace = |k: usize| (c[(k, k)] + c[(k + 1, k + 1)] + c[(k + 2, k + 2)]).max(0.0).sqrt();
+    (trace(0), trace(3))
 }
 
 /// A link's blind directions as every document reports them: in the

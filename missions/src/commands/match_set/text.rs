@@ -348,6 +348,8 @@ mod tests {
             rmse_m: Some(0.01),
             start_rmse_m: Some(0.01),
             noise_m: 0.01,
+            relative_sigma_xyz_m: None,
+            relative_sigma_rot_deg: None,
             consistent,
             free_space: None,
         }
