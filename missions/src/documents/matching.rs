@@ -158,14 +158,15 @@ pub struct CheckReport {
     /// noise floors (each scan's two random halves matched at the
     /// identity), metres.
     pub noise_m: f64,
-    /// The registered relative pose of the two scans, its σ: √ of the
-    /// trace of the translation block of Cₛ + Cₜ − Cₛₜ − Cₜₛ (the poses'
-    /// joint covariance, `--joint-covariance`; in the world's axes),
-    /// metres — as `scans[]`' σ columns, but of the pair: what the two
-    /// scans' own σ overstate where the same links place both. Null where
-    /// the covariances are not an adjustment's.
+    /// The registered relative pose of the two scans, its σ: of their
+    /// relative error ξₛ − ξₜ (covariance Cₛ + Cₜ − Cₛₜ − Cₜₛ, from the
+    /// poses' joint covariance, `--joint-covariance`), √ of the trace of
+    /// the displacement it gives the source scan's origin, metres — where
+    /// the source stands relative to the target, which the two scans' own
+    /// σ overstate where the same links place both. Null where the
+    /// covariances are not an adjustment's.
     pub relative_sigma_xyz_m: Option<f64>,
-    /// … and of its rotation block, degrees.
+    /// … and √ of the trace of its rotation block, degrees.
     pub relative_sigma_rot_deg: Option<f64>,
     /// The match moved the points by at most the finest stage's voxel, or
     /// along what it sees well by at most 5 % of their RMS radius, turned

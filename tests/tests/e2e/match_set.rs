@@ -241,11 +241,24 @@ fn the_joint_covariance_holds_each_poses_own_and_what_two_share() {
         assert!(least >= -1e-12 * relative.amax(), "{mode}: the relative covariance's eigenvalue {least:e}");
         assert!((relative - (one + two)).amax() > 1e-3 * (one + two).amax(), "{mode}: scans 1 and 2 share nothing");
         // Each verified pair's relative σ (`checks[]`, with or without
-        // the flag) is that of this relative covariance.
+        // the flag) is that of this relative covariance: its rotation, and
+        // the displacement it gives the source scan's origin (ω × p + v,
+        // p from the first scan's origin).
+        let poses: Vec<Isometry3<f64>> =
+            v["scans"].as_array().expect("scans").iter().map(|s| pose(&s["world_from_scan"])).collect();
         for c in v["checks"].as_array().expect("checks") {
             let (a, b) = (c["source"].as_u64().expect("index") as usize, c["target"].as_u64().expect("index") as usize);
             let r = block(a, a) + block(b, b) - block(a, b) - block(b, a);
-            let sigma = |k: usize| (r[(k, k)] + r[(k + 1, k + 1)] + r[(k + 2, k + 2)]).sqrt();
+            let p = poses[a].translation.vector - poses[0].translation.vector;
+            let at = nalgebra::Matrix3x6::from_fn(|i, k| match k {
+                0..3 => nalgebra::Vector3::ith(k, 1.0).cross(&p)[i],
+                _ => f64::from(u8::from(i == k - 3)),
+            });
+            let displacement = at * r * at.transpose();
+            let sigma = |k: usize| match k {
+                0 => (r[(0, 0)] + r[(1, 1)] + r[(2, 2)]).sqrt(),
+                _ => displacement.trace().sqrt(),
+            };
             let (m, deg) =
                 (c["relative_sigma_xyz_m"].as_f64().expect("σ"), c["relative_sigma_rot_deg"].as_f64().expect("σ"));
             assert!((m - sigma(3)).abs() <= 1e-9 * m && m > 0.0, "{mode}: {c}");

@@ -1,7 +1,7 @@
 //! How a registration becomes `poses.json` ([`crate::documents::matching`]).
 
 use fusion::scanset::SetResult;
-use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion};
+use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3};
 
 use super::args::ModeArg;
 use crate::documents::matching::*;
@@ -126,7 +126,10 @@ pub(super) fn report(
             .checks
             .iter()
             .map(|c| {
-                let relative = r.joint_covariance.as_ref().map(|j| relative_sigma(j, c.source, c.target));
+                // At the source scan's origin, from the first scan's (about
+                // which the covariances are).
+                let at = r.world_from_scan[c.source].translation.vector - r.world_from_scan[0].translation.vector;
+                let relative = r.joint_covariance.as_ref().map(|j| relative_sigma(j, c.source, c.target, &at));
                 CheckReport {
                     source: c.source,
                     target: c.target,
@@ -157,13 +160,18 @@ pub(super) fn report(
     }
 }
 
-/// The σ of scan `a`'s pose relative to scan `b`'s — √ of the traces of
-/// the rotation and translation blocks of Cₐ + C_b − C_ab − C_ba, radians
-/// and metres (first order, the world's axes).
-fn relative_sigma(joint: &fusion::graph::JointCovariance, a: usize, b: usize) -> (f64, f64) {
+/// The σ of scan `a`'s pose relative to scan `b`'s: of their relative
+/// error ξₐ − ξ_b (covariance Cₐ + C_b − C_ab − C_ba, first order, the
+/// world's axes about the first scan's origin), √ of the trace of its
+/// rotation block, radians, and of the displacement it gives the point
+/// `at` (from the first scan's origin: ω × at + v), metres.
+fn relative_sigma(joint: &fusion::graph::JointCovariance, a: usize, b: usize, at: &Vector3<f64>) -> (f64, f64) {
     let c = joint.block(a, a) + joint.block(b, b) - joint.block(a, b) - joint.block(b, a);
-    let trace = |k: usize| (c[(k, k)] + c[(k + 1, k + 1)] + c[(k + 2, k + 2)]).max(0.0).sqrt();
-    (trace(0), trace(3))
+    let mut g = nalgebra::Matrix3x6::zeros();
+    g.fixed_view_mut::<3, 3>(0, 0).copy_from(&-fusion::se3::skew(at));
+    g.fixed_view_mut::<3, 3>(0, 3).copy_from(&nalgebra::Matrix3::identity());
+    let rotation = (c[(0, 0)] + c[(1, 1)] + c[(2, 2)]).max(0.0).sqrt();
+    (rotation, (g * c * g.transpose()).trace().max(0.0).sqrt())
 }
 
 /// A link's blind directions as every document reports them: in the
