@@ -504,14 +504,10 @@ impl JointCovariance {
     pub fn turned(&self, ad: &Matrix6<f64>) -> Self {
         let n = self.len();
         let mut out = Self::zeros(n);
+        // Block (j, i) is block (i, j) transposed: `add` writes both.
         for i in 0..n {
-            for j in 0..n {
-                let b = ad * self.block(i, j) * ad.transpose();
-                for r in 0..6 {
-                    for c in 0..6 {
-                        out.matrix[(6 * i + r, 6 * j + c)] = b[(r, c)];
-                    }
-                }
+            for j in 0..=i {
+                out.add(i, j, &(ad * self.block(i, j) * ad.transpose()));
             }
         }
         out
@@ -520,11 +516,6 @@ impl JointCovariance {
     /// The matrix, row by row.
     pub fn rows(&self) -> Vec<Vec<f64>> {
         (0..self.matrix.nrows()).map(|r| (0..self.matrix.ncols()).map(|c| self.matrix[(r, c)]).collect()).collect()
-    }
-
-    /// The whole 6N×6N matrix.
-    pub fn matrix(&self) -> &Mat<f64> {
-        &self.matrix
     }
 }
 

@@ -162,16 +162,15 @@ pub(super) fn report(
 
 /// The σ of scan `a`'s pose relative to scan `b`'s: of their relative
 /// error ξₐ − ξ_b (covariance Cₐ + C_b − C_ab − C_ba, first order, the
-/// world's axes about the first scan's origin), √ of the trace of its
-/// rotation block, radians, and of the displacement it gives the point
-/// `at` (from the first scan's origin: ω × at + v), metres.
+/// world's axes about the first scan's origin) moved to be about the
+/// point `at` (from the first scan's origin; the adjoint of the shift
+/// there: v + ω × at), √ of the traces of its rotation block, radians,
+/// and of its translation block — the displacement of `at` —, metres.
 fn relative_sigma(joint: &fusion::graph::JointCovariance, a: usize, b: usize, at: &Vector3<f64>) -> (f64, f64) {
-    let c = joint.block(a, a) + joint.block(b, b) - joint.block(a, b) - joint.block(b, a);
-    let mut g = nalgebra::Matrix3x6::zeros();
-    g.fixed_view_mut::<3, 3>(0, 0).copy_from(&-fusion::se3::skew(at));
-    g.fixed_view_mut::<3, 3>(0, 3).copy_from(&nalgebra::Matrix3::identity());
-    let rotation = (c[(0, 0)] + c[(1, 1)] + c[(2, 2)]).max(0.0).sqrt();
-    (rotation, (g * c * g.transpose()).trace().max(0.0).sqrt())
+    let about = fusion::se3::adjoint(&Isometry3::from_parts(Translation3::from(-at), UnitQuaternion::identity()));
+    let c = about * (joint.block(a, a) + joint.block(b, b) - joint.block(a, b) - joint.block(b, a)) * about.transpose();
+    let trace = |k: usize| (c[(k, k)] + c[(k + 1, k + 1)] + c[(k + 2, k + 2)]).max(0.0).sqrt();
+    (trace(0), trace(3))
 }
 
 /// A link's blind directions as every document reports them: in the
