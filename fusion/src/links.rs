@@ -40,8 +40,10 @@
 //!   each pair's variance its own squared residual (the covariance by
 //!   pair), times σ̂₀², plus
 //!   its pull by the pairs past the other scan's sampled edge (a bias its
-//!   residuals do not show) — and, when σ̂₀² is below 1, the scans'
-//!   shared noise (`shared_noise`).
+//!   residuals do not show) — or, where the links corrected by their
+//!   edges' lean agree better than as measured, that lean, with the
+//!   corrected links' σ̂₀² ([`Pull`]) — and, when σ̂₀² is below 1, the
+//!   scans' shared noise (`shared_noise`).
 
 use nalgebra::{Isometry3, Matrix6, Point3, Vector6};
 use rayon::prelude::*;
@@ -200,6 +202,12 @@ pub struct LinkGraph {
     /// σ̂₀² = χ² / redundancy of the used links in the final adjustment
     /// (1 without redundancy).
     pub variance_factor: f64,
+    /// σ̂₀² of the used links each corrected by its edge's lean
+    /// ([`LEAN_SHORTFALL`]× [`crate::icp::IcpResult::edge_lean`]) and
+    /// adjusted again; `None` without redundancy or a lean. Below
+    /// [`variance_factor`](Self::variance_factor) the lean explains the
+    /// links' misfit, and the covariances take it ([`Pull`]).
+    pub lean_variance_factor: Option<f64>,
     /// The used links' redundancy: 6 per link less 6 per scan they place
     /// (the start's steps take no part).
     pub redundancy: usize,
@@ -525,6 +533,9 @@ pub struct Adjusted {
     /// redundancy): how much more they disagree with one another than
     /// their information allows.
     pub variance_factor: f64,
+    /// σ̂₀² of the measurements each corrected by its edge's lean, as
+    /// [`LinkGraph::lean_variance_factor`].
+    pub lean_variance_factor: Option<f64>,
     /// How far each pose is from the measurements' adjustment: ξ with
     /// pose ≈ exp(ξ)·adjusted (world frame; zero for scan 0, the frame).
     pub departure: Vec<Vector6<f64>>,
@@ -546,8 +557,9 @@ pub struct Adjusted {
 /// `edges` — relative measurements between the scans at `poses`, e.g. the
 /// verification's matches ([`crate::verify::PairCheck::edge`]), with each
 /// one's `noise` before the variance factor
-/// ([`crate::verify::PairCheck::edge_covariance`]) and edge pull `bias`,
-/// and each scan's `shared` footprint overlap of its edges
+/// ([`crate::verify::PairCheck::edge_covariance`]) and its edge's `pulls`
+/// ([`crate::verify::PairCheck::edge_bias`] and
+/// [`edge_lean`](crate::verify::PairCheck::edge_lean)), and each scan's `shared` footprint overlap of its edges
 /// ([`crate::verify::PairChecks::shared`]; empty: 1 for every scan) —
 /// adjusted from `poses` as [`adjust`] adjusts its links, the
 /// poses' own increments holding what no edge sees, whichever strategy
@@ -564,14 +576,14 @@ pub fn adjust_matches(
     poses: &[Isometry3<f64>],
     edges: &[Edge],
     noise: &[Matrix6<f64>],
-    bias: &[Vector6<f64>],
+    pulls: &[Pull],
     shared: &[f64],
     config: &LinkConfig,
 ) -> Result<Adjusted> {
-    if noise.len() != edges.len() || bias.len() != edges.len() {
+    if noise.len() != edges.len() || pulls.len() != edges.len() {
         return Err(FusionError::OutOfRange {
             what: "noise and pulls of the matches".into(),
-            value: noise.len().min(bias.len()) as f64,
+            value: noise.len().min(pulls.len()) as f64,
             expected: format!("one of each per match: {}", edges.len()),
         });
     }
@@ -580,8 +592,9 @@ pub fn adjust_matches(
     all.extend_from_slice(edges);
     let g = crate::graph::optimize(poses, &priors, &all, 20)?;
     let variance_factor = judged(&g.world_from_scan, edges).variance_factor;
-    let agreement = Agreement { variance_factor, shared };
-    let mut joint = adjusted_covariance(&g.world_from_scan, &priors, &all, steps, noise, bias, &agreement)?;
+    let lean_variance_factor = lean_factor(&g.world_from_scan, &priors, &all, steps, pulls)?;
+    let agreement = Agreement { variance_factor, lean_variance_factor, shared };
+    let mut joint = adjusted_covariance(&g.world_from_scan, &priors, &all, steps, noise, pulls, &agreement)?;
     joint.hold(0);
     let adjusted = joint.diagonal();
     // Scan 0's prior leaves it within 1e-20 m of its pose: the departures
@@ -606,7 +619,14 @@ pub fn adjust_matches(
             joint.add(i, j, &(departure[i] * departure[j].transpose()));
         }
     }
-    Ok(Adjusted { variance_factor, departure, covariance: joint.diagonal(), joint_covariance: joint, departure_chi2 })
+    Ok(Adjusted {
+        variance_factor,
+        lean_variance_factor,
+        departure,
+        covariance: joint.diagonal(),
+        joint_covariance: joint,
+        departure_chi2,
+    })
 }
 
 /// Links (as graph edges) judged at their adjusted `poses`.
@@ -792,22 +812,23 @@ fn solve(
                 .collect(),
         };
         // Each link's covariance: its covariance by pair, calibrated, times
-        // σ̂₀², and its edge pull ([`adjusted_covariance`]).
-        let (noise, bias): (Vec<Matrix6<f64>>, Vec<Vector6<f64>>) = used
+        // σ̂₀², and its edge's pull or lean ([`adjusted_covariance`]).
+        let (noise, pulls): (Vec<Matrix6<f64>>, Vec<Pull>) = used
             .iter()
             .map(|&k| {
                 let r = links[k].result.as_ref().expect("an accepted link has its match");
-                (link_noise(&r.information, r.range_covariance, config.range_scale), r.edge_bias)
+                (link_noise(&r.information, r.range_covariance, config.range_scale), Pull::of(r))
             })
             .unzip();
+        let lean_variance_factor = lean_factor(&g.world_from_scan, &priors, &edges, steps.len(), &pulls)?;
         let mut joint = adjusted_covariance(
             &g.world_from_scan,
             &priors,
             &edges,
             steps.len(),
             &noise,
-            &bias,
-            &Agreement { variance_factor, shared },
+            &pulls,
+            &Agreement { variance_factor, lean_variance_factor, shared },
         )?;
         // Scan 0 is the frame: the others' covariances are relative to it.
         joint.hold(0);
@@ -820,6 +841,7 @@ fn solve(
             links,
             unobservable,
             variance_factor,
+            lean_variance_factor,
             redundancy,
         });
     }
@@ -840,31 +862,96 @@ fn solve(
 ///   cycles ([`shared_noise`]). (σ̂₀² is exactly 1 without redundancy.)
 ///   The start's steps, which hold only what no link sees, are taken as
 ///   they are weighed.
-/// - its pull by its pairs beyond the other scan's sampled edge (`bias`,
-///   [`crate::icp::IcpResult::edge_bias`]): a bias that its residuals do
-///   not show, nor — where the pulls close the cycles — σ̂₀²; each link's
-///   an independent error.
+/// - its edge's pull (`pulls`, [`Pull`]): a bias that its residuals do not
+///   show, nor — where the pulls close the cycles — σ̂₀²; each link's an
+///   independent error. Where the links each corrected by their lean
+///   ([`LEAN_SHORTFALL`] × [`Pull::lean`]) agree better than as measured
+///   (`lean_variance_factor` below σ̂₀²), the lean is what they miss by:
+///   each link's bias is that, and the factor on the noise the corrected
+///   links' σ̂₀² (not below min(1, σ̂₀²): below 1 as measured, the rest
+///   of the noise stays the scans' own); otherwise the pull by the pairs
+///   beyond the edge alone ([`Pull::bias`]), and σ̂₀².
 fn adjusted_covariance(
     poses: &[Isometry3<f64>],
     priors: &[Option<Prior>],
     edges: &[Edge],
     steps: usize,
     noise: &[Matrix6<f64>],
-    bias: &[Vector6<f64>],
+    pulls: &[Pull],
     agreement: &Agreement,
 ) -> Result<JointCovariance> {
     let (variance_factor, shared) = (agreement.variance_factor, agreement.shared);
+    let (variance_factor, bias): (f64, Vec<Vector6<f64>>) = match agreement.lean_variance_factor {
+        Some(lean) if lean < variance_factor => {
+            (lean.max(variance_factor.min(1.0)), pulls.iter().map(|p| LEAN_SHORTFALL * p.lean).collect())
+        }
+        _ => (variance_factor, pulls.iter().map(|p| p.bias).collect()),
+    };
     let f = noise_factor(variance_factor);
     let mut covariances = vec![None; steps];
-    covariances.extend(noise.iter().zip(bias).map(|(c, d)| Some(c * f + d * d.transpose())));
+    covariances.extend(noise.iter().zip(&bias).map(|(c, d)| Some(c * f + d * d.transpose())));
     let covariance = crate::graph::sandwich_joint(poses, priors, edges, &covariances)?;
     Ok(if f < 1.0 { shared_noise(poses, covariance, &edges[steps..], noise, f, shared) } else { covariance })
+}
+
+/// How far a link's error runs along its edge's lean
+/// ([`crate::icp::IcpResult::edge_lean`]), in lean lengths: on a real
+/// room's wedges (four 150° wedges, a ring of links) each link's error lay
+/// along its pull by the pairs beyond the edge, 2–2.5× its length (cos
+/// 0.975); the lean, 1.55× the pull at the median, takes most of that.
+/// Of 1.25, 1.5 and 2, the NEES bench (graph mode) judged 1.25 best on
+/// seeds 7 and 13, and it held on 11, 17 and 23 (BENCHMARKS.md, "The
+/// edge's lean").
+pub const LEAN_SHORTFALL: f64 = 1.25;
+
+/// How the other scan's sampled edge pulls a match (target frame, ξ =
+/// (ω, v), left).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Pull {
+    /// By the pairs beyond the edge ([`crate::icp::IcpResult::edge_bias`]).
+    pub bias: Vector6<f64>,
+    /// By those and the covered pairs nearest the edge
+    /// ([`crate::icp::IcpResult::edge_lean`]).
+    pub lean: Vector6<f64>,
+}
+
+impl Pull {
+    /// A match's.
+    pub fn of(r: &IcpResult) -> Self {
+        Self { bias: r.edge_bias, lean: r.edge_lean }
+    }
+}
+
+/// σ̂₀² of the links (`edges` after the start's `steps`) each corrected by
+/// its lean — its measurement moved by exp([`LEAN_SHORTFALL`] ·
+/// [`Pull::lean`]), where the covered fit would take it — and adjusted
+/// again from `poses` with `priors`; `None` without redundancy, or without
+/// a lean (no pair beyond an edge: nothing to correct).
+fn lean_factor(
+    poses: &[Isometry3<f64>],
+    priors: &[Option<Prior>],
+    edges: &[Edge],
+    steps: usize,
+    pulls: &[Pull],
+) -> Result<Option<f64>> {
+    if pulls.iter().all(|p| p.lean == Vector6::zeros()) {
+        return Ok(None);
+    }
+    let mut corrected = edges.to_vec();
+    for (e, p) in corrected[steps..].iter_mut().zip(pulls) {
+        e.target_from_source = crate::se3::exp(&(LEAN_SHORTFALL * p.lean)) * e.target_from_source;
+    }
+    let g = crate::graph::optimize(poses, priors, &corrected, 20)?;
+    let j = judged(&g.world_from_scan, &corrected[steps..]);
+    Ok((j.redundancy > 0).then_some(j.variance_factor))
 }
 
 /// What the links' agreement says of their noise ([`adjusted_covariance`]).
 struct Agreement<'a> {
     /// σ̂₀².
     variance_factor: f64,
+    /// σ̂₀² of the links corrected by their lean ([`lean_factor`]).
+    lean_variance_factor: Option<f64>,
     /// Each scan's links' footprint overlap ([`shared_shares`]); empty: 1
     /// for every scan.
     shared: &'a [f64],
@@ -1093,8 +1180,72 @@ mod tests {
     fn adjusted(poses: &[Isometry3<f64>], edges: &[Edge]) -> Adjusted {
         let noise: Vec<Matrix6<f64>> =
             edges.iter().map(|e| e.information.try_inverse().expect("positive definite")).collect();
-        adjust_matches(poses, edges, &noise, &vec![Vector6::zeros(); edges.len()], &[], &LinkConfig::default())
+        adjust_matches(poses, edges, &noise, &vec![Pull::default(); edges.len()], &[], &LinkConfig::default())
             .expect("adjusted")
+    }
+
+    /// A ring of four scans whose links each miss by their edge's lean
+    /// (1.25× it, 12–20 mm, 3–10 σ, across the ring) besides their noise:
+    /// corrected by it, the links agree as they do without it (σ̂₀² of the
+    /// same links measured without the lean), so the covariances take the
+    /// lean, with that σ̂₀² — where σ̂₀² alone, one factor on every
+    /// direction, widens the poses' tilt and height too, which the leans
+    /// do not touch (2.7–6×). Where the leans are not what the links miss
+    /// by, the covariances are exactly those of the pulls beyond the edge
+    /// alone.
+    #[test]
+    fn a_ring_that_misses_by_its_leans_takes_them_as_its_links_bias() {
+        use nalgebra::Vector3;
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(43);
+        let truth: Vec<Isometry3<f64>> = (0..4)
+            .map(|k| crate::se3::exp(&Vector6::new(0.0, 0.0, 1.57 * k as f64, 0.2 * k as f64, 0.1, 0.0)))
+            .collect();
+        let ring = [(0, 1), (1, 2), (2, 3), (3, 0)];
+        let clean = measured(&mut rng, &truth, &ring);
+        let leans: Vec<Vector6<f64>> = (0..ring.len())
+            .map(|_| {
+                let v = Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), 0.0).normalize();
+                let length = rng.random_range(12e-3..20e-3) / LEAN_SHORTFALL;
+                Vector6::new(0.0, 0.0, 2e-3 * rng.random_range(-1.0..1.0), v.x * length, v.y * length, 0.0)
+            })
+            .collect();
+        let edges: Vec<Edge> = clean
+            .iter()
+            .zip(&leans)
+            .map(|(e, l)| Edge {
+                target_from_source: crate::se3::exp(&(-LEAN_SHORTFALL * l)) * e.target_from_source,
+                ..*e
+            })
+            .collect();
+        let noise: Vec<Matrix6<f64>> =
+            edges.iter().map(|e| e.information.try_inverse().expect("positive definite")).collect();
+        let at = |edges: &[Edge], pulls: &[Pull]| {
+            adjust_matches(&truth, edges, &noise, pulls, &[], &LinkConfig::default()).expect("adjusted")
+        };
+        let pulls: Vec<Pull> = leans.iter().map(|l| Pull { bias: 0.5 * l, lean: *l }).collect();
+        let leaning = at(&edges, &pulls);
+        let lean = leaning.lean_variance_factor.expect("a ring has redundancy");
+        let without = at(&clean, &vec![Pull::default(); ring.len()]);
+        assert_eq!(without.lean_variance_factor, None, "no lean, nothing to correct");
+        assert!(leaning.variance_factor > 5.0, "σ̂₀² {}", leaning.variance_factor);
+        assert!((lean / without.variance_factor - 1.0).abs() < 0.05, "{lean} against {}", without.variance_factor);
+        // The pulls beyond the edge alone (no lean), and σ̂₀².
+        let unexplained: Vec<Pull> = pulls.iter().map(|p| Pull { lean: Vector6::zeros(), ..*p }).collect();
+        let alone = at(&edges, &unexplained);
+        for k in 1..4 {
+            let (l, a) = (leaning.covariance[k].diagonal(), alone.covariance[k].diagonal());
+            for axis in [0, 1, 5] {
+                assert!(a[axis] > 2.5 * l[axis], "scan {k}, axis {axis}: {} against {}", a[axis], l[axis]);
+            }
+        }
+        // Leans the other way: the corrected links miss more.
+        let wrong: Vec<Pull> = pulls.iter().map(|p| Pull { lean: -p.lean, ..*p }).collect();
+        let wrong = at(&edges, &wrong);
+        assert!(wrong.lean_variance_factor.expect("redundancy") > wrong.variance_factor);
+        for k in 1..4 {
+            assert_eq!(wrong.covariance[k], alone.covariance[k], "scan {k}");
+        }
     }
 
     /// A scan's noise common to its matches is weighed by how far they use
@@ -1115,7 +1266,7 @@ mod tests {
         let noise: Vec<Matrix6<f64>> =
             edges.iter().map(|e| e.information.try_inverse().expect("positive definite")).collect();
         let at = |shared: &[f64]| {
-            adjust_matches(&truth, &edges, &noise, &vec![Vector6::zeros(); edges.len()], shared, &LinkConfig::default())
+            adjust_matches(&truth, &edges, &noise, &vec![Pull::default(); edges.len()], shared, &LinkConfig::default())
                 .expect("adjusted")
         };
         let (whole, given, none, half) = (at(&[]), at(&[1.0; 4]), at(&[0.0; 4]), at(&[0.5; 4]));

@@ -437,6 +437,7 @@ pub(crate) fn in_world(mut r: IcpResult, world_from_j: &Isometry3<f64>) -> IcpRe
     r.information = 0.5 * (r.information + r.information.transpose());
     r.unobservable.iter_mut().for_each(|d| *d = (ad * *d).normalize());
     r.edge_bias = ad * r.edge_bias;
+    r.edge_lean = ad * r.edge_lean;
     r.range_covariance = r.range_covariance.map(|c| ad * c * ad.transpose());
     r
 }

@@ -161,6 +161,11 @@ pub struct SetResult {
     /// covariances (below 1 as the scans' shared noise). `None` before
     /// the verification (other modes) or without a pair to verify.
     pub variance_factor: Option<f64>,
+    /// σ̂₀² of the same links each corrected by its edge's lean
+    /// ([`crate::links::LinkGraph::lean_variance_factor`]); below
+    /// `variance_factor` the covariances take it ([`crate::links::Pull`]).
+    /// `None` without redundancy or a lean, or where `variance_factor` is.
+    pub lean_variance_factor: Option<f64>,
     /// Each stage of the schedule: its matches and time.
     pub stages: Vec<StageRun>,
     /// Every pair overlapping at the final poses, matched once more from
@@ -517,16 +522,17 @@ fn verified<S: AsRef<[Point3<f32>]> + Sync>(scans: &[S], mut r: SetResult, confi
     let PairChecks { pairs, shared } = verify_set(scans, &r.world_from_scan, config)?;
     r.checks = pairs;
     if config.mode != Mode::Graph && !r.checks.is_empty() {
-        let (mut edges, mut noise, mut bias) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut edges, mut noise, mut pulls) = (Vec::new(), Vec::new(), Vec::new());
         for c in &r.checks {
             if let (Some(e), Some(n)) = (c.edge, c.edge_covariance) {
                 edges.push(e);
                 noise.push(n);
-                bias.push(c.edge_bias);
+                pulls.push(crate::links::Pull { bias: c.edge_bias, lean: c.edge_lean });
             }
         }
-        let a = crate::links::adjust_matches(&r.world_from_scan, &edges, &noise, &bias, &shared, &config.link)?;
+        let a = crate::links::adjust_matches(&r.world_from_scan, &edges, &noise, &pulls, &shared, &config.link)?;
         r.variance_factor = Some(a.variance_factor);
+        r.lean_variance_factor = a.lean_variance_factor;
         r.covariance = a.covariance;
         r.joint_covariance = Some(a.joint_covariance);
         r.departure = a.departure;
@@ -1063,6 +1069,7 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
         matches,
         settled,
         variance_factor: None,
+        lean_variance_factor: None,
         stages: runs,
         checks: Vec::new(),
         check_seconds: 0.0,
@@ -1151,6 +1158,7 @@ fn from_graph(g: LinkGraph, matches: usize, settled: bool, stages: Vec<StageRun>
         matches,
         settled,
         variance_factor: Some(g.variance_factor),
+        lean_variance_factor: g.lean_variance_factor,
         stages,
         checks: Vec::new(),
         check_seconds: 0.0,
@@ -1255,6 +1263,7 @@ mod tests {
             matches: 0,
             settled: true,
             variance_factor: None,
+            lean_variance_factor: None,
             stages: Vec::new(),
             checks: Vec::new(),
             check_seconds: 0.0,

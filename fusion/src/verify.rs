@@ -166,6 +166,11 @@ pub struct PairCheck {
     /// ([`crate::icp::IcpResult::edge_bias`], target frame): a bias its
     /// residuals do not show, added to its noise as δδᵀ.
     pub edge_bias: Vector6<f64>,
+    /// How the edge leans the match, those pairs and the covered ones
+    /// nearest the edge ([`crate::icp::IcpResult::edge_lean`], target
+    /// frame): the bias in its place where it explains the matches'
+    /// misfit ([`crate::links::Pull`]).
+    pub edge_lean: Vector6<f64>,
 }
 
 impl PairCheck {
@@ -289,6 +294,7 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
                 edge_covariance: used
                     .map(|r| crate::links::link_noise(&r.information, r.range_covariance, config.range_scale)),
                 edge_bias: l.result.as_ref().map_or_else(Vector6::zeros, |r| r.edge_bias),
+                edge_lean: l.result.as_ref().map_or_else(Vector6::zeros, |r| r.edge_lean),
             };
             check.consistent &= !check.violates_free_space();
             check
@@ -401,6 +407,7 @@ mod tests {
             edge: None,
             edge_covariance: None,
             edge_bias: Vector6::zeros(),
+            edge_lean: Vector6::zeros(),
         }
     }
 

@@ -60,8 +60,11 @@ pub struct IcpConfig {
     /// Point-to-plane, without `only_covered`: measure how far the pairs
     /// beyond the target's sampled edge pull the estimate — where the fit
     /// without them would step from it, linearised at the last pass
-    /// ([`IcpResult::edge_bias`](super::IcpResult::edge_bias)). It changes
-    /// nothing of the match. Default false.
+    /// ([`IcpResult::edge_bias`](super::IcpResult::edge_bias)), and
+    /// without the covered pairs nearest the edge too
+    /// ([`IcpResult::edge_lean`](super::IcpResult::edge_lean): one more
+    /// pass over the last pass's pairs). It changes nothing of the match.
+    /// Default false.
     pub edge_bias: bool,
     /// Point-to-plane: also report the estimate's covariance with each
     /// pair's variance its own squared residual (the sandwich H⁻¹·B·H⁻¹,

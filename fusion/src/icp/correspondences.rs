@@ -28,6 +28,11 @@ pub(crate) struct Sums {
     /// [`IcpConfig::only_covered`] leaves out.
     pub(crate) edge_h: Matrix6<f64>,
     pub(crate) edge_b: Vector6<f64>,
+    /// [`edge_zone`]: the share of `h` and `b` of the covered pairs
+    /// within [`EDGE_ZONE_SPACINGS`] spacings of a pair beyond the edge;
+    /// zero from [`accumulate`].
+    pub(crate) zone_h: Matrix6<f64>,
+    pub(crate) zone_b: Vector6<f64>,
     /// Point-to-plane with [`IcpConfig::range_noise`]: Σ (w·r)²·JJᵀ, each
     /// pair's score by its own squared residual — the middle of the
     /// estimate's sandwich covariance (zero otherwise).
@@ -52,6 +57,8 @@ impl Sums {
         self.spp += o.spp;
         self.edge_h += o.edge_h;
         self.edge_b += o.edge_b;
+        self.zone_h += o.zone_h;
+        self.zone_b += o.zone_b;
         self.scores += o.scores;
         self
     }
@@ -74,6 +81,8 @@ impl Sums {
             b: 0.5 * (self.b + a.transpose() * back.b),
             edge_h: 0.5 * (self.edge_h + a.transpose() * back.edge_h * a),
             edge_b: 0.5 * (self.edge_b + a.transpose() * back.edge_b),
+            zone_h: 0.5 * (self.zone_h + a.transpose() * back.zone_h * a),
+            zone_b: 0.5 * (self.zone_b + a.transpose() * back.zone_b),
             ..self
         }
     }
@@ -215,17 +224,12 @@ pub(crate) fn accumulate(
                 }
                 match config.method {
                     Method::PointToPlane => {
-                        let n = target.normal(i);
-                        let res = n.dot(&(pt - q));
-                        let edge = (config.only_covered || config.edge_bias) && target.beyond(i, &(pt - q - res * n));
+                        let (res, j, edge) = plane_pair(target, i, &pt, config);
                         if edge && config.only_covered {
                             continue;
                         }
                         s.n += 1;
                         let w = config.kernel.weight(res);
-                        // r = nᵀ(T̂p + ω × T̂p + v − q): ∂r/∂ω = T̂p × n, ∂r/∂v = n.
-                        let c = pt.cross(&n);
-                        let j = Vector6::new(c.x, c.y, c.z, n.x, n.y, n.z);
                         let (h, b) = (w * j * j.transpose(), w * res * j);
                         s.h += h;
                         s.b += b;
@@ -256,6 +260,93 @@ pub(crate) fn accumulate(
         // Merged in chunk order, so that a match gives the same estimate
         // every time (a parallel reduction associates as the threads
         // steal work, and a float sum's rounding follows it).
+        .collect::<Vec<Sums>>()
+        .into_iter()
+        .fold(Sums::default(), Sums::merge)
+}
+
+/// A point-to-plane pair: source point `pt` (target frame) on target
+/// point `i`'s plane — its residual, its Jacobian row and whether it lies
+/// beyond the target's sampled edge (asked only with
+/// [`IcpConfig::only_covered`] or [`IcpConfig::edge_bias`]).
+fn plane_pair(target: &Target, i: usize, pt: &Vector3<f64>, config: &IcpConfig) -> (f64, Vector6<f64>, bool) {
+    let q = point(&target.points[i]);
+    let n = target.normal(i);
+    let res = n.dot(&(pt - q));
+    let edge = (config.only_covered || config.edge_bias) && target.beyond(i, &(pt - q - res * n));
+    // r = nᵀ(T̂p + ω × T̂p + v − q): ∂r/∂ω = T̂p × n, ∂r/∂v = n.
+    let c = pt.cross(&n);
+    (res, Vector6::new(c.x, c.y, c.z, n.x, n.y, n.z), edge)
+}
+
+/// How far from the pairs beyond the target's edge [`edge_zone`] reaches,
+/// in target spacings. The pairs there are covered, but the edge cuts
+/// their partners' neighbourhoods too (normals from one side, nearest
+/// samples all inward), and they lean the match as the pairs beyond it
+/// pull it: the pull with the zone left out too was 1.2, 1.5 and 1.55×
+/// the pull alone (medians) at 1, 2 and 3 spacings on a real room's
+/// wedges, in its direction (cos 0.995), 1.1, 1.3 and 1.4× on a street's
+/// (BENCHMARKS.md, "The edge's lean").
+pub(crate) const EDGE_ZONE_SPACINGS: f64 = 3.0;
+
+/// The covered pairs nearest the target's sampled edge: of a pass at
+/// `estimate` (each source point on its partner of that pass, `partners`;
+/// back faces and the distance as [`accumulate`] takes them), those within
+/// [`EDGE_ZONE_SPACINGS`] target spacings (the median distance of the
+/// edge's samples to their nearest neighbours) of a pair beyond the edge
+/// ([`Target::beyond`]), summed into `zone_h` / `zone_b` (the rest of the
+/// sums zero). Zero when no pair lies beyond the edge.
+pub(crate) fn edge_zone(
+    source: &[Point3<f32>],
+    target: &Target,
+    estimate: &Isometry3<f64>,
+    max_sq: f64,
+    config: &IcpConfig,
+    partners: &Partners,
+) -> Sums {
+    let r: Matrix3<f64> = estimate.rotation.to_rotation_matrix().into_inner();
+    let t = estimate.translation.vector;
+    let back_faces = config.reject_back_faces.then(|| r * config.source_viewpoint.coords + t);
+    let config = IcpConfig { edge_bias: true, only_covered: false, ..*config };
+    // Each pair: its source point in the target frame, its partner, and
+    // whether it lies beyond the edge.
+    let pairs: Vec<(Vector3<f64>, usize, bool)> = source
+        .par_iter()
+        .zip(&partners.nearest)
+        .filter_map(|(p, &i)| {
+            let i = i as usize;
+            let q = point(target.points.get(i)?);
+            let pt = r * p.coords.cast::<f64>() + t;
+            if (pt - q).norm_squared() > max_sq {
+                return None;
+            }
+            if let Some(eye) = back_faces
+                && target.normal(i).dot(&(eye - q)) < 0.0
+            {
+                return None;
+            }
+            let (_, _, edge) = plane_pair(target, i, &pt, &config);
+            Some((pt, i, edge))
+        })
+        .collect();
+    let beyond: Vec<Point3<f32>> =
+        pairs.iter().filter(|(_, _, e)| *e).map(|(pt, _, _)| Point3::from(pt.cast::<f32>())).collect();
+    let Some(edge) = (!beyond.is_empty()).then(|| Target::new(&beyond, 0).ok()).flatten() else {
+        return Sums::default();
+    };
+    let mut spacings: Vec<f64> = pairs.iter().filter(|(_, _, e)| *e).map(|(_, i, _)| target.spacing(*i)).collect();
+    spacings.sort_by(f64::total_cmp);
+    let reach_sq = (EDGE_ZONE_SPACINGS * spacings[spacings.len() / 2]).powi(2);
+    pairs
+        .par_iter()
+        .filter(|(pt, _, beyond)| {
+            !beyond && edge.nearest_from(&[pt.x as f32, pt.y as f32, pt.z as f32], u32::MAX).1 <= reach_sq
+        })
+        .map(|(pt, i, _)| {
+            let (res, j, _) = plane_pair(target, *i, pt, &config);
+            let w = config.kernel.weight(res);
+            Sums { zone_h: w * j * j.transpose(), zone_b: w * res * j, ..Sums::default() }
+        })
         .collect::<Vec<Sums>>()
         .into_iter()
         .fold(Sums::default(), Sums::merge)

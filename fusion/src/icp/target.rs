@@ -253,6 +253,15 @@ impl Target {
         )
     }
 
+    /// The distance from point `i` to its nearest other point, metres
+    /// (zero when it has none).
+    pub(crate) fn spacing(&self, i: usize) -> f64 {
+        let hood = &self.local(i).hood;
+        hood.points[..usize::from(hood.len)]
+            .first()
+            .map_or(0.0, |&k| (point(&self.points[k as usize]) - point(&self.points[i])).norm())
+    }
+
     /// Point `j`'s surroundings, queried the first time they are needed.
     fn local(&self, j: usize) -> &Local {
         self.local[j].get_or_init(|| {

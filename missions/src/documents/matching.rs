@@ -29,6 +29,18 @@ pub struct MatchReport {
     /// of it is taken as each scan's own, shared by its links. In the other
     /// modes null when no pair was verified (a single scan).
     pub variance_factor: Option<f64>,
+    /// σ̂₀² of the same links each corrected by its edge's lean: its
+    /// measurement moved by 1.25× the step its match would take without
+    /// the pairs beyond the other scan's sampled edge and the covered
+    /// pairs within three spacings of them, and the links adjusted again.
+    /// Where it is below `variance_factor` the lean explains the links'
+    /// misfit: the covariances take it as each link's bias, and this
+    /// factor (not below the smaller of 1 and `variance_factor`) in place
+    /// of `variance_factor`; otherwise each link's pull by the pairs
+    /// beyond the edge alone, and `variance_factor`. Null without
+    /// redundancy (nothing to judge: the pull alone) or without a lean (no
+    /// pair beyond an edge), or where `variance_factor` is.
+    pub lean_variance_factor: Option<f64>,
     /// With `--joint-covariance`: the poses' joint covariance, 6N×6N for
     /// the N `scans` in their order, row by row — block (i, j) is
     /// cov(ξᵢ, ξⱼ) in the order and frame of `scans[].covariance`, which

@@ -68,6 +68,7 @@ pub(super) fn report(
             .collect(),
         matches: r.matches,
         variance_factor: r.variance_factor,
+        lean_variance_factor: r.lean_variance_factor,
         joint_covariance: joint
             .then(|| r.joint_covariance.as_ref().map(fusion::graph::JointCovariance::rows))
             .flatten(),
