@@ -559,7 +559,8 @@ pub struct Adjusted {
 /// one's `noise` before the variance factor
 /// ([`crate::verify::PairCheck::edge_covariance`]) and its edge's `pulls`
 /// ([`crate::verify::PairCheck::edge_bias`] and
-/// [`edge_lean`](crate::verify::PairCheck::edge_lean)), and each scan's `shared` footprint overlap of its edges
+/// [`edge_lean`](crate::verify::PairCheck::edge_lean)), and each scan's
+/// `shared` footprint overlap of its edges
 /// ([`crate::verify::PairChecks::shared`]; empty: 1 for every scan) —
 /// adjusted from `poses` as [`adjust`] adjusts its links, the
 /// poses' own increments holding what no edge sees, whichever strategy

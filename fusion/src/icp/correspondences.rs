@@ -308,9 +308,9 @@ pub(crate) fn edge_zone(
     let t = estimate.translation.vector;
     let back_faces = config.reject_back_faces.then(|| r * config.source_viewpoint.coords + t);
     let config = IcpConfig { edge_bias: true, only_covered: false, ..*config };
-    // Each pair: its source point in the target frame, its partner, and
-    // whether it lies beyond the edge.
-    let pairs: Vec<(Vector3<f64>, usize, bool)> = source
+    // Each pair: its source point in the target frame, its partner, its
+    // residual and Jacobian row, and whether it lies beyond the edge.
+    let pairs: Vec<(Vector3<f64>, usize, f64, Vector6<f64>, bool)> = source
         .par_iter()
         .zip(&partners.nearest)
         .filter_map(|(p, &i)| {
@@ -325,25 +325,24 @@ pub(crate) fn edge_zone(
             {
                 return None;
             }
-            let (_, _, edge) = plane_pair(target, i, &pt, &config);
-            Some((pt, i, edge))
+            let (res, j, edge) = plane_pair(target, i, &pt, &config);
+            Some((pt, i, res, j, edge))
         })
         .collect();
     let beyond: Vec<Point3<f32>> =
-        pairs.iter().filter(|(_, _, e)| *e).map(|(pt, _, _)| Point3::from(pt.cast::<f32>())).collect();
+        pairs.iter().filter(|pair| pair.4).map(|(pt, ..)| Point3::from(pt.cast::<f32>())).collect();
     let Some(edge) = (!beyond.is_empty()).then(|| Target::new(&beyond, 0).ok()).flatten() else {
         return Sums::default();
     };
-    let mut spacings: Vec<f64> = pairs.iter().filter(|(_, _, e)| *e).map(|(_, i, _)| target.spacing(*i)).collect();
+    let mut spacings: Vec<f64> = pairs.iter().filter(|pair| pair.4).map(|pair| target.spacing(pair.1)).collect();
     spacings.sort_by(f64::total_cmp);
     let reach_sq = (EDGE_ZONE_SPACINGS * spacings[spacings.len() / 2]).powi(2);
     pairs
         .par_iter()
-        .filter(|(pt, _, beyond)| {
+        .filter(|(pt, .., beyond)| {
             !beyond && edge.nearest_from(&[pt.x as f32, pt.y as f32, pt.z as f32], u32::MAX).1 <= reach_sq
         })
-        .map(|(pt, i, _)| {
-            let (res, j, _) = plane_pair(target, *i, pt, &config);
+        .map(|&(_, _, res, j, _)| {
             let w = config.kernel.weight(res);
             Sums { zone_h: w * j * j.transpose(), zone_b: w * res * j, ..Sums::default() }
         })
