@@ -33,7 +33,11 @@ NEES_AXES=1 the mean square error over the mean variance along each world axis, 
 into K parts (4; 2 is one link alone), NEES_ARGS="--only-covered" adds
 arguments to every `match`, NEES_VIEWPOINTS=1 writes the parts as PCD with
 the scanner's position (VIEWPOINT) so that the verification tests free
-space (PLY says nothing of it), NEES_SEED=S draws with another seed (7).
+space (PLY says nothing of it), NEES_SEED=S draws with another seed (7),
+NEES_DEPARTURE_SCALES=C1,C2,… (the modes without a link graph) judges each
+trial again with the departures' ξξᵀ scaled by each C (1 is what `match`
+reports) and the adjustment's own error — each pose less its departure —
+against the adjustment's covariance alone.
 """
 import json
 import math
@@ -178,6 +182,8 @@ def main():
         for label, cut, up in scenarios:
             results = {m: [] for m in modes}
             joint = {m: [] for m in modes}
+            # (mode, what) → each trial's joint NEES and part count.
+            variants = {}
             exits = {m: [] for m in modes}
             silent = {m: 0 for m in modes}
             for trial in range(trials):
@@ -217,6 +223,16 @@ def main():
                         rows_ = np.concatenate([np.arange(6 * i, 6 * i + 6) for i in kept])
                         e = np.concatenate([xi(np.array(v["scans"][i]["world_from_scan"]), truths[i]) for i in kept])
                         joint[mode].append((e @ np.linalg.solve(big[np.ix_(rows_, rows_)], e), len(kept)))
+                        scales = os.environ.get("NEES_DEPARTURE_SCALES")
+                        if scales and v["scans"][kept[0]].get("departure") is not None:
+                            # The reported joint covariance is the adjustment's plus ξξᵀ.
+                            dep = np.concatenate([np.array(v["scans"][i]["departure"]) for i in kept])
+                            adjustment = big[np.ix_(rows_, rows_)] - np.outer(dep, dep)
+                            for c in map(float, scales.split(",")):
+                                nees = e @ np.linalg.solve(adjustment + c * np.outer(dep, dep), e)
+                                variants.setdefault((mode, f"departure's ξξᵀ × {c}:"), []).append((nees, len(kept)))
+                            own = (e - dep) @ np.linalg.solve(adjustment, e - dep)
+                            variants.setdefault((mode, "the adjustment's own error:"), []).append((own, len(kept)))
                     for i in range(1, len(parts)):
                         e = xi(np.array(v["scans"][i]["world_from_scan"]), truths[i])
                         c = np.array(v["scans"][i]["covariance"])
@@ -258,6 +274,10 @@ def main():
                     jlo, jhi = chi2_interval(6 * poses)
                     print(f"{'':41} joint NEES per part {total / poses:8.2f} [{jlo / poses:.2f}, {jhi / poses:.2f}] "
                           f"over {len(joint[mode])} trials")
+                for (m, what), nees in variants.items():
+                    if m == mode:
+                        total, poses = sum(j for j, _ in nees), sum(k for _, k in nees)
+                        print(f"{'':41} {what:32} joint NEES per part {total / poses:8.2f}")
                 if os.environ.get("NEES_AXES"):
                     # Per axis of the world (ω x y z, v x y z): the errors' mean square over the reported variance.
                     ratio = [np.mean([e[k] ** 2 for e, _, _ in rows]) / np.mean([c[k, k] for _, c, _ in rows]) for k in range(6)]
