@@ -289,6 +289,19 @@ fn plane_pair(target: &Target, i: usize, pt: &Vector3<f64>, config: &IcpConfig) 
 /// (BENCHMARKS.md, "The edge's lean").
 pub(crate) const EDGE_ZONE_SPACINGS: f64 = 3.0;
 
+/// One pair of the zone's first pass.
+struct ZonePair {
+    /// The source point in the target frame.
+    pt: Vector3<f64>,
+    /// Its partner.
+    i: usize,
+    /// Its residual and Jacobian row ([`plane_pair`]).
+    res: f64,
+    row: Vector6<f64>,
+    /// Whether it lies beyond the target's edge.
+    beyond: bool,
+}
+
 /// The covered pairs nearest the target's sampled edge: of a pass at
 /// `estimate` (each source point on its partner of that pass, `partners`;
 /// back faces and the distance as [`accumulate`] takes them), those within
@@ -308,9 +321,7 @@ pub(crate) fn edge_zone(
     let t = estimate.translation.vector;
     let back_faces = config.reject_back_faces.then(|| r * config.source_viewpoint.coords + t);
     let config = IcpConfig { edge_bias: true, only_covered: false, ..*config };
-    // Each pair: its source point in the target frame, its partner, its
-    // residual and Jacobian row, and whether it lies beyond the edge.
-    let pairs: Vec<(Vector3<f64>, usize, f64, Vector6<f64>, bool)> = source
+    let pairs: Vec<ZonePair> = source
         .par_iter()
         .zip(&partners.nearest)
         .filter_map(|(p, &i)| {
@@ -325,26 +336,27 @@ pub(crate) fn edge_zone(
             {
                 return None;
             }
-            let (res, j, edge) = plane_pair(target, i, &pt, &config);
-            Some((pt, i, res, j, edge))
+            let (res, row, beyond) = plane_pair(target, i, &pt, &config);
+            Some(ZonePair { pt, i, res, row, beyond })
         })
         .collect();
     let beyond: Vec<Point3<f32>> =
-        pairs.iter().filter(|pair| pair.4).map(|(pt, ..)| Point3::from(pt.cast::<f32>())).collect();
+        pairs.iter().filter(|pair| pair.beyond).map(|pair| Point3::from(pair.pt.cast::<f32>())).collect();
     let Some(edge) = (!beyond.is_empty()).then(|| Target::new(&beyond, 0).ok()).flatten() else {
         return Sums::default();
     };
-    let mut spacings: Vec<f64> = pairs.iter().filter(|pair| pair.4).map(|pair| target.spacing(pair.1)).collect();
+    let mut spacings: Vec<f64> = pairs.iter().filter(|pair| pair.beyond).map(|pair| target.spacing(pair.i)).collect();
     spacings.sort_by(f64::total_cmp);
     let reach_sq = (EDGE_ZONE_SPACINGS * spacings[spacings.len() / 2]).powi(2);
     pairs
         .par_iter()
-        .filter(|(pt, .., beyond)| {
-            !beyond && edge.nearest_from(&[pt.x as f32, pt.y as f32, pt.z as f32], u32::MAX).1 <= reach_sq
+        .filter(|pair| {
+            let pt = &pair.pt;
+            !pair.beyond && edge.nearest_from(&[pt.x as f32, pt.y as f32, pt.z as f32], u32::MAX).1 <= reach_sq
         })
-        .map(|&(_, _, res, j, _)| {
+        .map(|&ZonePair { res, row, .. }| {
             let w = config.kernel.weight(res);
-            Sums { zone_h: w * j * j.transpose(), zone_b: w * res * j, ..Sums::default() }
+            Sums { zone_h: w * row * row.transpose(), zone_b: w * res * row, ..Sums::default() }
         })
         .collect::<Vec<Sums>>()
         .into_iter()
