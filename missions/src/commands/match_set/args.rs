@@ -72,6 +72,12 @@ pub struct MatchArgs {
     /// it overlaps most.
     #[arg(long, default_value_t = 10)]
     pub max_partners: usize,
+    /// simultaneous: at most this many matches for each new scan's queue
+    /// at each stage; a queue still moving scans then is abandoned and its
+    /// stage reported as not settled (`stages[].settled`). Bounds the
+    /// mode's time where its queue creeps (a pipe: docs/match.md).
+    #[arg(long, default_value_t = fusion::multiview::MultiviewConfig::default().max_matches_per_scan)]
+    pub max_matches_per_scan: usize,
     /// Directions a match cannot see — eigenvalue of its normal matrix
     /// (about the scan's centroid, rotation scaled by its radius) below
     /// this ratio of the largest — are held where the start put them and

@@ -65,8 +65,12 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
     if args.max_partners == 0 {
         bail!("--max-partners 0: expected at least 1");
     }
+    if args.max_matches_per_scan == 0 {
+        bail!("--max-matches-per-scan 0: expected at least 1");
+    }
     let mut config = SetConfig { mode: mode(args.mode), ..SetConfig::default() };
     config.link.max_partners = args.max_partners;
+    config.link.multiview.max_matches_per_scan = args.max_matches_per_scan;
     let icp = &mut config.link.multiview.icp;
     icp.degeneracy_ratio = (args.degeneracy_ratio > 0.0).then_some(args.degeneracy_ratio);
     if args.method == MethodArg::PointToPoint {
