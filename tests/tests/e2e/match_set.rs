@@ -2189,9 +2189,8 @@ fn a_links_blind_directions_are_in_the_worlds_axes_in_every_mode() {
             .filter(|l| l["degenerate_directions"].as_array().is_some_and(|d| !d.is_empty()))
             .collect();
         // (Simultaneous mode's metascan matches, each against up to eight
-        // partners along the pipe, may see it all — at the default cap a
-        // further restart was kept whose matches flagged nothing — so none
-        // need be blind there; at a cap of 5 six of its eight are, about x.)
+        // partners along the pipe, may see it all, so none need be blind
+        // there.)
         assert!(mode == "simultaneous" || !blind.is_empty(), "{mode}: no link is blind in a pipe: {}", v["links"]);
         let c = |d: &Value, i: usize| d[i].as_f64().expect("number").abs();
         for l in blind {
