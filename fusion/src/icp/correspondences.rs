@@ -295,8 +295,9 @@ struct ZonePair {
     pt: Vector3<f64>,
     /// Its partner.
     i: usize,
-    /// Its residual and Jacobian row ([`plane_pair`]).
+    /// Its point-to-plane residual ([`plane_pair`]).
     res: f64,
+    /// Its Jacobian row in ξ = (ω, v) ([`plane_pair`]).
     row: Vector6<f64>,
     /// Whether it lies beyond the target's edge.
     beyond: bool,
