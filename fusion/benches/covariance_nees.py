@@ -270,19 +270,24 @@ def main():
                     # independent parts; the trials are independent: each
                     # trial's parts against their joint covariance (χ² with
                     # 6 per part when honest), per part.
-                    total, poses = sum(j for j, _ in joint[mode]), sum(k for _, k in joint[mode])
+                    total, poses = per_part(joint[mode])
                     jlo, jhi = chi2_interval(6 * poses)
                     print(f"{'':41} joint NEES per part {total / poses:8.2f} [{jlo / poses:.2f}, {jhi / poses:.2f}] "
                           f"over {len(joint[mode])} trials")
                 for (m, what), nees in variants.items():
                     if m == mode:
-                        total, poses = sum(j for j, _ in nees), sum(k for _, k in nees)
+                        total, poses = per_part(nees)
                         print(f"{'':41} {what:32} joint NEES per part {total / poses:8.2f}")
                 if os.environ.get("NEES_AXES"):
                     # Per axis of the world (ω x y z, v x y z): the errors' mean square over the reported variance.
                     ratio = [np.mean([e[k] ** 2 for e, _, _ in rows]) / np.mean([c[k, k] for _, c, _ in rows]) for k in range(6)]
                     print(f"{'':41} per axis, error² / variance: " + " ".join(f"{r:.2f}" for r in ratio))
                 sys.stdout.flush()
+
+
+def per_part(trials):
+    """The trials' joint NEES summed, and their parts counted: [(NEES, parts)] → (Σ NEES, Σ parts)."""
+    return sum(j for j, _ in trials), sum(k for _, k in trials)
 
 
 def chi2_interval(dof):
