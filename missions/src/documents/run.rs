@@ -148,6 +148,11 @@ pub struct FusionReport {
     pub mode: String,
     /// ICP runs.
     pub matches: usize,
+    /// False when `icp`'s simultaneous pass abandoned a queue at `[fusion]
+    /// max_matches_per_scan` with its scans still moving (true in the other
+    /// modes, and in reports written before the key).
+    #[serde(default = "yes")]
+    pub settled: bool,
     /// Every scan.
     pub scans: Vec<FusedScanReport>,
     /// RMS horizontal error of the fused poses (simulator).
@@ -217,4 +222,9 @@ impl Document for RunReport {
 impl Document for FusionReport {
     const NAME: &'static str = "fusion";
     const VERSION: u32 = 1;
+}
+
+/// `true`: serde's default for [`FusionReport::settled`].
+fn yes() -> bool {
+    true
 }

@@ -279,6 +279,11 @@ pub struct FusionPlan {
     /// see docs/fusion.md). `cps-icp` does not need it: the CPS prior holds
     /// the scans and its gate leaves out a match that slid.
     pub degeneracy_ratio: f64,
+    /// `icp`: the simultaneous pass runs at most this many matches in each
+    /// new scan's queue at each stage before it abandons the queue and
+    /// reports the stage not settled (`max_matches_per_scan`, default 100;
+    /// `match --max-matches-per-scan`, docs/match.md).
+    pub max_matches_per_scan: usize,
 }
 
 impl Default for FusionPlan {
@@ -294,6 +299,7 @@ impl Default for FusionPlan {
             max_partners: 4,
             icp_variance_factor: 1.0,
             degeneracy_ratio: 0.0,
+            max_matches_per_scan: fusion::multiview::MultiviewConfig::default().max_matches_per_scan,
         }
     }
 }

@@ -185,6 +185,9 @@ pub struct Fused {
     pub scans: Vec<FusedScan>,
     /// ICP runs.
     pub matches: usize,
+    /// False when a simultaneous queue (`icp`) hit `[fusion]
+    /// max_matches_per_scan` and was abandoned still moving its scans.
+    pub settled: bool,
     /// Wall time, seconds.
     pub seconds: f64,
     /// Every ICP run iteration by iteration, when asked for (`trace`).
@@ -213,6 +216,7 @@ fn multiview_config(plan: &FusionPlan, strategy: Strategy, scanner_in_body: Poin
         source_voxel_m: plan.voxel_m,
         target_voxel_m: plan.voxel_m / 2.0,
         min_pairs: plan.min_pairs,
+        max_matches_per_scan: plan.max_matches_per_scan,
         ..MultiviewConfig::default()
     }
 }
@@ -258,6 +262,7 @@ pub fn fuse(
     let base = views.first().map_or_else(Vector3::zeros, |v| v.pose.position.coords);
     let to_local = Translation3::from(-base);
     let to_world = Translation3::from(base);
+    let mut settled = true;
     let (poses, rmse, matches): (Vec<Isometry3<f64>>, Vec<Option<f64>>, usize) = match mode {
         FusionMode::Direct => (views.iter().map(ScanView::direct).collect(), vec![None; views.len()], 0),
         _ if views.is_empty() => (Vec::new(), Vec::new(), 0),
@@ -277,6 +282,7 @@ pub fn fuse(
             config.icp.max_correspondence_m = plan.fine_correspondence_m;
             let r = fusion::multiview::register_views(&scans, &coarse.world_from_scan, &config, progress)
                 .context("ICP fusion (simultaneous matching, fine pass)")?;
+            settled = coarse.settled && r.settled;
             traces = coarse.traces.into_iter().chain(r.traces).collect();
             for (s, (m, partners)) in r.last_match.iter().zip(&r.partners).enumerate() {
                 if let Some(m) = m {
@@ -353,7 +359,7 @@ pub fn fuse(
             unobservable,
         })
         .collect();
-    Ok(Fused { mode, scans, matches, seconds: started.elapsed().as_secs_f64(), traces, links })
+    Ok(Fused { mode, scans, matches, settled, seconds: started.elapsed().as_secs_f64(), traces, links })
 }
 
 /// The points a scan keeps through the voxel filter; a scan is matched
@@ -394,7 +400,15 @@ fn fuse_without(
         .map(|&i| ScanView { correlation: Correlation::Earlier(std::mem::take(&mut cross[i])), ..views[i].clone() })
         .collect();
     let mut fused = if sub.is_empty() {
-        Fused { mode, scans: Vec::new(), matches: 0, seconds: 0.0, traces: Vec::new(), links: Vec::new() }
+        Fused {
+            mode,
+            scans: Vec::new(),
+            matches: 0,
+            settled: true,
+            seconds: 0.0,
+            traces: Vec::new(),
+            links: Vec::new(),
+        }
     } else {
         fuse(&sub, mode, plan, scanner_in_body, trace, progress)?
     };

@@ -79,6 +79,7 @@ impl FusionReport {
         Self {
             mode: fused.mode.name().into(),
             matches: fused.matches,
+            settled: fused.settled,
             scans,
             rms_error_xy_m: rms(sq[0]),
             direct_rms_error_xy_m: rms(sq[1]),

@@ -4,6 +4,10 @@ use std::io::Write;
 
 use super::fuse::{Fused, ScanView, error_heading, error_xy};
 
+/// The line both texts print when `icp`'s simultaneous pass did not settle.
+pub const UNSETTLED: &str = "fusion not settled: a simultaneous queue reached [fusion] max_matches_per_scan \
+     with its scans still moving; the poses are where it stopped (docs/match.md, Known limits)";
+
 /// `fuse`: one row per scan.
 pub fn fusion(out: &mut dyn Write, views: &[ScanView], fused: &Fused) -> std::io::Result<()> {
     writeln!(
@@ -14,6 +18,9 @@ pub fn fusion(out: &mut dyn Write, views: &[ScanView], fused: &Fused) -> std::io
         fused.matches,
         fused.seconds
     )?;
+    if !fused.settled {
+        writeln!(out, "{UNSETTLED}")?;
+    }
     writeln!(
         out,
         "{:>7} {:>10} {:>10} {:>9} {:>8} {:>11} {:>11} {:>11}",

@@ -48,6 +48,9 @@ pub fn run_summary(out: &mut dyn Write, mission: &Mission, s: &RunSummary) -> st
             1e3 * direct
         )?;
     }
+    if !fusion.settled {
+        writeln!(out, "{}", crate::products::text::UNSETTLED)?;
+    }
     if let Some(pipe) = &s.report.pipe {
         crate::view::tables::pipe_summary(out, pipe)?;
     }

@@ -160,6 +160,23 @@ fn corridor_icp_example() {
     assert!(f(&fusion["rms_error_xy_m"]) < 0.1 * f(&fusion["direct_rms_error_xy_m"]), "{fusion}");
     let on = on_scene("corridor", &dir.path().join("cloud.ply"), 0.05);
     assert!(on > 0.95, "{:.1} % of the cloud within 5 cm of the corridor", 100.0 * on);
+    // Every simultaneous queue settled: nothing said.
+    assert_eq!(fusion["settled"], true, "{fusion}");
+    assert!(!run.stdout.contains("fusion not settled"), "{}", run.stdout);
+    // Re-fused with each queue capped at two matches (`[fusion]
+    // max_matches_per_scan`, read from the run's mission.toml): queues that
+    // still move their scans are abandoned, and the report and the text say so.
+    let plan = dir.path().join("mission.toml");
+    let copied = std::fs::read_to_string(&plan).expect("the run's mission.toml");
+    std::fs::write(&plan, copied.edit("mode = \"icp\"", "mode = \"icp\"\nmax_matches_per_scan = 2")).expect("write");
+    let out = cps_survey(["fuse".into(), dir.path().as_os_str().to_owned(), "--mode".into(), "icp".into()]);
+    assert_eq!(out.code, 0, "{}", out.stderr);
+    assert!(out.stdout.contains("fusion not settled"), "{}", out.stdout);
+    let capped = json_file(&dir.path().join("fusion/icp/fusion.json"));
+    assert_eq!(capped["settled"], false, "{capped}");
+    // Two passes; each new scan's start match and at most two more.
+    let (all, some) = (fusion["matches"].as_u64().expect("matches"), capped["matches"].as_u64().expect("matches"));
+    assert!(some <= 2 * 3 * 19 && some < all, "{some} of {all}");
 }
 
 /// The building at full resolution in the three fusion modes, as an open

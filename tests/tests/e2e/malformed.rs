@@ -413,6 +413,13 @@ const CASES: &[Case] = &[
         "out of range",
     ),
     (
+        "a simultaneous queue of no matches",
+        ("[plan]", "[fusion]\nmax_matches_per_scan = 0\n[plan]"),
+        "15:24",
+        "fusion.max_matches_per_scan",
+        "out of range",
+    ),
+    (
         "fine distance above the coarse one",
         ("[plan]", "[fusion]\nmax_correspondence_m = 0.2\nfine_correspondence_m = 0.5\n[plan]"),
         "16:25",

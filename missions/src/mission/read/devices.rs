@@ -326,6 +326,7 @@ pub(super) fn read_fusion(r: &mut Reader<'_>, root: &mut Table<'_, '_>, solo: bo
     let partners = fu.optional(r, "max_partners", |r, v, f| r.integer_in(v, f, 1, 1000));
     let variance_factor = fu.optional(r, "icp_variance_factor", positive_at_most(1e6));
     let degeneracy = fu.optional(r, "degeneracy_ratio", within(0.0, 0.1));
+    let queue = fu.optional(r, "max_matches_per_scan", |r, v, f| r.integer_in(v, f, 1, 1_000_000));
     let fd = FusionPlan::default();
     let (max_corr, fine_corr) = (max_corr?, fine_corr?);
     let coarse = max_corr.unwrap_or(fd.max_correspondence_m);
@@ -350,6 +351,7 @@ pub(super) fn read_fusion(r: &mut Reader<'_>, root: &mut Table<'_, '_>, solo: bo
         max_partners: partners?.map_or(fd.max_partners, |n| n as usize),
         icp_variance_factor: variance_factor?.unwrap_or(fd.icp_variance_factor),
         degeneracy_ratio: degeneracy?.unwrap_or(fd.degeneracy_ratio),
+        max_matches_per_scan: queue?.map_or(fd.max_matches_per_scan, |n| n as usize),
     })
 }
 
