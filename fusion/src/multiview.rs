@@ -278,15 +278,17 @@ impl Matcher<'_> {
     /// The model set M: the `members`' models in the world frame.
     fn model(&self, members: &[usize]) -> Result<Target> {
         let total: usize = members.iter().map(|&j| self.prepared[j].local.len()).sum();
-        let (mut points, mut normals) = (Vec::with_capacity(total), Vec::with_capacity(total));
+        let (mut points, mut normals, mut shares) =
+            (Vec::with_capacity(total), Vec::with_capacity(total), Vec::with_capacity(total));
         for &j in members {
             let pose = self.poses[j];
             let moved: Isometry3<f32> = pose.cast();
             let local = &self.prepared[j].local;
             points.extend(local.points().map(|p| moved * p));
             normals.extend(local.normals().into_iter().map(|v| pose.rotation * v));
+            shares.extend(local.middle_shares());
         }
-        Target::with_oriented_normals(&points, normals)
+        Target::with_oriented_normals(&points, normals)?.with_middle_shares(shares)
     }
 
     /// Aligns scan `c` to its `partners` and records the match; returns its
@@ -558,6 +560,7 @@ mod tests {
             &local.points().map(|p| moved * p).collect::<Vec<_>>(),
             local.normals().into_iter().map(|n| world_from_j.rotation * n).collect(),
         )
+        .and_then(|t| t.with_middle_shares(local.middle_shares()))
         .expect("world target");
         let b = in_world(align(&source, &local, &start, &config).expect("in j's frame"), &world_from_j);
         let a = align(&source, &world, &(world_from_j * start), &config).expect("in the world");

@@ -51,6 +51,16 @@ pub struct IcpConfig {
     /// [`IcpResult::unobservable`](super::IcpResult::unobservable). Default
     /// none: a singular normal matrix is an error.
     pub degeneracy_ratio: Option<f64>,
+    /// Point-to-plane with `degeneracy_ratio`: judge the blind directions
+    /// without the pairs whose partner's neighbourhood is one scan line —
+    /// its middle PCA eigenvalue below this ratio of its largest
+    /// ([`Target::middle_shares`](super::Target::middle_shares)) — since
+    /// PCA takes a line's arc for the surface and gives it the line's own
+    /// plane as normal ([`Observability::judged`](super::Observability::judged)).
+    /// Sparse scan lines of a pipe made its axis look seen that way (the
+    /// sewer at 60 slices: BENCHMARKS.md, "Sparse scan lines"); 0.1 holds
+    /// it. The pairs stay in the solve. Default none.
+    pub line_ratio: Option<f64>,
     /// Point-to-plane: leave out a pair whose source point lies beyond the
     /// part of the surface the target sampled around its partner — where a
     /// partial overlap ends, at an occlusion — matched to the last sample
@@ -124,6 +134,7 @@ impl Default for IcpConfig {
             reject_back_faces: false,
             source_viewpoint: Point3::origin(),
             degeneracy_ratio: None,
+            line_ratio: None,
             only_covered: false,
             edge_bias: false,
             range_noise: false,

@@ -33,6 +33,12 @@ pub(crate) struct Sums {
     /// zero from [`accumulate`].
     pub(crate) zone_h: Matrix6<f64>,
     pub(crate) zone_b: Vector6<f64>,
+    /// Point-to-plane with [`IcpConfig::line_ratio`]: the share of `h` of
+    /// the pairs whose partner lies on one scan line (its middle share
+    /// below the ratio: [`Target::middle_shares`](super::Target::middle_shares)),
+    /// whose normal may not be the surface's: the blind-direction analysis
+    /// judges without it.
+    pub(crate) line_h: Matrix6<f64>,
     /// Point-to-plane with [`IcpConfig::range_noise`]: Σ (w·r)²·JJᵀ, each
     /// pair's score by its own squared residual — the middle of the
     /// estimate's sandwich covariance (zero otherwise).
@@ -59,6 +65,7 @@ impl Sums {
         self.edge_b += o.edge_b;
         self.zone_h += o.zone_h;
         self.zone_b += o.zone_b;
+        self.line_h += o.line_h;
         self.scores += o.scores;
         self
     }
@@ -83,6 +90,7 @@ impl Sums {
             edge_b: 0.5 * (self.edge_b + a.transpose() * back.edge_b),
             zone_h: 0.5 * (self.zone_h + a.transpose() * back.zone_h * a),
             zone_b: 0.5 * (self.zone_b + a.transpose() * back.zone_b),
+            line_h: 0.5 * (self.line_h + a.transpose() * back.line_h * a),
             ..self
         }
     }
@@ -236,6 +244,11 @@ pub(crate) fn accumulate(
                         if edge {
                             s.edge_h += h;
                             s.edge_b += b;
+                        }
+                        if let Some(ratio) = config.line_ratio
+                            && f64::from(target.middle_share(i)) < ratio
+                        {
+                            s.line_h += h;
                         }
                         if config.range_noise {
                             s.scores += (w * res * res) * h;

@@ -80,6 +80,9 @@ pub struct Observability {
     min_ratio: f64,
     /// ξ = A·ξ_c: v = v_c + c × ω.
     about: Matrix6<f64>,
+    /// Blind directions in u found by another analysis
+    /// ([`judged`](Self::judged)): `hu` is projected off them.
+    judged: Vec<Vector6<f64>>,
 }
 
 impl Observability {
@@ -103,7 +106,37 @@ impl Observability {
         let hu = s * about.transpose() * h * about * s;
         let hu = (hu + hu.transpose()) * 0.5;
         let eigen = SymmetricEigen::new(hu);
-        Self { hu, eigen, lever_arm_m, min_ratio, about }
+        Self { hu, eigen, lever_arm_m, min_ratio, about, judged: Vec::new() }
+    }
+
+    /// [`about`](Self::about) `h`, blind also where `surface` is — the same
+    /// normal matrix without the pairs whose partner lies on one scan line
+    /// ([`IcpConfig::line_ratio`](crate::icp::IcpConfig::line_ratio)):
+    /// their PCA normal is the line's own plane, not the surface's, and on
+    /// sparse scan lines of a pipe it lies along the axis and makes the
+    /// axis look seen (the sewer at 60 slices: BENCHMARKS.md, "Sparse scan
+    /// lines"). The solve and the information keep every pair, projected
+    /// off those directions. With `surface` equal to `h`, exactly
+    /// [`about`](Self::about).
+    pub fn judged(
+        h: &Matrix6<f64>,
+        surface: &Matrix6<f64>,
+        centre: &Point3<f64>,
+        lever_arm_m: f64,
+        min_ratio: f64,
+    ) -> Self {
+        let own = Self::about(h, centre, lever_arm_m, min_ratio);
+        if surface == h {
+            return own;
+        }
+        let judged = Self::about(surface, centre, lever_arm_m, min_ratio).blind();
+        if judged.is_empty() {
+            return own;
+        }
+        let p = projector_off(&judged);
+        let hu = p * own.hu * p;
+        let hu = (hu + hu.transpose()) * 0.5;
+        Self { eigen: SymmetricEigen::new(hu), hu, judged, ..own }
     }
 
     /// A⁻¹: ξ_c = A⁻¹·ξ.
@@ -121,19 +154,26 @@ impl Observability {
     /// The blind directions in u: the eigenvectors below the ratio, a
     /// rotation or translation part under [`SNAP`] dropped, orthonormalised.
     fn blind(&self) -> Vec<Vector6<f64>> {
-        let snapped: Vec<Vector6<f64>> = (0..6)
-            .filter(|&i| !self.observed(i))
-            .map(|i| {
-                let mut b: Vector6<f64> = self.eigen.eigenvectors.column(i).into_owned();
-                for part in [0, 3] {
-                    if b.fixed_rows::<3>(part).norm() < SNAP {
-                        b.fixed_rows_mut::<3>(part).fill(0.0);
-                    }
+        let judged = orthonormal(&self.judged);
+        let snapped = (0..6).filter(|&i| !self.observed(i)).filter_map(|i| {
+            let mut b: Vector6<f64> = self.eigen.eigenvectors.column(i).into_owned();
+            // What is left outside the directions already judged blind
+            // (their own eigenvalues are zero here).
+            for q in &judged {
+                b -= q * q.dot(&b);
+            }
+            if b.norm() < 0.5 {
+                return None;
+            }
+            b.normalize_mut();
+            for part in [0, 3] {
+                if b.fixed_rows::<3>(part).norm() < SNAP {
+                    b.fixed_rows_mut::<3>(part).fill(0.0);
                 }
-                b
-            })
-            .collect();
-        orthonormal(&snapped)
+            }
+            Some(b)
+        });
+        orthonormal(&judged.iter().copied().chain(snapped).collect::<Vec<_>>())
     }
 
     /// The unobservable directions, each a unit vector of u = (L·ω, v)
@@ -218,6 +258,38 @@ mod tests {
         assert!(o.unobservable().is_empty());
         let want = h.cholesky().expect("positive definite").solve(&rhs);
         assert!((o.solve(&rhs) - want).norm() < 1e-9 * want.norm());
+    }
+
+    /// A direction seen only through the pairs on scan lines (a pipe's axis
+    /// through rings' normals) is blind when judged on the surfaces, and
+    /// held: the solve moves nothing along it, the rest as `h` has it, and
+    /// the information keeps nothing of it. Judged on `h` itself, it is
+    /// exactly [`Observability::about`].
+    #[test]
+    fn a_direction_seen_only_through_scan_lines_is_judged_blind() {
+        let surface = Matrix6::from_diagonal(&Vector6::new(50.0, 40.0, 30.0, 1e-6, 20.0, 10.0));
+        let mut lines = Matrix6::zeros();
+        // The rings' normals along x, coupled to y a little.
+        lines[(3, 3)] = 5.0;
+        lines[(3, 4)] = 0.5;
+        lines[(4, 3)] = 0.5;
+        let h = surface + lines;
+        let centre = Point3::origin();
+        let own = Observability::about(&h, &centre, 3.0, 1e-2);
+        assert!(own.unobservable().is_empty(), "h sees x: {:?}", own.unobservable());
+        let o = Observability::judged(&h, &surface, &centre, 3.0, 1e-2);
+        let dirs = o.unobservable();
+        assert_eq!(dirs.len(), 1, "{dirs:?}");
+        assert!((dirs[0].abs() - Vector6::new(0.0, 0.0, 0.0, 1.0, 0.0, 0.0)).norm() < 1e-9, "{dirs:?}");
+        let rhs = Vector6::new(5.0, 4.0, 3.0, 7.0, 2.0, 1.0);
+        let x = o.solve(&rhs);
+        assert!(x[3].abs() < 1e-12, "moved along the blind x: {x}");
+        // The rest solves h with x held (about the origin, x in u is x in ξ).
+        assert!((x[4] - 2.0 / h[(4, 4)]).abs() < 1e-12 && (x[0] - 0.1).abs() < 1e-12, "{x}");
+        assert!(o.observed_part().row(3).amax() < 1e-9, "{}", o.observed_part());
+        let same = Observability::judged(&h, &h, &centre, 3.0, 1e-2);
+        assert_eq!(same.solve(&rhs), own.solve(&rhs));
+        assert_eq!(same.observed_part(), own.observed_part());
     }
 
     #[test]

@@ -283,17 +283,21 @@ fn align_impl(
                 Isometry3::from_parts(Translation3::from(cq - r * cp), r)
             }
             Method::PointToPlane => {
-                let (h, b) = match prior {
-                    None => (sums.h, sums.b),
+                let (h, surface, b) = match prior {
+                    None => (sums.h, sums.h - sums.line_h, sums.b),
                     Some(p) => {
                         let sigma2 = residual_variance(sums, config.method);
                         let e = crate::se3::left_difference(&estimate, &p.target_from_source);
-                        (sums.h / sigma2 + p.information, sums.b / sigma2 + p.information * e)
+                        (
+                            sums.h / sigma2 + p.information,
+                            (sums.h - sums.line_h) / sigma2 + p.information,
+                            sums.b / sigma2 + p.information * e,
+                        )
                     }
                 };
                 let delta = match config.degeneracy_ratio {
                     Some(ratio) => {
-                        let o = Observability::about(&h, &(estimate * centre), lever_arm_m, ratio);
+                        let o = Observability::judged(&h, &surface, &(estimate * centre), lever_arm_m, ratio);
                         unobservable = o.unobservable();
                         o.solve(&(-b))
                     }
@@ -346,6 +350,8 @@ fn align_impl(
     // references: BENCHMARKS.md, "Covariances the data calibrate".)
     let data = sums.normal_matrix(config.method) / sigma2;
     let independent = data + prior_information;
+    // What the surfaces alone see (point-to-point has no lines: `line_h` is zero).
+    let surface = independent - sums.line_h / sigma2;
     let measured = data / config.noise_scale + prior_information;
     let information = match config.degeneracy_ratio {
         Some(ratio) => {
@@ -354,7 +360,7 @@ fn align_impl(
             // odometry in a pose graph). Which directions those are is
             // judged on the residuals' own scatter, as the iteration
             // judges them.
-            let o = Observability::about(&independent, &(estimate * centre), lever_arm_m, ratio);
+            let o = Observability::judged(&independent, &surface, &(estimate * centre), lever_arm_m, ratio);
             unobservable = o.unobservable();
             o.project(&measured)
         }
@@ -439,6 +445,15 @@ fn check(c: &IcpConfig) -> Result<()> {
     FusionError::require_non_negative("rotation tolerance (rad)", c.rotation_tolerance_rad)?;
     if let Some(ratio) = c.degeneracy_ratio {
         FusionError::require_positive("degeneracy eigenvalue ratio", ratio)?;
+    }
+    if let Some(ratio) = c.line_ratio
+        && !(ratio.is_finite() && ratio > 0.0 && ratio < 1.0)
+    {
+        return Err(FusionError::OutOfRange {
+            what: "scan-line eigenvalue ratio".into(),
+            value: ratio,
+            expected: "in (0, 1)".into(),
+        });
     }
 
     if c.max_iterations == 0 {

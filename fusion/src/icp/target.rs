@@ -67,6 +67,8 @@ impl Neighbourhood {
 struct Local {
     /// Zero when the target's normals are given, not estimated.
     normal: Vector3<f64>,
+    /// The middle PCA eigenvalue over the largest ([`Target::middle_shares`]).
+    middle: f32,
     hood: Neighbourhood,
 }
 
@@ -81,6 +83,9 @@ pub struct Target {
     pub(crate) points: Vec<[f32; 3]>,
     /// Normals given with the points; empty when estimated or absent.
     given: Vec<Vector3<f64>>,
+    /// With given normals: their neighbourhoods' middle shares (see
+    /// [`Target::middle_shares`]); empty when not known.
+    given_middle: Vec<f32>,
     /// Points of an estimated normal's neighbourhood; 0: none estimated.
     normal_neighbours: usize,
     /// Estimated normals are turned towards this point.
@@ -108,7 +113,16 @@ impl Target {
             .map_err(|e| FusionError::Degenerate { what: format!("k-d tree: {e:?}") })?;
         let local = std::iter::repeat_with(OnceLock::new).take(points.len()).collect();
         let normal_neighbours = if normal_neighbours > 0 { normal_neighbours.max(3) } else { 0 };
-        Ok(Self { points, given: Vec::new(), normal_neighbours, viewpoint: None, tree, local, oriented: false })
+        Ok(Self {
+            points,
+            given: Vec::new(),
+            given_middle: Vec::new(),
+            normal_neighbours,
+            viewpoint: None,
+            tree,
+            local,
+            oriented: false,
+        })
     }
 
     /// A target from points and their unit normals (estimated elsewhere, e.g.
@@ -134,6 +148,21 @@ impl Target {
         let mut t = Self::with_normals(points, normals)?;
         t.oriented = !t.given.is_empty();
         Ok(t)
+    }
+
+    /// The [`middle_shares`](Self::middle_shares) of the given normals'
+    /// neighbourhoods, from the targets they were estimated in. Empty: not
+    /// known (taken as planar).
+    pub fn with_middle_shares(mut self, shares: Vec<f32>) -> Result<Self> {
+        if !shares.is_empty() && shares.len() != self.points.len() {
+            return Err(FusionError::OutOfRange {
+                what: "middle share count".into(),
+                value: shares.len() as f64,
+                expected: format!("one per point ({})", self.points.len()),
+            });
+        }
+        self.given_middle = shares;
+        Ok(self)
     }
 
     /// Turns every normal towards `viewpoint` (the scanner that took the
@@ -213,6 +242,24 @@ impl Target {
         if self.normal_neighbours > 0 { self.local(i).normal } else { self.given[i] }
     }
 
+    /// Each point's middle share — the middle PCA eigenvalue of the
+    /// neighbourhood its normal came from, over the largest (estimating
+    /// those not yet estimated): near 0 where the neighbours lie along one
+    /// line, which a scan line's arc does, and its PCA normal is then the
+    /// line's own plane, not the surface's ([`super::IcpConfig::line_ratio`]).
+    /// Empty without normals.
+    pub fn middle_shares(&self) -> Vec<f32> {
+        if !self.has_normals() {
+            return Vec::new();
+        }
+        (0..self.points.len()).into_par_iter().map(|i| self.middle_share(i)).collect()
+    }
+
+    /// Point `i`'s [middle share](Self::middle_shares) (1 when not known).
+    pub(crate) fn middle_share(&self, i: usize) -> f32 {
+        if self.normal_neighbours > 0 { self.local(i).middle } else { self.given_middle.get(i).copied().unwrap_or(1.0) }
+    }
+
     /// Whether `offset` (a source point's offset from target point `i`
     /// along the surface, metres) takes it beyond what the target sampled
     /// there: farther than half the way to `i`'s nearest neighbour, and
@@ -272,7 +319,7 @@ impl Target {
             let nn = self.tree.query(&self.points[j]).nearest_n::<SquaredEuclidean<f32>>(k).execute();
             let hood = Neighbourhood::new(j, nn.iter().map(|r| (r.item, r.distance)), nn.len() == n);
             if self.normal_neighbours == 0 {
-                return Local { normal: Vector3::zeros(), hood };
+                return Local { normal: Vector3::zeros(), middle: 1.0, hood };
             }
             let used = &nn[..self.normal_neighbours.min(nn.len())];
             let mean =
@@ -281,11 +328,11 @@ impl Target {
                 let d = point(&self.points[r.item as usize]) - mean;
                 s + d * d.transpose()
             });
-            let mut normal = smallest_eigenvector(&cov);
+            let (mut normal, middle) = pca_normal(&cov);
             if let Some(v) = &self.viewpoint {
                 orient(&mut normal, &self.points[j], v);
             }
-            Local { normal, hood }
+            Local { normal, middle: middle as f32, hood }
         })
     }
 
@@ -332,15 +379,22 @@ fn squared_distance(a: &[f32; 3], b: &[f32; 3]) -> f32 {
     (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)
 }
 
-/// The unit eigenvector of the smallest eigenvalue of a symmetric 3×3
-/// matrix: the eigenvalue in closed form (trigonometric solution of the
-/// characteristic cubic), the vector as the longest cross product of two
-/// rows of A − λI. Falls back to the iterative solver when that vector is
-/// ill-defined (a repeated smallest eigenvalue).
-fn smallest_eigenvector(a: &Matrix3<f64>) -> Vector3<f64> {
+/// A neighbourhood's covariance `a` (symmetric 3×3): the unit
+/// eigenvector of its smallest eigenvalue — the eigenvalues in closed
+/// form (trigonometric solution of the characteristic cubic), the vector
+/// as the longest cross product of two rows of A − λI, falling back to the
+/// iterative solver when that vector is ill-defined (a repeated smallest
+/// eigenvalue) — and its middle eigenvalue over its largest (1 for a
+/// zero matrix).
+fn pca_normal(a: &Matrix3<f64>) -> (Vector3<f64>, f64) {
+    let middle_share = |mut e: [f64; 3]| {
+        e.sort_by(f64::total_cmp);
+        if e[2] > 0.0 { (e[1] / e[2]).max(0.0) } else { 1.0 }
+    };
     let iterative = || {
         let eig = SymmetricEigen::new(*a);
-        eig.eigenvectors.column(eig.eigenvalues.imin()).into_owned()
+        let e = eig.eigenvalues;
+        (eig.eigenvectors.column(e.imin()).into_owned(), middle_share([e[0], e[1], e[2]]))
     };
     let p1 = a[(0, 1)].powi(2) + a[(0, 2)].powi(2) + a[(1, 2)].powi(2);
     let q = a.trace() / 3.0;
@@ -352,6 +406,8 @@ fn smallest_eigenvector(a: &Matrix3<f64>) -> Vector3<f64> {
     let b = (a - Matrix3::identity() * q) / p;
     let phi = (b.determinant() / 2.0).clamp(-1.0, 1.0).acos() / 3.0;
     let lambda = q + 2.0 * p * (phi + 2.0 * std::f64::consts::FRAC_PI_3).cos();
+    let largest = q + 2.0 * p * phi.cos();
+    let middle = middle_share([lambda, largest, 3.0 * q - lambda - largest]);
     let m = a - Matrix3::identity() * lambda;
     let (r0, r1, r2) = (m.row(0).transpose(), m.row(1).transpose(), m.row(2).transpose());
     let best = [r0.cross(&r1), r0.cross(&r2), r1.cross(&r2)]
@@ -359,7 +415,7 @@ fn smallest_eigenvector(a: &Matrix3<f64>) -> Vector3<f64> {
         .max_by(|x, y| x.norm_squared().total_cmp(&y.norm_squared()))
         .unwrap_or_default();
     // |rᵢ × rⱼ| ~ p² when the other two eigenvalues are apart from λ.
-    if best.norm_squared() > 1e-12 * p2 * p2 { best.normalize() } else { iterative() }
+    if best.norm_squared() > 1e-12 * p2 * p2 { (best.normalize(), middle) } else { iterative() }
 }
 
 /// A stored point in f64.
@@ -419,19 +475,23 @@ mod tests {
         assert!(target.beyond(at(2, 199), &Vector3::new(0.09, 0.0, 0.0)));
     }
 
-    /// `smallest_eigenvector` agrees with nalgebra's `SymmetricEigen` on
-    /// random covariances, from isotropic to nearly planar and linear.
+    /// `pca_normal` agrees with nalgebra's `SymmetricEigen` on random
+    /// covariances, from isotropic to nearly planar and linear: the
+    /// smallest eigenvector, and the middle eigenvalue over the largest.
     #[test]
-    fn smallest_eigenvector_matches_symmetric_eigen() {
+    fn pca_normal_matches_symmetric_eigen() {
         let mut rng = ChaCha8Rng::seed_from_u64(3);
-        for k in 0..2000 {
-            let r = UnitQuaternion::from_euler_angles(
+        let turn = |rng: &mut ChaCha8Rng| {
+            UnitQuaternion::from_euler_angles(
                 rng.random_range(-3.0..3.0),
                 rng.random_range(-1.5..1.5),
                 rng.random_range(-3.0..3.0),
             )
             .to_rotation_matrix()
-            .into_inner();
+            .into_inner()
+        };
+        for k in 0..2000 {
+            let r = turn(&mut rng);
             let thin = [1.0, 1e-2, 1e-4, 1e-6][k % 4];
             let d = Matrix3::from_diagonal(&Vector3::new(
                 rng.random_range(0.5..1.0),
@@ -441,13 +501,30 @@ mod tests {
             let a = r * d * r.transpose() * 1e-2;
             let eig = SymmetricEigen::new(a);
             let reference = eig.eigenvectors.column(eig.eigenvalues.imin()).into_owned();
-            let v = smallest_eigenvector(&a);
+            let (v, _) = pca_normal(&a);
             assert!((v.norm() - 1.0).abs() < 1e-12);
             assert!(v.dot(&reference).abs() > 1.0 - 1e-9, "case {k}: {v} vs {reference}");
         }
-        // Repeated eigenvalues go through the fallback and still give a unit eigenvector.
-        let v = smallest_eigenvector(&Matrix3::from_diagonal(&Vector3::new(2.0, 1.0, 1.0)));
+        // Lines and planes: the middle eigenvalue from 0.1 % to 80 % of the largest.
+        for k in 0..2000 {
+            let r = turn(&mut rng);
+            let largest = rng.random_range(0.5..1.0);
+            let middle = largest * 10f64.powf(rng.random_range(-3.0..-0.1));
+            let d = Matrix3::from_diagonal(&Vector3::new(largest, middle, middle * rng.random_range(0.0..0.5)));
+            let a = r * d * r.transpose() * 1e-2;
+            let mut e: Vec<f64> = SymmetricEigen::new(a).eigenvalues.iter().copied().collect();
+            e.sort_by(f64::total_cmp);
+            let (_, share) = pca_normal(&a);
+            assert!((share - e[1] / e[2]).abs() < 1e-9, "case {k}: {share} against eigenvalues {e:?}");
+        }
+        // Repeated eigenvalues go through the fallback and still give a unit
+        // eigenvector and the middle share.
+        let (v, share) = pca_normal(&Matrix3::from_diagonal(&Vector3::new(2.0, 1.0, 1.0)));
         assert!((v.x.abs() < 1e-12) && (v.norm() - 1.0).abs() < 1e-12);
+        assert!((share - 0.5).abs() < 1e-12, "{share}");
+        let (_, share) = pca_normal(&Matrix3::from_diagonal(&Vector3::new(1.0, 0.01, 0.01)));
+        assert!((share - 0.01).abs() < 1e-12, "a needle: {share}");
+        assert_eq!(pca_normal(&Matrix3::zeros()).1, 1.0);
     }
 
     /// Normals estimated as they are needed are the PCA normals of each

@@ -84,6 +84,14 @@ pub struct MatchArgs {
     /// reported (0: off).
     #[arg(long, default_value_t = fusion::links::DEFAULT_DEGENERACY_RATIO)]
     pub degeneracy_ratio: f64,
+    /// Judge those directions without the points whose ten nearest
+    /// neighbours lie along one scan line (their middle PCA eigenvalue
+    /// below this ratio of the largest): PCA takes the line's own plane for
+    /// the surface. Sparse scan lines of a pipe (a rotating scanner's
+    /// slices far apart) make its axis look seen that way and the scans
+    /// slide along it; 0.1 holds it (docs/match.md). 0: off.
+    #[arg(long, default_value_t = 0.0)]
+    pub line_ratio: f64,
     /// Every scan's frame has its scanner at the origin (PLY, XYZ and LAS
     /// say nothing of where the scanner stood; 3DTK, E57 scans with a
     /// pose, PCD and ROS 2 clouds do): the verification then tests every

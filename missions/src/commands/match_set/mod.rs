@@ -62,6 +62,12 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
     if !(args.degeneracy_ratio.is_finite() && (0.0..0.1).contains(&args.degeneracy_ratio)) {
         bail!("--degeneracy-ratio {}: expected a ratio in [0, 0.1) (0: off)", args.degeneracy_ratio);
     }
+    if !(args.line_ratio.is_finite() && (0.0..1.0).contains(&args.line_ratio)) {
+        bail!("--line-ratio {}: expected a ratio in [0, 1) (0: off)", args.line_ratio);
+    }
+    if args.line_ratio > 0.0 && args.degeneracy_ratio == 0.0 {
+        bail!("--line-ratio {} judges the blind directions: it needs --degeneracy-ratio above 0", args.line_ratio);
+    }
     if args.max_partners == 0 {
         bail!("--max-partners 0: expected at least 1");
     }
@@ -73,6 +79,7 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
     config.link.multiview.max_matches_per_scan = args.max_matches_per_scan;
     let icp = &mut config.link.multiview.icp;
     icp.degeneracy_ratio = (args.degeneracy_ratio > 0.0).then_some(args.degeneracy_ratio);
+    icp.line_ratio = (args.line_ratio > 0.0).then_some(args.line_ratio);
     if args.method == MethodArg::PointToPoint {
         icp.method = Method::PointToPoint;
         // Back faces need the target's normals, which point-to-point does not estimate.
