@@ -286,7 +286,10 @@ impl Matcher<'_> {
             let local = &self.prepared[j].local;
             points.extend(local.points().map(|p| moved * p));
             normals.extend(local.normals().into_iter().map(|v| pose.rotation * v));
-            shares.extend(local.middle_shares());
+            // Only the scan-line test reads them (none: every point planar).
+            if self.config.icp.line_ratio.is_some() {
+                shares.extend(local.middle_shares());
+            }
         }
         Target::with_oriented_normals(&points, normals)?.with_middle_shares(shares)
     }

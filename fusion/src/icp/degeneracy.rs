@@ -154,12 +154,13 @@ impl Observability {
     /// The blind directions in u: the eigenvectors below the ratio, a
     /// rotation or translation part under [`SNAP`] dropped, orthonormalised.
     fn blind(&self) -> Vec<Vector6<f64>> {
-        let judged = orthonormal(&self.judged);
+        // (`judged` is another analysis' `blind()`: orthonormal already.)
+        let judged = &self.judged;
         let snapped = (0..6).filter(|&i| !self.observed(i)).filter_map(|i| {
             let mut b: Vector6<f64> = self.eigen.eigenvectors.column(i).into_owned();
             // What is left outside the directions already judged blind
             // (their own eigenvalues are zero here).
-            for q in &judged {
+            for q in judged {
                 b -= q * q.dot(&b);
             }
             if b.norm() < 0.5 {

@@ -2226,16 +2226,9 @@ fn a_links_blind_directions_are_in_the_worlds_axes_in_every_mode() {
         for l in v["links"].as_array().expect("links").iter().filter(|l| l["accepted"] == true) {
             let d = l["degenerate_directions"].as_array().expect("directions");
             // The world's x within their span (they may mix it with the roll).
-            let mut basis: Vec<nalgebra::Vector6<f64>> = Vec::new();
-            for d in d {
-                let mut b = nalgebra::Vector6::from_fn(|i, _| d[i].as_f64().expect("number"));
-                for q in &basis {
-                    b -= q * q.dot(&b);
-                }
-                if b.norm() > 1e-6 {
-                    basis.push(b.normalize());
-                }
-            }
+            let directions: Vec<nalgebra::Vector6<f64>> =
+                d.iter().map(|d| nalgebra::Vector6::from_fn(|i, _| d[i].as_f64().expect("number"))).collect();
+            let basis = fusion::icp::degeneracy::orthonormal(&directions);
             let along = basis.iter().map(|q| q[3].powi(2)).sum::<f64>().sqrt();
             assert!(along > 0.95, "{mode}: link {}: the axis is not blind: {d:?}", l["source"]);
         }
