@@ -279,6 +279,13 @@ pub struct FusionPlan {
     /// see docs/fusion.md). `cps-icp` does not need it: the CPS prior holds
     /// the scans and its gate leaves out a match that slid.
     pub degeneracy_ratio: f64,
+    /// `icp` with `degeneracy_ratio`: judge the blind directions without
+    /// the points whose normal is not a surface's — their ten nearest
+    /// neighbours along one scan line (the middle PCA eigenvalue below
+    /// this ratio of the largest) or with no clear smallest direction
+    /// (`line_ratio`, default 0: off; the sewer uses 0.1, `match
+    /// --line-ratio`'s key; see docs/fusion.md).
+    pub line_ratio: f64,
     /// `icp`: the simultaneous pass runs at most this many matches in each
     /// new scan's queue at each stage before it abandons the queue and
     /// reports the stage not settled (`max_matches_per_scan`, default 100;
@@ -299,6 +306,7 @@ impl Default for FusionPlan {
             max_partners: 4,
             icp_variance_factor: 1.0,
             degeneracy_ratio: 0.0,
+            line_ratio: 0.0,
             max_matches_per_scan: fusion::multiview::MultiviewConfig::default().max_matches_per_scan,
         }
     }

@@ -276,6 +276,8 @@ pub fn fuse(
             // Nothing but the start holds a scan here: what the matches
             // cannot see is left where odometry put it.
             config.icp.degeneracy_ratio = (plan.degeneracy_ratio > 0.0).then_some(plan.degeneracy_ratio);
+            // … judged on the pairs whose partner's normal is a surface's.
+            config.icp.line_ratio = (plan.degeneracy_ratio > 0.0 && plan.line_ratio > 0.0).then_some(plan.line_ratio);
             let coarse = fusion::multiview::register_views(&scans, &guesses, &config, progress)
                 .context("ICP fusion (simultaneous matching, coarse pass)")?;
             config.overlap_m = Some(plan.max_correspondence_m);

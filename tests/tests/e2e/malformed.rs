@@ -413,6 +413,20 @@ const CASES: &[Case] = &[
         "out of range",
     ),
     (
+        "line ratio of 1",
+        ("[plan]", "[fusion]\ndegeneracy_ratio = 0.01\nline_ratio = 1\n[plan]"),
+        "16:14",
+        "fusion.line_ratio",
+        "expected ≥ 0 and ≤ 0.99",
+    ),
+    (
+        "line ratio without blind directions",
+        ("[plan]", "[fusion]\nline_ratio = 0.1\n[plan]"),
+        "15:14",
+        "fusion.line_ratio",
+        "expected degeneracy_ratio above 0 with it",
+    ),
+    (
         "a simultaneous queue of no matches",
         ("[plan]", "[fusion]\nmax_matches_per_scan = 0\n[plan]"),
         "15:24",

@@ -326,9 +326,23 @@ pub(super) fn read_fusion(r: &mut Reader<'_>, root: &mut Table<'_, '_>, solo: bo
     let partners = fu.optional(r, "max_partners", |r, v, f| r.integer_in(v, f, 1, 1000));
     let variance_factor = fu.optional(r, "icp_variance_factor", positive_at_most(1e6));
     let degeneracy = fu.optional(r, "degeneracy_ratio", within(0.0, 0.1));
+    let line = fu.optional(r, "line_ratio", |r, v, f| {
+        r.number_in(v, f, 0.0, true, Some(0.99)).map(|x| (*x.get_ref(), x.span()))
+    });
     let queue = fu.optional(r, "max_matches_per_scan", |r, v, f| r.integer_in(v, f, 1, 1_000_000));
     let fd = FusionPlan::default();
     let (max_corr, fine_corr) = (max_corr?, fine_corr?);
+    let degeneracy = degeneracy?.unwrap_or(fd.degeneracy_ratio);
+    let line = match line? {
+        Some((line, span)) if line > 0.0 && degeneracy == 0.0 => {
+            let message =
+                format!("value {line} judges the blind directions; expected degeneracy_ratio above 0 with it");
+            r.problem(&span, "fusion.line_ratio", message);
+            None
+        }
+        Some((line, _)) => Some(line),
+        None => Some(fd.line_ratio),
+    };
     let coarse = max_corr.unwrap_or(fd.max_correspondence_m);
     let fine = match fine_corr {
         Some((fine, span)) if fine > coarse => {
@@ -350,7 +364,8 @@ pub(super) fn read_fusion(r: &mut Reader<'_>, root: &mut Table<'_, '_>, solo: bo
         min_pairs: min_pairs?.map_or(fd.min_pairs, |n| n as usize),
         max_partners: partners?.map_or(fd.max_partners, |n| n as usize),
         icp_variance_factor: variance_factor?.unwrap_or(fd.icp_variance_factor),
-        degeneracy_ratio: degeneracy?.unwrap_or(fd.degeneracy_ratio),
+        degeneracy_ratio: degeneracy,
+        line_ratio: line?,
         max_matches_per_scan: queue?.map_or(fd.max_matches_per_scan, |n| n as usize),
     })
 }
