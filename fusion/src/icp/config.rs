@@ -56,10 +56,13 @@ pub struct IcpConfig {
     /// neighbourhood one scan line, the middle PCA eigenvalue below this
     /// ratio of its largest, or with no clear smallest direction
     /// ([`Target::middle_shares`](super::Target::middle_shares),
-    /// [`AMBIGUOUS_NORMAL`](super::target::AMBIGUOUS_NORMAL)) — since PCA
-    /// takes a line's arc for the surface and gives it the line's own
-    /// plane as normal, and two alike small eigenvalues any direction
-    /// between them ([`Observability::judged`](super::Observability::judged)).
+    /// [`AMBIGUOUS_NORMAL`](super::target::AMBIGUOUS_NORMAL)), and a wider
+    /// neighbourhood a surface with another normal — since PCA takes a
+    /// line's arc for the surface and gives it the line's own plane as
+    /// normal, and two alike small eigenvalues any direction between them
+    /// ([`Observability::judged`](super::Observability::judged)); a thin
+    /// real structure (a pole, a wire) and a ring on flat ground keep
+    /// theirs.
     /// Sparse scan lines of a pipe made its axis look seen both ways (the
     /// sewer at 60 slices: `match` at its last stage's 8.6 mm cells through
     /// the lines, `fuse --mode icp` at 0.1 m cells through the unclear

@@ -92,6 +92,9 @@ pub struct Target {
     viewpoint: Option<Point3<f64>>,
     tree: KdTree,
     local: Vec<OnceLock<Local>>,
+    /// Each estimated point's [middle share](Target::middle_shares), its
+    /// wider neighbourhood consulted the first time it is asked for.
+    line_share: Vec<OnceLock<f32>>,
     /// The normals point to the side the target's scanner saw.
     pub(crate) oriented: bool,
 }
@@ -113,6 +116,8 @@ impl Target {
             .map_err(|e| FusionError::Degenerate { what: format!("k-d tree: {e:?}") })?;
         let local = std::iter::repeat_with(OnceLock::new).take(points.len()).collect();
         let normal_neighbours = if normal_neighbours > 0 { normal_neighbours.max(3) } else { 0 };
+        let shares = if normal_neighbours > 0 { points.len() } else { 0 };
+        let line_share = std::iter::repeat_with(OnceLock::new).take(shares).collect();
         Ok(Self {
             points,
             given: Vec::new(),
@@ -121,6 +126,7 @@ impl Target {
             viewpoint: None,
             tree,
             local,
+            line_share,
             oriented: false,
         })
     }
@@ -248,7 +254,13 @@ impl Target {
     /// line, which a scan line's arc does, and its PCA normal is then the
     /// line's own plane, not the surface's ([`super::IcpConfig::line_ratio`]);
     /// 0 where the normal is not clear at all (the smallest eigenvalue
-    /// above [`AMBIGUOUS_NORMAL`] of the middle one). Empty without normals.
+    /// above [`AMBIGUOUS_NORMAL`] of the middle one). But 1 where the
+    /// normal stands: where the wider neighbourhood ([`WIDER`] times the
+    /// points) is a line too — a thin real structure (a pole, a kerb, a
+    /// wire), whose points' normals, each some direction across it,
+    /// together see it — or a surface whose normal is within 30° of the
+    /// point's (a multi-beam lidar's ring on flat ground: the ring's plane
+    /// is the ground's). Empty without normals.
     pub fn middle_shares(&self) -> Vec<f32> {
         if !self.has_normals() {
             return Vec::new();
@@ -258,7 +270,39 @@ impl Target {
 
     /// Point `i`'s [middle share](Self::middle_shares) (1 when not known).
     pub(crate) fn middle_share(&self, i: usize) -> f32 {
-        if self.normal_neighbours > 0 { self.local(i).middle } else { self.given_middle.get(i).copied().unwrap_or(1.0) }
+        if self.normal_neighbours == 0 {
+            return self.given_middle.get(i).copied().unwrap_or(1.0);
+        }
+        *self.line_share[i].get_or_init(|| {
+            let local = self.local(i);
+            if local.middle >= 1.0 || self.wider_agrees(i, &local.normal) { 1.0 } else { local.middle }
+        })
+    }
+
+    /// Whether point `i`'s `normal` stands against its wider neighbourhood
+    /// ([`middle_shares`](Self::middle_shares)): a line there too (its
+    /// middle PCA eigenvalue below [`WIDE_SURFACE`] of the largest), or a
+    /// clear surface whose normal is within 30° of `normal` — not a
+    /// surface with another normal, nor a blob with no clear normal at any
+    /// scale (a sparse far stretch of a pipe, its neighbourhoods wider
+    /// than the pipe).
+    fn wider_agrees(&self, i: usize, normal: &Vector3<f64>) -> bool {
+        let k = (WIDER * self.normal_neighbours).min(self.points.len());
+        let k = std::num::NonZero::new(k).unwrap_or(std::num::NonZero::<usize>::MIN);
+        let nn = self.tree.query(&self.points[i]).nearest_n::<SquaredEuclidean<f32>>(k).execute();
+        let mean = nn.iter().fold(Vector3::zeros(), |s, r| s + point(&self.points[r.item as usize])) / nn.len() as f64;
+        let cov = nn.iter().fold(Matrix3::zeros(), |s, r| {
+            let d = point(&self.points[r.item as usize]) - mean;
+            s + d * d.transpose()
+        });
+        let eig = SymmetricEigen::new(cov);
+        let mut order = [0, 1, 2];
+        order.sort_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
+        let e = order.map(|k| eig.eigenvalues[k].max(0.0));
+        if e[1] <= WIDE_SURFACE * e[2] {
+            return true;
+        }
+        e[0] <= AMBIGUOUS_NORMAL * e[1] && eig.eigenvectors.column(order[0]).dot(normal).abs() >= AGREE_COS
     }
 
     /// Whether `offset` (a source point's offset from target point `i`
@@ -380,6 +424,18 @@ fn squared_distance(a: &[f32; 3], b: &[f32; 3]) -> f32 {
     (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)
 }
 
+/// The wider neighbourhood that tells whether a point's normal stands
+/// ([`Target::middle_shares`]): this many times the normal's points.
+pub const WIDER: usize = 4;
+
+/// … a line there: its middle PCA eigenvalue at most this share of the
+/// largest (a surface: above it, and its smallest not above
+/// [`AMBIGUOUS_NORMAL`] of the middle one).
+pub const WIDE_SURFACE: f64 = 0.1;
+
+/// cos 30°: a normal within 30° of its wider neighbourhood's stands.
+const AGREE_COS: f64 = 0.866_025_403_784_438_6;
+
 /// A neighbourhood whose smallest PCA eigenvalue is above this share of
 /// its middle one has no clear normal: its [middle share](Target::middle_shares)
 /// is 0. Noise across a thin line, or a patch curved as much across as
@@ -491,6 +547,61 @@ mod tests {
         // Past the last line, and out of the lines' end.
         assert!(target.beyond(at(4, 100), &Vector3::new(0.0, 0.09, 0.0)));
         assert!(target.beyond(at(2, 199), &Vector3::new(0.09, 0.0, 0.0)));
+    }
+
+    /// The line test's share tells a scan line's artefact from a normal
+    /// that stands: a pipe scanned in rings 8 cm apart (1 cm along each)
+    /// has every point's ten nearest neighbours on its own ring, their
+    /// normal along the axis, while the wider 40 span three rings and
+    /// show the wall — flagged; a thin pole (a real line) and a ring on
+    /// flat ground (its plane the ground's) keep their normals — 1.
+    #[test]
+    fn a_scan_lines_artefact_is_told_from_a_real_line() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let mut noise = |sigma: f32| rng.random_range(-sigma..sigma);
+        let mut pipe = Vec::new();
+        for ring in 0..12 {
+            let x = ring as f32 * 0.08;
+            for k in 0..314 {
+                let a = k as f32 * 0.01 / 0.5;
+                pipe.push(Point3::new(x + noise(2e-4), 0.5 * a.cos() + noise(2e-4), 0.5 * a.sin()));
+            }
+        }
+        let t = Target::new(&pipe, 10).expect("pipe");
+        let shares = t.middle_shares();
+        // Away from the first and last rings.
+        let inner: Vec<usize> = (0..pipe.len()).filter(|&i| (0.15..0.75).contains(&pipe[i].x)).collect();
+        let along = |i: usize| t.normal(i).x.abs();
+        let artefacts = inner.iter().filter(|&&i| along(i) > 0.9).count();
+        assert!(artefacts > inner.len() * 9 / 10, "ring normals along the axis: {artefacts} of {}", inner.len());
+        let flagged = inner.iter().filter(|&&i| shares[i] < 0.1).count();
+        assert!(flagged > inner.len() * 9 / 10, "flagged {flagged} of {}", inner.len());
+        // A pole: 2 m of points 1 cm apart, 1 mm of noise across.
+        let pole: Vec<Point3<f32>> = (0..200).map(|k| Point3::new(noise(1e-3), noise(1e-3), k as f32 * 0.01)).collect();
+        let t = Target::new(&pole, 10).expect("pole");
+        assert!(t.middle_shares().iter().all(|&s| s == 1.0), "a pole's normals stand");
+        // Flat ground in a lidar's rings 0.5 m apart, 1 cm along each.
+        let mut ground = Vec::new();
+        for ring in 0..3 {
+            let r = 5.0 + ring as f32 * 0.5;
+            for k in 0..(std::f32::consts::TAU * r / 0.01) as usize {
+                let a = k as f32 * 0.01 / r;
+                ground.push(Point3::new(r * a.cos(), r * a.sin(), noise(1e-4)));
+            }
+        }
+        let t = Target::new(&ground, 10).expect("ground");
+        let shares = t.middle_shares();
+        assert!(
+            shares.iter().all(|&s| s == 1.0),
+            "{} of the ground's ring points flagged",
+            shares.iter().filter(|&&s| s < 1.0).count()
+        );
+        // A blob (a pipe's sparse far stretch, seen in neighbourhoods wider
+        // than the pipe): no surface at any scale.
+        let blob: Vec<Point3<f32>> = (0..200).map(|_| Point3::new(noise(1.0), noise(1.0), noise(1.0))).collect();
+        let t = Target::new(&blob, 10).expect("blob");
+        let kept = t.middle_shares().iter().filter(|&&s| s == 1.0).count();
+        assert!(kept < 20, "{kept} of a blob's 200 normals stand");
     }
 
     /// `pca_normal` agrees with nalgebra's `SymmetricEigen` on random

@@ -88,10 +88,11 @@ pub struct MatchArgs {
     /// surface's: their ten nearest neighbours along one scan line (the
     /// middle PCA eigenvalue below this ratio of the largest; PCA takes
     /// the line's own plane for the surface) or with no clear smallest
-    /// direction (the smallest above 0.2 of the middle). Sparse scan lines
-    /// of a pipe (a rotating scanner's slices far apart) make its axis
-    /// look seen that way and the scans slide along it; 0.1 holds it
-    /// (docs/match.md). 0: off.
+    /// direction (the smallest above 0.2 of the middle), unless their 40
+    /// nearest are a line too (a pole, a wire) or a surface with the same
+    /// normal. Sparse scan lines of a pipe (a rotating scanner's slices
+    /// far apart) make its axis look seen that way and the scans slide
+    /// along it; 0.1 holds it (docs/match.md). 0: off.
     #[arg(long, default_value_t = 0.0)]
     pub line_ratio: f64,
     /// Every scan's frame has its scanner at the origin (PLY, XYZ and LAS
