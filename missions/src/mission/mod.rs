@@ -282,8 +282,9 @@ pub struct FusionPlan {
     /// `icp` with `degeneracy_ratio`: judge the blind directions without
     /// the points whose normal is not a surface's — their ten nearest
     /// neighbours along one scan line (the middle PCA eigenvalue below
-    /// this ratio of the largest) or with no clear smallest direction
-    /// (`line_ratio`, default 0: off; the sewer uses 0.1, `match
+    /// this ratio of the largest) or with no clear smallest direction,
+    /// unless their 40 nearest are a line too or a surface with the same
+    /// normal (`line_ratio`, default 0: off; the sewer uses 0.1, `match
     /// --line-ratio`'s key; see docs/fusion.md).
     pub line_ratio: f64,
     /// `icp`: the simultaneous pass runs at most this many matches in each

@@ -332,9 +332,11 @@ pub(super) fn read_fusion(r: &mut Reader<'_>, root: &mut Table<'_, '_>, solo: bo
     let queue = fu.optional(r, "max_matches_per_scan", |r, v, f| r.integer_in(v, f, 1, 1_000_000));
     let fd = FusionPlan::default();
     let (max_corr, fine_corr) = (max_corr?, fine_corr?);
-    let degeneracy = degeneracy?.unwrap_or(fd.degeneracy_ratio);
-    let line = match line? {
-        Some((line, span)) if line > 0.0 && degeneracy == 0.0 => {
+    // (A degeneracy_ratio that did not read is reported as such, and
+    // line_ratio is not checked against it.)
+    let no_degeneracy = degeneracy.is_some_and(|d| d.unwrap_or(fd.degeneracy_ratio) == 0.0);
+    let line = line.and_then(|line| match line {
+        Some((line, span)) if line > 0.0 && no_degeneracy => {
             let message =
                 format!("value {line} judges the blind directions; expected degeneracy_ratio above 0 with it");
             r.problem(&span, "fusion.line_ratio", message);
@@ -342,7 +344,7 @@ pub(super) fn read_fusion(r: &mut Reader<'_>, root: &mut Table<'_, '_>, solo: bo
         }
         Some((line, _)) => Some(line),
         None => Some(fd.line_ratio),
-    };
+    });
     let coarse = max_corr.unwrap_or(fd.max_correspondence_m);
     let fine = match fine_corr {
         Some((fine, span)) if fine > coarse => {
@@ -364,7 +366,7 @@ pub(super) fn read_fusion(r: &mut Reader<'_>, root: &mut Table<'_, '_>, solo: bo
         min_pairs: min_pairs?.map_or(fd.min_pairs, |n| n as usize),
         max_partners: partners?.map_or(fd.max_partners, |n| n as usize),
         icp_variance_factor: variance_factor?.unwrap_or(fd.icp_variance_factor),
-        degeneracy_ratio: degeneracy,
+        degeneracy_ratio: degeneracy?.unwrap_or(fd.degeneracy_ratio),
         line_ratio: line?,
         max_matches_per_scan: queue?.map_or(fd.max_matches_per_scan, |n| n as usize),
     })
