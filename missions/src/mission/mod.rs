@@ -244,6 +244,12 @@ impl FusionMode {
 /// Mode names `[fusion] mode` accepts.
 pub const FUSION_MODES: [&str; 3] = ["direct", "icp", "cps-icp"];
 
+/// `[fusion] line_ratio` when `degeneracy_ratio` is set and it is not: the
+/// rig's scanner takes its scans in slices, and where they lie far apart
+/// (fewer `slices`) a pipe's axis looked seen through their lines'
+/// normals (docs/fusion.md, the sewer at 60 slices).
+pub const DEFAULT_LINE_RATIO: f64 = 0.1;
+
 /// Fusion settings (`[fusion]`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FusionPlan {
@@ -284,8 +290,9 @@ pub struct FusionPlan {
     /// neighbours along one scan line (the middle PCA eigenvalue below
     /// this ratio of the largest) or with no clear smallest direction,
     /// unless their 40 nearest are a line too or a surface with the same
-    /// normal (`line_ratio`, default 0: off; the sewer uses 0.1, `match
-    /// --line-ratio`'s key; see docs/fusion.md).
+    /// normal (`line_ratio`, `match --line-ratio`'s key; default
+    /// [`DEFAULT_LINE_RATIO`] with `degeneracy_ratio`, else 0: off; see
+    /// docs/fusion.md).
     pub line_ratio: f64,
     /// `icp`: the simultaneous pass runs at most this many matches in each
     /// new scan's queue at each stage before it abandons the queue and

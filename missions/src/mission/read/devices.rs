@@ -343,7 +343,8 @@ pub(super) fn read_fusion(r: &mut Reader<'_>, root: &mut Table<'_, '_>, solo: bo
             None
         }
         Some((line, _)) => Some(line),
-        None => Some(fd.line_ratio),
+        None if no_degeneracy => Some(fd.line_ratio),
+        None => Some(crate::mission::DEFAULT_LINE_RATIO),
     });
     let coarse = max_corr.unwrap_or(fd.max_correspondence_m);
     let fine = match fine_corr {
