@@ -438,12 +438,13 @@ const AGREE_COS: f64 = 0.866_025_403_784_438_6;
 
 /// A neighbourhood whose smallest PCA eigenvalue is above this share of
 /// its middle one has no clear normal: its [middle share](Target::middle_shares)
-/// is 0. Noise across a thin line, or a patch curved as much across as
-/// along, leaves the two smaller eigenvalues alike and their eigenvectors
-/// any pair in their plane — on the sewer's 60 slices, fused at 0.1 m
-/// cells, such points (λ_min/λ_mid ≥ 0.2: 3–4 % of them) gave 42–51 % of
-/// what the pipe's axis seemed to be seen by (BENCHMARKS.md, "Sparse scan
-/// lines").
+/// is 0. Noise across a thin line, or a neighbourhood wider than the
+/// surface is flat (a pipe's sparse far reaches), leaves the two smaller
+/// eigenvalues alike and their eigenvectors any pair in their plane — on
+/// the sewer's 60 slices, fused at 0.1 m cells, such points (λ_min/λ_mid
+/// ≥ 0.2: 3–4 % of them) gave 42–51 % of what the pipe's axis seemed to
+/// be seen by (BENCHMARKS.md, "Sparse scan lines in the mission's ICP
+/// fusion").
 pub const AMBIGUOUS_NORMAL: f64 = 0.2;
 
 /// A neighbourhood's covariance `a` (symmetric 3×3): the unit

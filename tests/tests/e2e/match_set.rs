@@ -2128,8 +2128,9 @@ fn a_links_blind_directions_are_in_the_worlds_axes_in_every_mode() {
     let done = tests::run_mission(&mission.path, &run_dir);
     assert!(done.code <= 1, "{}", done.stderr);
     // The same sparse lines in the mission's own ICP fusion: with the
-    // sewer's `[fusion] line_ratio = 0.1` every station stays within 5 mm
-    // of the simulator's truth (measured 1.8–4.1 mm; without the key
+    // sewer's `[fusion] line_ratio` (0.1, the default with its
+    // `degeneracy_ratio`) every station stays within 5 mm of the
+    // simulator's truth (measured 1.9–4.2 mm; with `line_ratio = 0`
     // stations 3–8 slid 0.12–1.40 m along the pipe, exit 0, each match
     // seeing the axis at 1.1–2.0e-2 of its largest eigenvalue through
     // normals of no clear direction).
