@@ -290,12 +290,7 @@ impl Target {
         let k = (WIDER * self.normal_neighbours).min(self.points.len());
         let k = std::num::NonZero::new(k).unwrap_or(std::num::NonZero::<usize>::MIN);
         let nn = self.tree.query(&self.points[i]).nearest_n::<SquaredEuclidean<f32>>(k).execute();
-        let mean = nn.iter().fold(Vector3::zeros(), |s, r| s + point(&self.points[r.item as usize])) / nn.len() as f64;
-        let cov = nn.iter().fold(Matrix3::zeros(), |s, r| {
-            let d = point(&self.points[r.item as usize]) - mean;
-            s + d * d.transpose()
-        });
-        let eig = SymmetricEigen::new(cov);
+        let eig = SymmetricEigen::new(self.scatter(nn.iter().map(|r| r.item)));
         let mut order = [0, 1, 2];
         order.sort_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
         let e = order.map(|k| eig.eigenvalues[k].max(0.0));
@@ -367,17 +362,23 @@ impl Target {
                 return Local { normal: Vector3::zeros(), middle: 1.0, hood };
             }
             let used = &nn[..self.normal_neighbours.min(nn.len())];
-            let mean =
-                used.iter().fold(Vector3::zeros(), |s, r| s + point(&self.points[r.item as usize])) / used.len() as f64;
-            let cov = used.iter().fold(Matrix3::zeros(), |s, r| {
-                let d = point(&self.points[r.item as usize]) - mean;
-                s + d * d.transpose()
-            });
-            let (mut normal, middle) = pca_normal(&cov);
+            let (mut normal, middle) = pca_normal(&self.scatter(used.iter().map(|r| r.item)));
             if let Some(v) = &self.viewpoint {
                 orient(&mut normal, &self.points[j], v);
             }
             Local { normal, middle: middle as f32, hood }
+        })
+    }
+
+    /// The scatter matrix of the points `items` (at least one) about
+    /// their mean: Σ (q − q̄)(q − q̄)ᵀ.
+    fn scatter(&self, items: impl Iterator<Item = u32> + Clone) -> Matrix3<f64> {
+        let (sum, count) =
+            items.clone().fold((Vector3::zeros(), 0usize), |(s, n), k| (s + point(&self.points[k as usize]), n + 1));
+        let mean = sum / count as f64;
+        items.fold(Matrix3::zeros(), |s, k| {
+            let d = point(&self.points[k as usize]) - mean;
+            s + d * d.transpose()
         })
     }
 
