@@ -81,9 +81,9 @@ pub struct MatchArgs {
     /// Directions a match cannot see — eigenvalue of its normal matrix
     /// (about the scan's centroid, rotation scaled by its radius) below
     /// this ratio of the largest — are held where the start put them and
-    /// reported (0: off).
-    #[arg(long, default_value_t = fusion::links::DEFAULT_DEGENERACY_RATIO)]
-    pub degeneracy_ratio: f64,
+    /// reported (0: off). Default 2e-3.
+    #[arg(long)]
+    pub degeneracy_ratio: Option<f64>,
     /// Judge those directions without the points whose normal is not a
     /// surface's: their ten nearest neighbours along one scan line (the
     /// middle PCA eigenvalue below this ratio of the largest; PCA takes
@@ -92,9 +92,12 @@ pub struct MatchArgs {
     /// nearest are a line too (a pole, a wire) or a surface with the same
     /// normal. Sparse scan lines of a pipe (a rotating scanner's slices
     /// far apart) make its axis look seen that way and the scans slide
-    /// along it; 0.1 holds it (docs/match.md). 0: off.
-    #[arg(long, default_value_t = 0.0)]
-    pub line_ratio: f64,
+    /// along it; 0.1 holds it (docs/match.md). 0: off. Default 0.1 when
+    /// --degeneracy-ratio is given, as a mission's `[fusion] line_ratio`
+    /// with its `degeneracy_ratio`; else 0 (at the default threshold it
+    /// held a street's weakly seen direction where a start 2° off put it).
+    #[arg(long)]
+    pub line_ratio: Option<f64>,
     /// Every scan's frame has its scanner at the origin (PLY, XYZ and LAS
     /// say nothing of where the scanner stood; 3DTK, E57 scans with a
     /// pose, PCD and ROS 2 clouds do): the verification then tests every

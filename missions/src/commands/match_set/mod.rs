@@ -59,14 +59,23 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
     }
     check_out(args)?;
     crate::view::recording::available()?;
-    if !(args.degeneracy_ratio.is_finite() && (0.0..0.1).contains(&args.degeneracy_ratio)) {
-        bail!("--degeneracy-ratio {}: expected a ratio in [0, 0.1) (0: off)", args.degeneracy_ratio);
+    let degeneracy_ratio = args.degeneracy_ratio.unwrap_or(fusion::links::DEFAULT_DEGENERACY_RATIO);
+    if !(degeneracy_ratio.is_finite() && (0.0..0.1).contains(&degeneracy_ratio)) {
+        bail!("--degeneracy-ratio {degeneracy_ratio}: expected a ratio in [0, 0.1) (0: off)");
     }
-    if !(args.line_ratio.is_finite() && (0.0..1.0).contains(&args.line_ratio)) {
-        bail!("--line-ratio {}: expected a ratio in [0, 1) (0: off)", args.line_ratio);
+    // A threshold of the user's own comes with the line test, as a
+    // mission's `[fusion] degeneracy_ratio` does (docs/match.md, Known
+    // limits: at the default it held a street's weakly seen direction
+    // at a start 2° off).
+    let line_ratio = args.line_ratio.unwrap_or(match args.degeneracy_ratio {
+        Some(r) if r > 0.0 => crate::mission::DEFAULT_LINE_RATIO,
+        _ => 0.0,
+    });
+    if !(line_ratio.is_finite() && (0.0..1.0).contains(&line_ratio)) {
+        bail!("--line-ratio {line_ratio}: expected a ratio in [0, 1) (0: off)");
     }
-    if args.line_ratio > 0.0 && args.degeneracy_ratio == 0.0 {
-        bail!("--line-ratio {} judges the blind directions: it needs --degeneracy-ratio above 0", args.line_ratio);
+    if line_ratio > 0.0 && degeneracy_ratio == 0.0 {
+        bail!("--line-ratio {line_ratio} judges the blind directions: it needs --degeneracy-ratio above 0");
     }
     if args.max_partners == 0 {
         bail!("--max-partners 0: expected at least 1");
@@ -78,8 +87,8 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
     config.link.max_partners = args.max_partners;
     config.link.multiview.max_matches_per_scan = args.max_matches_per_scan;
     let icp = &mut config.link.multiview.icp;
-    icp.degeneracy_ratio = (args.degeneracy_ratio > 0.0).then_some(args.degeneracy_ratio);
-    icp.line_ratio = (args.line_ratio > 0.0).then_some(args.line_ratio);
+    icp.degeneracy_ratio = (degeneracy_ratio > 0.0).then_some(degeneracy_ratio);
+    icp.line_ratio = (line_ratio > 0.0).then_some(line_ratio);
     if args.method == MethodArg::PointToPoint {
         icp.method = Method::PointToPoint;
         // Back faces need the target's normals, which point-to-point does not estimate.
