@@ -146,6 +146,14 @@ pub struct SetResult {
     /// strategy settled in a compromise of its matches that no pair,
     /// matched again alone, moves far enough to name. Empty in graph mode.
     pub departed: Vec<usize>,
+    /// In graph mode, how far each scan moved from its start along the
+    /// directions it reports blind ([`unobservable`](Self::unobservable):
+    /// held by the start's steps, not by its links), in χ² of its own
+    /// covariance along them (with as many degrees of freedom as there are
+    /// directions), and how far that moves its points, metres (0 and 0
+    /// without a blind direction; empty in the other modes and before the
+    /// verification).
+    pub held: Vec<Held>,
     /// Each scan's directions the matches do not see (unit ξ, world frame).
     pub unobservable: Vec<Vec<Vector6<f64>>>,
     /// The final stage's matches: the link graph's pairs, or each scan's
@@ -208,10 +216,78 @@ impl SetResult {
     pub fn named(&self) -> Vec<usize> {
         let mut named = crate::verify::untrusted(self.world_from_scan.len(), &self.checks);
         named.extend(&self.departed);
+        named.extend(self.held.iter().enumerate().filter(|(_, h)| h.named).map(|(i, _)| i));
         named.sort_unstable();
         named.dedup();
         named
     }
+}
+
+/// A graph-mode scan's move from its start along the directions it
+/// reports blind ([`SetResult::held`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Held {
+    /// The move in χ² of the scan's covariance along those directions.
+    pub chi2: f64,
+    /// How many directions (the χ²'s degrees of freedom).
+    pub directions: usize,
+    /// How far the move takes the scan's points: its centroid's
+    /// displacement plus the turn times their RMS radius, metres.
+    pub moved_m: f64,
+    /// Beyond [`held_limit`] and the finest voxel: what its links do not
+    /// see moved further than the start's steps allow — the scan is named.
+    /// (A pipe's scans, matched at the default blind-direction threshold,
+    /// slid 74–184 mm along its axis with both the axis and the roll
+    /// reported blind on every scan: 15.7–22.6 in χ² with two directions;
+    /// right results 0.0–0.1.)
+    pub named: bool,
+}
+
+/// The χ² a [`Held`] move with `directions` degrees of freedom may reach:
+/// the distribution's 99.9 % point (1–6 degrees of freedom).
+pub fn held_limit(directions: usize) -> f64 {
+    const LIMITS: [f64; 6] = [10.828, 13.816, 16.266, 18.467, 20.515, 22.458];
+    LIMITS[directions.clamp(1, 6) - 1]
+}
+
+/// How scan `pose` moved from `start` along `blind` (unit ξ, left, about
+/// the frame's origin, as `covariance`), judged about the scan's points'
+/// `centroid` (in its own frame) with rotations scaled by their RMS
+/// `radius` — the metric the blind directions were found in — so that
+/// its move along what its links see does not leak into them.
+pub fn held_move(
+    pose: &Isometry3<f64>,
+    start: &Isometry3<f64>,
+    blind: &[Vector6<f64>],
+    covariance: &Matrix6<f64>,
+    centroid: &Point3<f64>,
+    radius: f64,
+    tolerance_m: f64,
+) -> Held {
+    if blind.is_empty() {
+        return Held::default();
+    }
+    // (ω, v) about the origin → (ω·radius, v + ω × c) about the centroid.
+    let c = (pose * centroid).coords;
+    let mut m = Matrix6::<f64>::identity();
+    m.fixed_view_mut::<3, 3>(0, 0).fill_diagonal(radius.max(f64::EPSILON));
+    m.fixed_view_mut::<3, 3>(3, 0).copy_from(&(-crate::se3::skew(&c)));
+    let moved: Vec<Vector6<f64>> = blind.iter().map(|d| m * d).collect();
+    let basis = orthonormal(&moved);
+    // The move itself, exactly: its turn and the centroid's displacement
+    // (a turn about a centroid far from the origin is no shift of it).
+    let step = pose * start.inverse();
+    let from = start * centroid;
+    let turn = step.rotation.scaled_axis() * radius.max(f64::EPSILON);
+    let shift = step * from - from;
+    let delta = Vector6::new(turn.x, turn.y, turn.z, shift.x, shift.y, shift.z);
+    let a = nalgebra::DVector::from_iterator(basis.len(), basis.iter().map(|q| q.dot(&delta)));
+    let cm = m * covariance * m.transpose();
+    let s = nalgebra::DMatrix::from_fn(basis.len(), basis.len(), |i, j| basis[i].dot(&(cm * basis[j])));
+    let chi2 = s.clone().pseudo_inverse(1e-12 * s.amax()).map_or(f64::INFINITY, |p| (a.transpose() * p * &a)[0]);
+    let along: Vector6<f64> = basis.iter().zip(a.iter()).map(|(q, x)| q * *x).sum();
+    let moved_m = along.fixed_rows::<3>(3).norm() + along.fixed_rows::<3>(0).norm();
+    Held { chi2, directions: basis.len(), moved_m, named: chi2 > held_limit(basis.len()) && moved_m > tolerance_m }
 }
 
 /// A second registration from the starts: the schedule without its first
@@ -495,7 +571,7 @@ fn registered<S: AsRef<[Point3<f32>]> + Sync>(
         .chain(starts[1..].iter().map(|s| world_from_first.inverse() * s))
         .collect();
     let r = match register_in_first_frame(scans, &local, config, progress) {
-        Ok(r) => restart_if_dragged(scans, &local, config, verified(scans, r, config)?, progress)?,
+        Ok(r) => restart_if_dragged(scans, &local, config, verified(scans, &local, r, config)?, progress)?,
         // A stage moved two scans apart, or a match lost its partner: the
         // restart without the first stage may not. (Where the starts
         // themselves do not overlap, or the input is at fault, the restart
@@ -507,6 +583,8 @@ fn registered<S: AsRef<[Point3<f32>]> + Sync>(
 }
 
 /// `r` with its verification ([`verify_set`]) and the time it took; in
+/// graph mode with each scan's move from its start (`starts`) along what
+/// it reports blind ([`held_move`]); in
 /// the modes without a link graph also with the variance factor and the
 /// covariances of the verification's matches adjusted together, plus the
 /// poses' departure from them ([`crate::links::adjust_matches`]): a
@@ -517,10 +595,34 @@ fn registered<S: AsRef<[Point3<f32>]> + Sync>(
 /// shares and 12.6 on wedges (6 when honest; 252 for a simultaneous
 /// compromise 0.68° off); so, 2.6–8.3 over five draws, as graph mode's
 /// 2.8–8.7 (BENCHMARKS).
-fn verified<S: AsRef<[Point3<f32>]> + Sync>(scans: &[S], mut r: SetResult, config: &SetConfig) -> Result<SetResult> {
+fn verified<S: AsRef<[Point3<f32>]> + Sync>(
+    scans: &[S],
+    starts: &[Isometry3<f64>],
+    mut r: SetResult,
+    config: &SetConfig,
+) -> Result<SetResult> {
     let started = std::time::Instant::now();
     let PairChecks { pairs, shared } = verify_set(scans, &r.world_from_scan, config)?;
     r.checks = pairs;
+    if config.mode == Mode::Graph {
+        let tolerance = finest_link(config).map_or(0.0, |(finest, _)| finest.voxel_m);
+        r.held = scans
+            .par_iter()
+            .enumerate()
+            .map(|(i, s)| {
+                let blind = r.unobservable.get(i).map_or(&[][..], Vec::as_slice);
+                let (Some(pose), Some(start), Some(c)) = (r.world_from_scan.get(i), starts.get(i), r.covariance.get(i))
+                else {
+                    return Held::default();
+                };
+                if i == 0 || blind.is_empty() {
+                    return Held::default();
+                }
+                let (centroid, radius) = crate::icp::degeneracy::centroid_and_lever_arm(s.as_ref());
+                held_move(pose, start, blind, c, &centroid, radius, tolerance)
+            })
+            .collect();
+    }
     if config.mode != Mode::Graph && !r.checks.is_empty() {
         let (mut edges, mut noise, mut pulls) = (Vec::new(), Vec::new(), Vec::new());
         for c in &r.checks {
@@ -603,7 +705,7 @@ fn restart_after_failure<S: AsRef<[Point3<f32>]> + Sync>(
         _ => None,
     };
     let Ok(r) = without_first(scans, starts, config, 1, progress) else { return Err(failure) };
-    let mut r = verified(scans, r, config)?;
+    let mut r = verified(scans, starts, r, config)?;
     let after = finest_link(config).and_then(|(finest, link)| {
         let prepared = crate::multiview::prepare(scans, &link.multiview).ok()?;
         Some(crate::agreement::disagreement(&prepared, &r.world_from_scan, finest.max_correspondence_m))
@@ -709,7 +811,7 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     let at_starts = crate::agreement::disagreement(&prepared, starts, tau);
     // A registration verified, with the scans its verification names.
     let verify = |r: SetResult| -> Result<(SetResult, Vec<usize>)> {
-        let r = verified(scans, r, config)?;
+        let r = verified(scans, starts, r, config)?;
         let named = r.named();
         Ok((r, named))
     };
@@ -1060,6 +1162,7 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
         departure_chi2: Vec::new(),
         departure_m: Vec::new(),
         departed: Vec::new(),
+        held: Vec::new(),
         unobservable: last
             .last_match
             .iter()
@@ -1142,6 +1245,7 @@ fn from_graph(g: LinkGraph, matches: usize, settled: bool, stages: Vec<StageRun>
         departure_chi2: Vec::new(),
         departure_m: Vec::new(),
         departed: Vec::new(),
+        held: Vec::new(),
         unobservable: g.unobservable,
         links: g
             .links
@@ -1258,6 +1362,7 @@ mod tests {
             departure_chi2: Vec::new(),
             departure_m: Vec::new(),
             departed: Vec::new(),
+            held: Vec::new(),
             unobservable: vec![Vec::new(); 4],
             links: Vec::new(),
             matches: 0,
@@ -1290,5 +1395,57 @@ mod tests {
         // voxel (a right pose whose pairs agree far more tightly, as
         // overlaps that share their samples do): not named.
         assert!(departed_scans(&chi2, &[1.0, 1.0, 1.0, 0.004], 0.05).is_empty());
+    }
+
+    /// A graph-mode scan's move along what it reports blind, in χ² of its
+    /// covariance there, judged about its points' centroid — far from the
+    /// frame's origin here (1.1 km), where a turn about the centroid is a
+    /// turn about the origin plus a long translation: a move along what
+    /// its links see leaks nothing into the blind directions. The limits
+    /// are the χ² distributions' 99.9 % points (two degrees of freedom:
+    /// −2 ln 0.001, exactly).
+    #[test]
+    fn a_move_along_what_only_the_start_holds_is_judged_in_its_own_sigma() {
+        let start = Isometry3::translation(1000.0, 500.0, 0.0);
+        let c = nalgebra::Vector3::new(1000.0, 500.0, 0.0);
+        // About the centroid (ω, the centroid's v) → about the origin: v − ω × c.
+        let mut n = Matrix6::<f64>::identity();
+        n.fixed_view_mut::<3, 3>(3, 0).copy_from(&crate::se3::skew(&c));
+        // Blind: the roll about the centroid and the shift along x; σ 0.01
+        // rad and 0.02 m there, 1e-4 in every seen direction.
+        let blind = [n * Vector6::new(1.0, 0.0, 0.0, 0.0, 0.0, 0.0), Vector6::new(0.0, 0.0, 0.0, 1.0, 0.0, 0.0)]
+            .map(|d| d.normalize());
+        let about_centroid = Matrix6::from_diagonal(&Vector6::new(1e-4, 1e-8, 1e-8, 4e-4, 1e-8, 1e-8));
+        let covariance = n * about_centroid * n.transpose();
+        // Turned about the centroid, then shifted.
+        let moved = |turn: nalgebra::Vector3<f64>, shift: nalgebra::Vector3<f64>| {
+            Isometry3::new(c + shift, turn) * Isometry3::translation(-c.x, -c.y, -c.z) * start
+        };
+        let judged = |roll: f64, along: f64, yaw: f64, across: f64| {
+            let pose = moved(nalgebra::Vector3::new(roll, 0.0, yaw), nalgebra::Vector3::new(along, across, 0.0));
+            held_move(&pose, &start, &blind, &covariance, &Point3::origin(), 2.0, 0.01)
+        };
+        // 0.03 rad and 0.04 m: 3² + 2² = 13, within 13.82.
+        let within = judged(0.03, 0.04, 0.0, 0.0);
+        assert!((within.chi2 - 13.0).abs() < 0.05, "{within:?}");
+        assert_eq!(within.directions, 2);
+        assert!(!within.named, "{within:?}");
+        // 0.04 rad and 0.05 m: 16 + 6.25; its points 0.05 + 0.04 × 2 m.
+        let beyond = judged(0.04, 0.05, 0.0, 0.0);
+        assert!((beyond.chi2 - 22.25).abs() < 0.1, "{beyond:?}");
+        assert!((beyond.moved_m - 0.13).abs() < 1e-3, "{beyond:?}");
+        assert!(beyond.named, "{beyond:?}");
+        // A turn of 0.2 rad about z and 0.5 m across: seen, and none of it
+        // is blind (about the origin the turn is also a 100 m shift along x).
+        let seen = judged(0.0, 0.0, 0.2, 0.5);
+        assert!(seen.chi2 < 1e-6 && seen.moved_m < 1e-6, "{seen:?}");
+        // Below the finest voxel the move names nothing, however tight σ.
+        let pose = moved(nalgebra::Vector3::zeros(), nalgebra::Vector3::new(0.005, 0.0, 0.0));
+        let small = held_move(&pose, &start, &blind, &(covariance * 1e-6), &Point3::origin(), 2.0, 0.01);
+        assert!(small.chi2 > 1e3 && !small.named, "{small:?}");
+        // Nothing blind, nothing judged.
+        assert_eq!(held_move(&start, &start, &[], &covariance, &Point3::origin(), 2.0, 0.01), Held::default());
+        assert!((held_limit(2) + 2.0 * 0.001f64.ln()).abs() < 1e-3);
+        assert!((1..6).all(|k| held_limit(k) < held_limit(k + 1)));
     }
 }

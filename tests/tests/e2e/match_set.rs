@@ -2260,6 +2260,61 @@ fn a_links_blind_directions_are_in_the_worlds_axes_in_every_mode() {
     assert!(r.stderr.contains("--line-ratio 1.5: expected a ratio in [0, 1) (0: off)"), "{}", r.stderr);
 }
 
+/// A pipe at the default blind-direction threshold (issue 38, session
+/// 49): the sewer example's own scans (180 slices) matched with nothing
+/// but the scans slid 74–184 mm along the pipe in graph mode, exit 0 —
+/// every scan reporting the axis and the roll blind, held by its start,
+/// yet moved along them 15.7–22.6 in χ² of its own covariance there.
+/// Named now, exit 1, with what a pipe needs; with it (`--degeneracy-ratio
+/// 0.01`) every scan lands within 3 mm of the simulator's truth, exit 0.
+#[test]
+fn a_pipe_slid_along_what_only_its_start_holds_is_named() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let text = std::fs::read_to_string(tests::example("sewer.toml"))
+        .expect("sewer")
+        .edit("[output]", "[output]\nrerun = false");
+    let mission = tests::temp_mission(&text);
+    let run_dir = dir.path().join("run");
+    let done = tests::run_mission(&mission.path, &run_dir);
+    assert_eq!(done.code, 0, "{}", done.stderr);
+    let scans: OsString = run_dir.join("scans").into();
+    let (r, v) = run(std::slice::from_ref(&scans), &dir.path().join("default"));
+    let v = v.unwrap_or_else(|| panic!("{}", r.stderr));
+    assert_eq!(r.code, 1, "{}", r.stderr);
+    let n = v["scans"].as_array().expect("scans").len();
+    assert_eq!(n, 9, "the sewer's stations");
+    assert_eq!(v["untrusted"], serde_json::json!((1..n).collect::<Vec<_>>()), "{}", r.stderr);
+    for s in &v["scans"].as_array().expect("scans")[1..] {
+        let blind = s["degenerate_directions"].as_array().expect("directions").len();
+        let chi2 = s["held_chi2"].as_f64().expect("a blind scan's move");
+        // (Measured 15.7–22.6 with two directions, 74–193 mm.)
+        assert!(blind >= 1 && chi2 > fusion::scanset::held_limit(blind), "{s}");
+        assert!(s["held_m"].as_f64().expect("metres") > 0.05, "{s}");
+    }
+    let said = run_text(std::slice::from_ref(&scans), &dir.path().join("said"));
+    assert_eq!(said.code, 1, "{}", said.stderr);
+    let text = format!("{}{}", said.stdout, said.stderr);
+    assert!(text.contains("only its start holds") && text.contains("--degeneracy-ratio 0.01"), "{text}");
+    // With the threshold a pipe needs: the axis and the roll held, nothing named.
+    let (r, v) = run(&[scans, "--degeneracy-ratio".into(), "0.01".into()], &dir.path().join("pipe"));
+    let v = v.unwrap_or_else(|| panic!("{}", r.stderr));
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let report: Value =
+        serde_json::from_str(&std::fs::read_to_string(run_dir.join("report.json")).expect("report")).expect("JSON");
+    for (k, s) in v["scans"].as_array().expect("scans").iter().enumerate() {
+        let m = pose(&s["world_from_scan"]);
+        let truth = &report["stations"][k]["truth"];
+        let d = nalgebra::Vector3::new(
+            m.translation.x - truth["x_m"].as_f64().expect("x"),
+            m.translation.y - truth["y_m"].as_f64().expect("y"),
+            m.translation.z - truth["z_m"].as_f64().expect("z"),
+        );
+        // (Measured 1.1–2.8 mm.)
+        assert!(d.norm() < 0.005, "scan {k}: {d:?} m from the truth");
+        assert!(s["held_chi2"].as_f64().is_none_or(|c| c < 1.0), "{s}");
+    }
+}
+
 /// The free-space test (issue 38, "a scan of another place entirely"):
 /// where a scanner saw through, another scan's points are placed wrongly.
 /// A 3DTK hall scan given with the two PCL room scans was placed 3.3 m

@@ -40,6 +40,8 @@ pub(super) fn report(
                     departure_chi2: r.departure_chi2.get(i).copied(),
                     departure_m: r.departure_m.get(i).copied(),
                     degenerate_directions: directions(&r.unobservable[i]),
+                    held_chi2: r.held.get(i).filter(|h| h.directions > 0).map(|h| h.chi2),
+                    held_m: r.held.get(i).filter(|h| h.directions > 0).map(|h| h.moved_m),
                 }
             })
             .collect(),

@@ -180,7 +180,8 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
             report.restart.iter().filter(|r| !r.corroborated).flat_map(|r| &r.undecided).any(|u| u.scan == i);
         let departed =
             report.scans.get(i).map_or(Ok(false), |s| why_departed(out, &scans[i].name, &report.mode, s, tolerance))?;
-        why_untrusted(out, scans, &report.checks, &report.untrusted, i, undecided || departed, tolerance)?;
+        let held = report.scans.get(i).map_or(Ok(false), |s| why_held(out, &scans[i].name, s, tolerance))?;
+        why_untrusted(out, scans, &report.checks, &report.untrusted, i, undecided || departed || held, tolerance)?;
     }
     for l in report.links.iter().filter(|l| !l.accepted || l.cycle.is_some()) {
         let targets: Vec<&str> = l.targets.iter().map(|&t| scans[t].name.as_str()).collect();
@@ -247,6 +248,27 @@ fn why_departed(out: &mut dyn Write, name: &str, mode: &str, s: &ScanReport, tol
         turn.to_degrees(),
         shift * 1e3,
         fusion::verify::MAX_DEPARTURE_CHI2
+    )?;
+    Ok(true)
+}
+
+/// Whether scan `s` (graph mode) moved from its start along the
+/// directions it reports blind by more than [`fusion::scanset::held_limit`]
+/// in χ² and `tolerance` (the finest voxel) in its points' motion, and if
+/// so the message that says so.
+fn why_held(out: &mut dyn Write, name: &str, s: &ScanReport, tolerance: f64) -> std::io::Result<bool> {
+    let (Some(chi2), Some(moved)) = (s.held_chi2, s.held_m) else { return Ok(false) };
+    let k = s.degenerate_directions.len();
+    let limit = fusion::scanset::held_limit(k);
+    if !(chi2 > limit && moved > tolerance) {
+        return Ok(false);
+    }
+    writeln!(
+        out,
+        "  not trusted: {name}: its links do not see {k} direction(s), which only its start holds, yet the stages \
+         moved it {moved:.3} m from its start along them ({chi2:.1} in χ² of its covariance there, above {limit:.1}): \
+         a coarse stage's pull that the finest cannot undo — a pipe or a tunnel needs --degeneracy-ratio 0.01; or give \
+         better starts"
     )?;
     Ok(true)
 }
@@ -393,6 +415,8 @@ mod tests {
             departure_chi2: Some(chi2),
             departure_m: Some(moved),
             degenerate_directions: Vec::new(),
+            held_chi2: None,
+            held_m: None,
         };
         let said = |s: &ScanReport| {
             let mut out = Vec::new();
@@ -409,6 +433,44 @@ mod tests {
         );
         assert_eq!(said(&scan(1400.0, 0.14)), (false, String::new()));
         assert_eq!(said(&scan(4744.0, 0.004)), (false, String::new()));
+    }
+
+    /// A graph-mode scan moved along what it reports blind beyond the
+    /// χ² limit for as many directions and the voxel in motion is said
+    /// with both; within either, or with nothing blind, nothing.
+    #[test]
+    fn a_move_along_what_only_the_start_holds_says_what_a_pipe_needs() {
+        let scan = |blind: usize, chi2: f64, moved: f64| ScanReport {
+            file: "b.ply".into(),
+            name: "b".into(),
+            number: 1,
+            world_from_scan: [[0.0; 4]; 4],
+            covariance: [[0.0; 6]; 6],
+            departure: None,
+            departure_chi2: None,
+            departure_m: None,
+            degenerate_directions: vec![[1.0, 0.0, 0.0, 0.0, 0.0, 0.0]; blind],
+            held_chi2: (blind > 0).then_some(chi2),
+            held_m: (blind > 0).then_some(moved),
+        };
+        let said = |s: &ScanReport| {
+            let mut out = Vec::new();
+            let held = why_held(&mut out, "b", s, 0.0085).expect("written");
+            (held, String::from_utf8(out).expect("UTF-8"))
+        };
+        let (held, text) = said(&scan(2, 18.8, 0.074));
+        assert!(held);
+        assert_eq!(
+            text,
+            "  not trusted: b: its links do not see 2 direction(s), which only its start holds, yet the stages moved \
+             it 0.074 m from its start along them (18.8 in χ² of its covariance there, above 13.8): a coarse stage's \
+             pull that the finest cannot undo — a pipe or a tunnel needs --degeneracy-ratio 0.01; or give better starts\n"
+        );
+        // 12 is beyond one direction's limit (10.8), within two's (13.8).
+        assert!(said(&scan(1, 12.0, 0.074)).0);
+        assert_eq!(said(&scan(2, 12.0, 0.074)), (false, String::new()));
+        assert_eq!(said(&scan(2, 18.8, 0.005)), (false, String::new()));
+        assert_eq!(said(&scan(0, 18.8, 0.074)), (false, String::new()));
     }
 
     #[test]
