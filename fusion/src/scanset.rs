@@ -250,6 +250,13 @@ pub fn held_limit(directions: usize) -> f64 {
     LIMITS[directions.clamp(1, 6) - 1]
 }
 
+/// Whether a move of `chi2` along `directions` blind directions, moving
+/// the scan's points by `moved_m`, names the scan ([`Held::named`]):
+/// beyond [`held_limit`] and beyond `tolerance_m` (the finest voxel).
+pub fn held_beyond(chi2: f64, directions: usize, moved_m: f64, tolerance_m: f64) -> bool {
+    chi2 > held_limit(directions) && moved_m > tolerance_m
+}
+
 /// How scan `pose` moved from `start` along `blind` (unit ξ, left, about
 /// the frame's origin, as `covariance`), judged about the scan's points'
 /// `centroid` (in its own frame) with rotations scaled by their RMS
@@ -287,7 +294,7 @@ pub fn held_move(
     let chi2 = s.clone().pseudo_inverse(1e-12 * s.amax()).map_or(f64::INFINITY, |p| (a.transpose() * p * &a)[0]);
     let along: Vector6<f64> = basis.iter().zip(a.iter()).map(|(q, x)| q * *x).sum();
     let moved_m = along.fixed_rows::<3>(3).norm() + along.fixed_rows::<3>(0).norm();
-    Held { chi2, directions: basis.len(), moved_m, named: chi2 > held_limit(basis.len()) && moved_m > tolerance_m }
+    Held { chi2, directions: basis.len(), moved_m, named: held_beyond(chi2, basis.len(), moved_m, tolerance_m) }
 }
 
 /// A second registration from the starts: the schedule without its first

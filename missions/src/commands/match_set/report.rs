@@ -30,6 +30,7 @@ pub(super) fn report(
             .map(|(i, s)| {
                 let m = r.world_from_scan[i].to_homogeneous();
                 let c: Matrix6<f64> = r.covariance[i];
+                let held = r.held.get(i).filter(|h| h.directions > 0);
                 ScanReport {
                     file: s.file.clone(),
                     name: s.name.clone(),
@@ -40,8 +41,8 @@ pub(super) fn report(
                     departure_chi2: r.departure_chi2.get(i).copied(),
                     departure_m: r.departure_m.get(i).copied(),
                     degenerate_directions: directions(&r.unobservable[i]),
-                    held_chi2: r.held.get(i).filter(|h| h.directions > 0).map(|h| h.chi2),
-                    held_m: r.held.get(i).filter(|h| h.directions > 0).map(|h| h.moved_m),
+                    held_chi2: held.map(|h| h.chi2),
+                    held_m: held.map(|h| h.moved_m),
                 }
             })
             .collect(),

@@ -253,16 +253,16 @@ fn why_departed(out: &mut dyn Write, name: &str, mode: &str, s: &ScanReport, tol
 }
 
 /// Whether scan `s` (graph mode) moved from its start along the
-/// directions it reports blind by more than [`fusion::scanset::held_limit`]
-/// in χ² and `tolerance` (the finest voxel) in its points' motion, and if
-/// so the message that says so.
+/// directions it reports blind beyond [`fusion::scanset::held_beyond`]'s
+/// limits (`tolerance`: the finest voxel), and if so the message that
+/// says so.
 fn why_held(out: &mut dyn Write, name: &str, s: &ScanReport, tolerance: f64) -> std::io::Result<bool> {
     let (Some(chi2), Some(moved)) = (s.held_chi2, s.held_m) else { return Ok(false) };
     let k = s.degenerate_directions.len();
-    let limit = fusion::scanset::held_limit(k);
-    if !(chi2 > limit && moved > tolerance) {
+    if !fusion::scanset::held_beyond(chi2, k, moved, tolerance) {
         return Ok(false);
     }
+    let limit = fusion::scanset::held_limit(k);
     writeln!(
         out,
         "  not trusted: {name}: its links do not see {k} direction(s), which only its start holds, yet the stages \
