@@ -500,6 +500,27 @@ fn identifiable(links: &[Link], used: &[usize], k: usize) -> bool {
     joined(None) && used.iter().filter(|&&m| m != k).all(|&m| joined(Some(m)))
 }
 
+/// Each scan's covariance from [`frame_and_steps`]'s steps alone (world
+/// frame, ξ = (ω, v), left; zero for scan 0, the frame): what the start
+/// says of scan i is the chain of steps 1..=i, each step's error in the
+/// frame of the scan before it — Σ Ad(Tⱼ₋₁)·S⁻¹·Ad(Tⱼ₋₁)ᵀ at `poses`.
+/// Beside an adjustment's covariance it tells which directions the
+/// matches hold less than the start does
+/// ([`crate::scanset::held_by_start`]).
+pub fn steps_covariance(poses: &[Isometry3<f64>], config: &LinkConfig) -> Vec<Matrix6<f64>> {
+    let step = config.step_information().try_inverse().unwrap_or_else(Matrix6::zeros);
+    let mut sum = Matrix6::zeros();
+    let mut out = Vec::with_capacity(poses.len());
+    for (i, _) in poses.iter().enumerate() {
+        if i > 0 {
+            let a = crate::se3::adjoint(&poses[i - 1]);
+            sum += a * step * a.transpose();
+        }
+        out.push(sum);
+    }
+    out
+}
+
 /// What holds a graph of `poses`' scans besides its links: scan 0's
 /// prior at its pose (1 µm / 1 µrad: it holds the frame), and consecutive
 /// scans tied by the increments of `starts` with the step information.
@@ -1037,6 +1058,50 @@ fn shared_noise(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Monte Carlo: four scans apart and turned, far from the origin, each
+    /// placed on the one before by its start's step with an error of the
+    /// step's σ (2 mrad, 3 cm) in the frame of the scan before: their
+    /// scatter in the world (ξ, left) is what [`steps_covariance`] says —
+    /// each step's turn swings every later scan about the earlier one's
+    /// origin.
+    #[test]
+    fn the_starts_steps_covariance_is_what_monte_carlo_scatters() {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, StandardNormal};
+        let pose = |x: f64, y: f64, yaw: f64| {
+            Isometry3::from_parts(
+                nalgebra::Translation3::new(500.0 + x, 300.0 + y, 0.2 * x),
+                nalgebra::UnitQuaternion::from_euler_angles(0.02, -0.01, yaw),
+            )
+        };
+        let poses = [pose(0.0, 0.0, 0.0), pose(6.0, 1.0, 0.4), pose(9.0, 7.0, 1.2), pose(2.0, 11.0, 2.0)];
+        let config = LinkConfig { step_sigma_rad: 2e-3, step_sigma_m: 0.03, ..LinkConfig::default() };
+        let predicted = steps_covariance(&poses, &config);
+        assert_eq!(predicted[0], Matrix6::zeros());
+        let sigma = Vector6::new(2e-3, 2e-3, 2e-3, 0.03, 0.03, 0.03);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(50);
+        let draws = 6000;
+        let mut scatter = vec![Matrix6::zeros(); poses.len()];
+        for _ in 0..draws {
+            let mut placed = poses[0];
+            for i in 1..poses.len() {
+                let e = Vector6::from_fn(|k, _| sigma[k] * Distribution::<f64>::sample(&StandardNormal, &mut rng));
+                placed = placed * crate::se3::exp(&e) * (poses[i - 1].inverse() * poses[i]);
+                let xi = crate::se3::left_difference(&placed, &poses[i]);
+                scatter[i] += xi * xi.transpose() / draws as f64;
+            }
+        }
+        for i in 1..poses.len() {
+            let p = &predicted[i];
+            for k in 0..6 {
+                // (Monte Carlo's own error on a variance: √(2/6000) ≈ 2 %.)
+                let r = scatter[i][(k, k)] / p[(k, k)];
+                assert!((r - 1.0).abs() < 0.08, "scan {i}, ξ[{k}]: scatter/predicted = {r}");
+            }
+            assert!((scatter[i] - p).norm() < 0.08 * p.norm(), "scan {i}: {} vs {}", scatter[i], p);
+        }
+    }
 
     /// Monte Carlo: four scans all linked, each link's error the two
     /// scans' own shifts (σ 1 mrad / 1 mm each, the same in all of a

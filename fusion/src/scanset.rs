@@ -146,13 +146,14 @@ pub struct SetResult {
     /// strategy settled in a compromise of its matches that no pair,
     /// matched again alone, moves far enough to name. Empty in graph mode.
     pub departed: Vec<usize>,
-    /// In graph mode, how far each scan moved from its start along the
-    /// directions it reports blind ([`unobservable`](Self::unobservable):
-    /// held by the start's steps, not by its links), in χ² of its own
+    /// How far each scan moved from its start along the directions only
+    /// the start holds — in graph mode those it reports blind
+    /// ([`unobservable`](Self::unobservable): held by the start's steps,
+    /// not by its links), in the other modes those its matches hold less
+    /// than the start does ([`held_by_start`]) — in χ² of its own
     /// covariance along them (with as many degrees of freedom as there are
     /// directions), and how far that moves its points, metres (0 and 0
-    /// without a blind direction; empty in the other modes and before the
-    /// verification).
+    /// without such a direction; empty before the verification).
     pub held: Vec<Held>,
     /// Each scan's directions the matches do not see (unit ξ, world frame).
     pub unobservable: Vec<Vec<Vector6<f64>>>,
@@ -209,9 +210,27 @@ impl SetResult {
         named
     }
 
+    /// Whether the verification names scans only by their moves along
+    /// what only their starts hold ([`held`](Self::held)): each of them
+    /// tied to another by a pair matched again that agrees, no pair
+    /// disagreeing and nothing departing from where they agree — what
+    /// the data do not hold moved, not what they contradict. (A scan that
+    /// no pair reaches is held by its start in every direction: its move
+    /// is all the stages' doing, and nothing verifies it.)
+    pub fn named_only_held(&self) -> bool {
+        let tied = |i: usize| self.checks.iter().any(|c| c.consistent && (c.source == i || c.target == i));
+        let held: Vec<usize> = self.held.iter().enumerate().filter(|(_, h)| h.named).map(|(i, _)| i).collect();
+        !held.is_empty()
+            && held.iter().all(|&i| tied(i))
+            && self.departed.is_empty()
+            && crate::verify::untrusted(self.world_from_scan.len(), &self.checks).is_empty()
+    }
+
     /// The scans the verification names at these poses: by their pairs
-    /// ([`crate::verify::untrusted`]) or by their departure from where
-    /// those pairs agree ([`departed`](Self::departed)), in order. What
+    /// ([`crate::verify::untrusted`]), by their departure from where
+    /// those pairs agree ([`departed`](Self::departed)) or by their move
+    /// along what only their start holds ([`held`](Self::held)), in
+    /// order. What
     /// the restarts judge a registration by ([`Restart`]).
     pub fn named(&self) -> Vec<usize> {
         let mut named = crate::verify::untrusted(self.world_from_scan.len(), &self.checks);
@@ -223,14 +242,19 @@ impl SetResult {
     }
 }
 
-/// A graph-mode scan's move from its start along the directions it
-/// reports blind ([`SetResult::held`]).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+/// A scan's move from its start along the directions only the start
+/// holds ([`SetResult::held`]): in graph mode those it reports blind, in
+/// the other modes those its matches hold less than the start does
+/// ([`held_by_start`]).
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct Held {
     /// The move in χ² of the scan's covariance along those directions.
     pub chi2: f64,
     /// How many directions (the χ²'s degrees of freedom).
     pub directions: usize,
+    /// The directions (unit ξ = (ω, v), left, in the frame of the
+    /// scan's covariance).
+    pub along: Vec<Vector6<f64>>,
     /// How far the move takes the scan's points: its centroid's
     /// displacement plus the turn times their RMS radius, metres.
     pub moved_m: f64,
@@ -294,7 +318,71 @@ pub fn held_move(
     let chi2 = s.clone().pseudo_inverse(1e-12 * s.amax()).map_or(f64::INFINITY, |p| (a.transpose() * p * &a)[0]);
     let along: Vector6<f64> = basis.iter().zip(a.iter()).map(|(q, x)| q * *x).sum();
     let moved_m = along.fixed_rows::<3>(3).norm() + along.fixed_rows::<3>(0).norm();
-    Held { chi2, directions: basis.len(), moved_m, named: held_beyond(chi2, basis.len(), moved_m, tolerance_m) }
+    let named = held_beyond(chi2, basis.len(), moved_m, tolerance_m);
+    Held { chi2, directions: basis.len(), along: orthonormal(blind), moved_m, named }
+}
+
+/// The least share of a direction's variance from the start alone that a
+/// scan's covariance keeps where the start holds it at least as much as
+/// the scan's matches do ([`held_by_start`]): information adds, so there
+/// the matches add at most as much as the start's steps give.
+pub const HELD_SHARE: f64 = 0.5;
+
+/// In the modes without a link graph, how scan `pose` moved from `start`
+/// along the directions its `covariance` (the verification's adjustment,
+/// [`crate::links::adjust_matches`]) keeps at least [`HELD_SHARE`] of the
+/// start's steps' alone (`steps`, [`crate::links::steps_covariance`]):
+/// those its matches hold no better than the start — a pipe's axis and
+/// roll, whatever a match's blind-direction threshold judged. The
+/// directions are the generalised eigenvectors of the two covariances
+/// (the same in every frame and unit), the move judged in the steps'
+/// whitened metric. (On a pipe's 180-slice scans at the default
+/// threshold, the matches reported nothing blind and slid the scans
+/// 74–289 mm along the axis: two such directions on every scan, their
+/// shares 0.72–1.13, the others' ≤ 0.17; the moves 17–51 in χ².) The
+/// points (`centroid` in the scan's frame, RMS `radius`) measure the
+/// move as [`held_move`] does, taken exactly as the turn and the
+/// centroid's displacement.
+pub fn held_by_start(
+    pose: &Isometry3<f64>,
+    start: &Isometry3<f64>,
+    covariance: &Matrix6<f64>,
+    steps: &Matrix6<f64>,
+    centroid: &Point3<f64>,
+    radius: f64,
+    tolerance_m: f64,
+) -> Held {
+    let Some(l) = steps.cholesky().map(|c| c.l()) else { return Held::default() };
+    let Some(li) = l.try_inverse() else { return Held::default() };
+    let w = li * covariance * li.transpose();
+    let eigen = nalgebra::SymmetricEigen::new((w + w.transpose()) * 0.5);
+    // The move exactly as its turn and its centroid's displacement (a
+    // turn about a centroid far from the origin is no shift of it), in
+    // ξ about the origin: (ω, v − ω × c).
+    let from = (start * centroid).coords;
+    let step = pose * start.inverse();
+    let turn = step.rotation.scaled_axis();
+    let shift = step * Point3::from(from) - Point3::from(from);
+    let xi = Vector6::from_iterator(turn.iter().copied().chain((shift - turn.cross(&from)).iter().copied()));
+    let y = li * xi;
+    let (mut chi2, mut along, mut directions) = (0.0, Vector6::<f64>::zeros(), Vec::new());
+    for (k, share) in eigen.eigenvalues.iter().enumerate().filter(|(_, s)| **s >= HELD_SHARE) {
+        let v = eigen.eigenvectors.column(k).into_owned();
+        let a = v.dot(&y);
+        chi2 += a * a / share;
+        let d = l * v;
+        along += d * a;
+        directions.push(d.normalize());
+    }
+    if directions.is_empty() {
+        return Held::default();
+    }
+    // Back about the centroid: its displacement plus the turn times the
+    // points' RMS radius.
+    let (w, v) = (along.fixed_rows::<3>(0).into_owned(), along.fixed_rows::<3>(3).into_owned());
+    let moved_m = (v + w.cross(&from)).norm() + w.norm() * radius;
+    let named = held_beyond(chi2, directions.len(), moved_m, tolerance_m);
+    Held { chi2, directions: directions.len(), along: directions, moved_m, named }
 }
 
 /// A second registration from the starts: the schedule without its first
@@ -589,9 +677,11 @@ fn registered<S: AsRef<[Point3<f32>]> + Sync>(
     Ok(into_world(r, &world_from_first, config.mode == Mode::Graph))
 }
 
-/// `r` with its verification ([`verify_set`]) and the time it took; in
-/// graph mode with each scan's move from its start (`starts`) along what
-/// it reports blind ([`held_move`]); in
+/// `r` with its verification ([`verify_set`]) and the time it took; with
+/// each scan's move from its start (`starts`) along what only the start
+/// holds — in graph mode what it reports blind ([`held_move`]), in the
+/// others what its matches hold less than the start does
+/// ([`held_by_start`]); in
 /// the modes without a link graph also with the variance factor and the
 /// covariances of the verification's matches adjusted together, plus the
 /// poses' departure from them ([`crate::links::adjust_matches`]): a
@@ -660,6 +750,21 @@ fn verified<S: AsRef<[Point3<f32>]> + Sync>(
             .collect();
         let tolerance = finest_link(config).map_or(0.0, |(finest, _)| finest.voxel_m);
         r.departed = departed_scans(&r.departure_chi2, &r.departure_m, tolerance);
+        let steps = crate::links::steps_covariance(&r.world_from_scan, &config.link);
+        r.held = scans
+            .par_iter()
+            .enumerate()
+            .map(|(i, s)| {
+                let (Some(pose), Some(start)) = (r.world_from_scan.get(i), starts.get(i)) else {
+                    return Held::default();
+                };
+                if i == 0 {
+                    return Held::default();
+                }
+                let (centroid, radius) = crate::icp::degeneracy::centroid_and_lever_arm(s.as_ref());
+                held_by_start(pose, start, &r.covariance[i], &steps[i], &centroid, radius, tolerance)
+            })
+            .collect();
     }
     r.check_seconds = started.elapsed().as_secs_f64();
     Ok(r)
@@ -905,8 +1010,11 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     let mut best = after.map_or(before, |a| a.min(before));
     // (A kept restart has its disagreement and its verification.)
     let in_doubt = |named: &[usize], disagreement: f64| !named.is_empty() || disagreement >= at_starts;
-    // The scans the verification names of the result so far.
+    // The scans the verification names of the result so far, and whether
+    // only by their moves along what only their starts hold.
     let mut current_named = if kept { named_after.clone().unwrap_or_default() } else { named.clone() };
+    let mut only_held =
+        if kept { second.as_ref().is_some_and(SetResult::named_only_held) } else { first.named_only_held() };
     let mut doubted = in_doubt(&current_named, if kept { after.unwrap_or(before) } else { before })
         || !undecided.is_empty()
         || rescued;
@@ -936,13 +1044,23 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
                 // what their link cannot see, nothing named, and a further
                 // restart the scans agreed with 1.19× better was passed
                 // over by the 1.5×).
-                let rescue = (!current_named.is_empty() && a < best) || (rescued && RESCUE_RATIO * a < best);
+                // Named only by such moves, it gives way to one the
+                // verification names nothing of within [`RESTART_RATIO`]
+                // of the best agreement, better or not: along what the
+                // data hold no better than the starts their agreement is
+                // no evidence (a pipe's scans slid 74–289 mm along its
+                // axis agreed 1.05× better than where the finest stage
+                // alone left them, 2.4 mm from the truth).
+                let rescue = (!current_named.is_empty() && a < best)
+                    || (rescued && RESCUE_RATIO * a < best)
+                    || (only_held && a <= RESTART_RATIO * best);
                 let (f, named) = if impossible || rescue || best > RESTART_RATIO * a {
                     let (f, named) = verify(f)?;
                     (f, Some(named))
                 } else {
                     (f, None)
                 };
+                let f_only_held = f.named_only_held();
                 spent = (spent.0 + f.matches, spent.1 + f.check_seconds);
                 let by_ratio = keeps_restart(impossible, named.as_deref(), best, Some(a));
                 let by_rescue = !by_ratio && rescue && named.as_ref().is_some_and(Vec::is_empty);
@@ -956,6 +1074,7 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
                 best = best.min(a);
                 if report.kept {
                     current_named = report.untrusted.clone().unwrap_or_default();
+                    only_held = f_only_held;
                     rescued = by_rescue;
                     doubted = by_rescue || in_doubt(&current_named, a);
                     (kept, undecided, alone) = (false, Vec::new(), Some(f));
@@ -1043,6 +1162,7 @@ fn into_world(mut r: SetResult, world_from_first: &Isometry3<f64>, graph: bool) 
     r.joint_covariance = r.joint_covariance.map(|j| j.turned(&ad));
     r.departure.iter_mut().for_each(|d| *d = ad * *d);
     r.unobservable.iter_mut().flatten().for_each(|d| *d = (ad * *d).normalize());
+    r.held.iter_mut().flat_map(|h| &mut h.along).for_each(|d| *d = (ad * *d).normalize());
     if !graph {
         for l in &mut r.links {
             l.result = l.result.take().map(|m| in_world(m, world_from_first));
@@ -1454,5 +1574,74 @@ mod tests {
         assert_eq!(held_move(&start, &start, &[], &covariance, &Point3::origin(), 2.0, 0.01), Held::default());
         assert!((held_limit(2) + 2.0 * 0.001f64.ln()).abs() < 1e-3);
         assert!((1..6).all(|k| held_limit(k) < held_limit(k + 1)));
+    }
+
+    /// The modes without a link graph: the directions where the scan's
+    /// covariance keeps at least half the start's steps' variance — here
+    /// the roll about the scan's centroid (0.8 of it) and the shift along
+    /// x (0.8), every other direction 1e-4 of it — found by the two
+    /// covariances alone, 1.1 km from the frame's origin; the move judged
+    /// along them in the covariance: 0.03 rad and 0.04 m are
+    /// 0.03²/0.8e-4 + 0.04²/3.2e-4 = 16.25 in χ², beyond two directions'
+    /// 13.8. A turn of 0.2 rad about the centroid and 0.5 m across are
+    /// seen: nothing of them is judged.
+    #[test]
+    fn what_the_matches_hold_no_better_than_the_start_is_judged_in_its_own_sigma() {
+        let start = Isometry3::translation(1000.0, 500.0, 0.0);
+        let c = nalgebra::Vector3::new(1000.0, 500.0, 0.0);
+        let mut n = Matrix6::<f64>::identity();
+        n.fixed_view_mut::<3, 3>(3, 0).copy_from(&crate::se3::skew(&c));
+        let about_centroid = Vector6::new(1e-4, 1e-4, 1e-4, 4e-4, 4e-4, 4e-4);
+        let steps = n * Matrix6::from_diagonal(&about_centroid) * n.transpose();
+        let share = Vector6::new(0.8, 1e-4, 1e-4, 0.8, 1e-4, 1e-4);
+        let covariance = n * Matrix6::from_diagonal(&about_centroid.component_mul(&share)) * n.transpose();
+        let moved = |turn: nalgebra::Vector3<f64>, shift: nalgebra::Vector3<f64>| {
+            Isometry3::new(c + shift, turn) * Isometry3::translation(-c.x, -c.y, -c.z) * start
+        };
+        let judged = |roll: f64, along: f64, yaw: f64, across: f64| {
+            let pose = moved(nalgebra::Vector3::new(roll, 0.0, yaw), nalgebra::Vector3::new(along, across, 0.0));
+            held_by_start(&pose, &start, &covariance, &steps, &Point3::origin(), 2.0, 0.01)
+        };
+        let beyond = judged(0.03, 0.04, 0.0, 0.0);
+        assert!((beyond.chi2 - 16.25).abs() < 0.05, "{beyond:?}");
+        assert_eq!(beyond.directions, 2);
+        // Its points: 0.04 m + 0.03 rad × 2 m.
+        assert!((beyond.moved_m - 0.1).abs() < 1e-3, "{beyond:?}");
+        assert!(beyond.named, "{beyond:?}");
+        // The directions: the roll about the centroid and x.
+        let basis = orthonormal(&beyond.along);
+        let roll = (n * Vector6::new(1.0, 0.0, 0.0, 0.0, 0.0, 0.0)).normalize();
+        for d in [roll, Vector6::new(0.0, 0.0, 0.0, 1.0, 0.0, 0.0)] {
+            let within: f64 = basis.iter().map(|q| q.dot(&d).powi(2)).sum();
+            assert!((within - 1.0).abs() < 1e-9, "{d:?} not in {:?}", beyond.along);
+        }
+        // 0.02 rad and 0.03 m: 5 + 2.8 = 7.8, within 13.8.
+        let within = judged(0.02, 0.03, 0.0, 0.0);
+        assert!((within.chi2 - 7.8125).abs() < 0.05 && !within.named, "{within:?}");
+        let seen = judged(0.0, 0.0, 0.2, 0.5);
+        assert!(seen.chi2 < 1e-6 && seen.moved_m < 1e-6, "{seen:?}");
+        // Below the finest voxel nothing is named, however far in χ².
+        let small = held_by_start(
+            &moved(nalgebra::Vector3::zeros(), nalgebra::Vector3::new(0.005, 0.0, 0.0)),
+            &start,
+            &(covariance * 1e-4),
+            &(steps * 1e-4),
+            &Point3::origin(),
+            2.0,
+            0.01,
+        );
+        assert!(small.chi2 > 1e2 && !small.named, "{small:?}");
+        // Where the matches hold every direction better than the start,
+        // nothing is judged.
+        let held = held_by_start(
+            &moved(nalgebra::Vector3::zeros(), nalgebra::Vector3::new(1.0, 0.0, 0.0)),
+            &start,
+            &(steps * 0.4),
+            &steps,
+            &Point3::origin(),
+            2.0,
+            0.01,
+        );
+        assert_eq!(held, Held::default());
     }
 }

@@ -454,18 +454,25 @@ pub struct ScanReport {
     /// frame of the covariance): held where the start put them, their σ
     /// the start's.
     pub degenerate_directions: Vec<[f64; 6]>,
-    /// In graph mode, for a scan with `degenerate_directions`: how far it
-    /// moved from its start along them. Above the χ² distribution's
-    /// 99.9 % point for as many degrees of freedom as directions — with
-    /// `held_m` above the finest voxel — what its links do not see moved
-    /// further than the start's steps allow: the scan is in `untrusted`,
-    /// exit 1 (a pipe at the default `--degeneracy-ratio`,
-    /// docs/match.md). Null otherwise.
+    /// For a scan with `held_directions`: how far it moved from its start
+    /// along them, in χ² of its covariance there. Above the χ²
+    /// distribution's 99.9 % point for as many degrees of freedom as
+    /// directions — with `held_m` above the finest voxel — what only the
+    /// start holds moved further than the start's steps allow: the scan
+    /// is in `untrusted`, exit 1 (a pipe at the default
+    /// `--degeneracy-ratio`, docs/match.md). Null otherwise.
     pub held_chi2: Option<f64>,
     /// How far that move takes the scan's points, metres: its centroid's
     /// displacement plus the turn times their RMS radius. Null where
     /// `held_chi2` is.
     pub held_m: Option<f64>,
+    /// The directions only the start holds (unit vectors in the order and
+    /// frame of the covariance), along which `held_chi2` judges the move:
+    /// in graph mode `degenerate_directions`; in the other modes those
+    /// where the covariance keeps at least half the variance the start's
+    /// steps alone give — the matches hold them no better than the start
+    /// (docs/match.md). Empty for the first scan and where none.
+    pub held_directions: Vec<[f64; 6]>,
 }
 
 impl Document for MatchReport {

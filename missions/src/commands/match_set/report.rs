@@ -43,6 +43,7 @@ pub(super) fn report(
                     degenerate_directions: directions(&r.unobservable[i]),
                     held_chi2: held.map(|h| h.chi2),
                     held_m: held.map(|h| h.moved_m),
+                    held_directions: held.map_or_else(Vec::new, |h| directions(&h.along)),
                 }
             })
             .collect(),

@@ -180,7 +180,8 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
             report.restart.iter().filter(|r| !r.corroborated).flat_map(|r| &r.undecided).any(|u| u.scan == i);
         let departed =
             report.scans.get(i).map_or(Ok(false), |s| why_departed(out, &scans[i].name, &report.mode, s, tolerance))?;
-        let held = report.scans.get(i).map_or(Ok(false), |s| why_held(out, &scans[i].name, s, tolerance))?;
+        let held =
+            report.scans.get(i).map_or(Ok(false), |s| why_held(out, &scans[i].name, &report.mode, s, tolerance))?;
         why_untrusted(out, scans, &report.checks, &report.untrusted, i, undecided || departed || held, tolerance)?;
     }
     for l in report.links.iter().filter(|l| !l.accepted || l.cycle.is_some()) {
@@ -252,23 +253,34 @@ fn why_departed(out: &mut dyn Write, name: &str, mode: &str, s: &ScanReport, tol
     Ok(true)
 }
 
-/// Whether scan `s` (graph mode) moved from its start along the
-/// directions it reports blind beyond [`fusion::scanset::held_beyond`]'s
-/// limits (`tolerance`: the finest voxel), and if so the message that
-/// says so.
-fn why_held(out: &mut dyn Write, name: &str, s: &ScanReport, tolerance: f64) -> std::io::Result<bool> {
+/// Whether scan `s` moved from its start along the directions only the
+/// start holds beyond [`fusion::scanset::held_beyond`]'s limits
+/// (`tolerance`: the finest voxel), and if so the message that says so:
+/// in graph mode (`mode`) the directions its links do not see, in the
+/// others those its matches hold no better than the start.
+fn why_held(out: &mut dyn Write, name: &str, mode: &str, s: &ScanReport, tolerance: f64) -> std::io::Result<bool> {
     let (Some(chi2), Some(moved)) = (s.held_chi2, s.held_m) else { return Ok(false) };
-    let k = s.degenerate_directions.len();
+    let k = s.held_directions.len();
     if !fusion::scanset::held_beyond(chi2, k, moved, tolerance) {
         return Ok(false);
     }
     let limit = fusion::scanset::held_limit(k);
+    let (what, cause) = if mode == "graph" {
+        (
+            format!("its links do not see {k} direction(s), which only its start holds"),
+            "a coarse stage's pull that the finest cannot undo",
+        )
+    } else {
+        (
+            format!("its matches hold {k} direction(s) no better than its start does"),
+            "along what the scans barely see, the matches' pull is no evidence",
+        )
+    };
     writeln!(
         out,
-        "  not trusted: {name}: its links do not see {k} direction(s), which only its start holds, yet the stages \
-         moved it {moved:.3} m from its start along them ({chi2:.1} in χ² of its covariance there, above {limit:.1}): \
-         a coarse stage's pull that the finest cannot undo — a pipe or a tunnel needs --degeneracy-ratio 0.01; or give \
-         better starts"
+        "  not trusted: {name}: {what}, yet the stages moved it {moved:.3} m from its start along them ({chi2:.1} in \
+         χ² of its covariance there, above {limit:.1}): {cause} — a pipe or a tunnel needs --degeneracy-ratio 0.01; \
+         or give better starts"
     )?;
     Ok(true)
 }
@@ -417,6 +429,7 @@ mod tests {
             degenerate_directions: Vec::new(),
             held_chi2: None,
             held_m: None,
+            held_directions: Vec::new(),
         };
         let said = |s: &ScanReport| {
             let mut out = Vec::new();
@@ -452,10 +465,11 @@ mod tests {
             degenerate_directions: vec![[1.0, 0.0, 0.0, 0.0, 0.0, 0.0]; blind],
             held_chi2: (blind > 0).then_some(chi2),
             held_m: (blind > 0).then_some(moved),
+            held_directions: vec![[1.0, 0.0, 0.0, 0.0, 0.0, 0.0]; blind],
         };
         let said = |s: &ScanReport| {
             let mut out = Vec::new();
-            let held = why_held(&mut out, "b", s, 0.0085).expect("written");
+            let held = why_held(&mut out, "b", "graph", s, 0.0085).expect("written");
             (held, String::from_utf8(out).expect("UTF-8"))
         };
         let (held, text) = said(&scan(2, 18.8, 0.074));
@@ -471,6 +485,19 @@ mod tests {
         assert_eq!(said(&scan(2, 12.0, 0.074)), (false, String::new()));
         assert_eq!(said(&scan(2, 18.8, 0.005)), (false, String::new()));
         assert_eq!(said(&scan(0, 18.8, 0.074)), (false, String::new()));
+        // The other modes: the directions its matches hold no better than
+        // the start, whatever they report blind.
+        let mut pairwise = scan(2, 18.8, 0.074);
+        pairwise.degenerate_directions.clear();
+        let mut out = Vec::new();
+        assert!(why_held(&mut out, "b", "pairwise", &pairwise, 0.0085).expect("written"));
+        assert_eq!(
+            String::from_utf8(out).expect("UTF-8"),
+            "  not trusted: b: its matches hold 2 direction(s) no better than its start does, yet the stages moved it \
+             0.074 m from its start along them (18.8 in χ² of its covariance there, above 13.8): along what the scans \
+             barely see, the matches' pull is no evidence — a pipe or a tunnel needs --degeneracy-ratio 0.01; or give \
+             better starts\n"
+        );
     }
 
     #[test]
