@@ -119,6 +119,20 @@ pub const MAX_TURN_RAD: f64 = 5.0 * std::f64::consts::PI / 180.0;
 /// scans' weakest informative direction (see [`LinkConfig::default`]).
 pub const DEFAULT_DEGENERACY_RATIO: f64 = 2e-3;
 
+/// The blind-direction threshold a pipe or a tunnel needs (`match
+/// --degeneracy-ratio 0.01`, the sewer mission's `degeneracy_ratio`):
+/// their axis, seen weakly through a dent or a brick, is held by the
+/// start there (docs/match.md, Known limits).
+pub const PIPE_DEGENERACY_RATIO: f64 = 1e-2;
+
+/// The line test's ratio with a threshold of one's own
+/// ([`crate::icp::IcpConfig::line_ratio`]: `match --line-ratio` with
+/// `--degeneracy-ratio`, a mission's `[fusion] line_ratio` with its
+/// `degeneracy_ratio`): a scanner that takes its scans in slices far
+/// apart (fewer `slices`) made a pipe's axis look seen through its
+/// lines' normals (docs/fusion.md, the sewer at 60 slices).
+pub const DEFAULT_LINE_RATIO: f64 = 0.1;
+
 impl Default for LinkConfig {
     fn default() -> Self {
         let multiview = MultiviewConfig::default();
@@ -500,8 +514,9 @@ fn identifiable(links: &[Link], used: &[usize], k: usize) -> bool {
     joined(None) && used.iter().filter(|&&m| m != k).all(|&m| joined(Some(m)))
 }
 
-/// Each scan's covariance from [`frame_and_steps`]'s steps alone (world
-/// frame, ξ = (ω, v), left; zero for scan 0, the frame): what the start
+/// Each scan's covariance from the start's steps alone (those
+/// [`adjust_matches`] holds the poses with; world frame, ξ = (ω, v),
+/// left; zero for scan 0, the frame): what the start
 /// says of scan i is the chain of steps 1..=i, each step's error in the
 /// frame of the scan before it — Σ Ad(Tⱼ₋₁)·S⁻¹·Ad(Tⱼ₋₁)ᵀ at `poses`.
 /// Beside an adjustment's covariance it tells which directions the

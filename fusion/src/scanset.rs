@@ -487,8 +487,11 @@ pub struct Restart {
     /// the street, the scans agreeing 1.11× worse than at the starts (and,
     /// where the parts' scanner positions are known, named by free space),
     /// and the schedule without its first two stages landed it within
-    /// 1 mm, the scans agreeing 2.0× better. Empty when none ran, and
-    /// after a schedule that failed ([`Trigger::Failed`]: the restart
+    /// 1 mm, the scans agreeing 2.0× better. Last, when the result is
+    /// still named only by moves along what only the starts hold
+    /// ([`SetResult::named_only_held`]), the whole schedule with a pipe's
+    /// threshold ([`Further::degeneracy_ratio`]). Empty when none ran,
+    /// and after a schedule that failed ([`Trigger::Failed`]: the restart
     /// alone).
     pub further: Vec<Further>,
 }
@@ -508,6 +511,13 @@ pub struct Further {
     /// The scans the verification names at its poses; `None` when it
     /// failed or was not verified (verified only where it may be kept).
     pub untrusted: Option<Vec<usize>>,
+    /// The blind-direction threshold it ran with where it is not the
+    /// set's: the whole schedule from the starts with a pipe's
+    /// ([`crate::links::PIPE_DEGENERACY_RATIO`], the line test on), run
+    /// last when the result is still named only by moves along what only
+    /// the starts hold ([`SetResult::named_only_held`]). `None` for the
+    /// shorter schedules.
+    pub degeneracy_ratio: Option<f64>,
 }
 
 /// What sets a [`Restart`] off.
@@ -854,6 +864,23 @@ fn without_first<S: AsRef<[Point3<f32>]> + Sync>(
     register_in_first_frame(scans, starts, &shorter, progress)
 }
 
+/// `config` with a pipe's blind-direction threshold
+/// ([`crate::links::PIPE_DEGENERACY_RATIO`]) and, point-to-plane, the
+/// line test ([`crate::links::DEFAULT_LINE_RATIO`] unless one is set);
+/// `None` where its threshold is that already or above, or off (the
+/// user's choice).
+fn pipe_config(config: &SetConfig) -> Option<SetConfig> {
+    let icp = &config.link.multiview.icp;
+    icp.degeneracy_ratio.filter(|&r| r < crate::links::PIPE_DEGENERACY_RATIO)?;
+    let mut pipe = config.clone();
+    let held = &mut pipe.link.multiview.icp;
+    held.degeneracy_ratio = Some(crate::links::PIPE_DEGENERACY_RATIO);
+    if held.method == crate::icp::Method::PointToPlane {
+        held.line_ratio = held.line_ratio.or(Some(crate::links::DEFAULT_LINE_RATIO));
+    }
+    Some(pipe)
+}
+
 /// The finest stage and the link settings at it.
 fn finest_link(config: &SetConfig) -> Option<(Stage, LinkConfig)> {
     let finest = *config.stages.last()?;
@@ -1070,6 +1097,7 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
                     error: None,
                     kept: by_ratio || by_rescue,
                     untrusted: named,
+                    degeneracy_ratio: None,
                 };
                 best = best.min(a);
                 if report.kept {
@@ -1090,8 +1118,51 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
                     error: Some(e.to_string()),
                     kept: false,
                     untrusted: None,
+                    degeneracy_ratio: None,
                 }
             }
+        };
+        further.push(report);
+    }
+    // Still named only by moves along what only the starts hold — a
+    // pipe at the default threshold, whose finest stage alone still slides
+    // some scans in the modes without a link graph —: the whole schedule
+    // once more from the starts with a pipe's threshold, where the matches
+    // find those directions blind and the starts hold them (what the
+    // message names as the remedy). Kept where the verification names
+    // nothing of it and the scans agree with it within [`RESTART_RATIO`]
+    // of the best (along what the data do not hold, their agreement is no
+    // evidence).
+    if let Some(pipe) = pipe_config(config).filter(|_| only_held) {
+        let ratio = pipe.link.multiview.icp.degeneracy_ratio;
+        let report = match without_first(scans, starts, &pipe, 0, progress).and_then(|f| {
+            let a = crate::agreement::disagreement(&prepared, &f.world_from_scan, tau);
+            Ok((verified(scans, starts, f, &pipe)?, a))
+        }) {
+            Ok((f, a)) => {
+                let named = f.named();
+                spent = (spent.0 + f.matches, spent.1 + f.check_seconds);
+                let report = Further {
+                    stages: f.stages.clone(),
+                    disagreement_m2: Some(a),
+                    error: None,
+                    kept: named.is_empty() && a <= RESTART_RATIO * best,
+                    untrusted: Some(named),
+                    degeneracy_ratio: ratio,
+                };
+                if report.kept {
+                    (kept, undecided, alone) = (false, Vec::new(), Some(f));
+                }
+                report
+            }
+            Err(e) => Further {
+                stages: Vec::new(),
+                disagreement_m2: None,
+                error: Some(e.to_string()),
+                kept: false,
+                untrusted: None,
+                degeneracy_ratio: ratio,
+            },
         };
         further.push(report);
     }
@@ -1574,6 +1645,27 @@ mod tests {
         assert_eq!(held_move(&start, &start, &[], &covariance, &Point3::origin(), 2.0, 0.01), Held::default());
         assert!((held_limit(2) + 2.0 * 0.001f64.ln()).abs() < 1e-3);
         assert!((1..6).all(|k| held_limit(k) < held_limit(k + 1)));
+    }
+
+    /// The pipe's threshold for the last further restart: 0.01 with the
+    /// line test (point-to-plane), a line ratio of the user's own kept;
+    /// none where the user's threshold is that or above, or off.
+    #[test]
+    fn the_pipes_threshold_is_tried_only_below_it() {
+        let with = |ratio: Option<f64>, line: Option<f64>, method: crate::icp::Method| {
+            let mut c = SetConfig::default();
+            c.link.multiview.icp.degeneracy_ratio = ratio;
+            c.link.multiview.icp.line_ratio = line;
+            c.link.multiview.icp.method = method;
+            pipe_config(&c).map(|p| (p.link.multiview.icp.degeneracy_ratio, p.link.multiview.icp.line_ratio))
+        };
+        let plane = crate::icp::Method::PointToPlane;
+        assert_eq!(with(Some(2e-3), None, plane), Some((Some(0.01), Some(0.1))));
+        assert_eq!(with(Some(2e-3), Some(0.05), plane), Some((Some(0.01), Some(0.05))));
+        assert_eq!(with(Some(2e-3), None, crate::icp::Method::PointToPoint), Some((Some(0.01), None)));
+        assert_eq!(with(Some(0.01), None, plane), None);
+        assert_eq!(with(Some(0.05), Some(0.1), plane), None);
+        assert_eq!(with(None, None, plane), None);
     }
 
     /// The modes without a link graph: the directions where the scan's

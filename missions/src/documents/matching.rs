@@ -311,7 +311,10 @@ pub struct RestartReport {
     /// `starts_disagreement_m2` — and the schedule has more than two
     /// stages: a restart's second stage can drag scans as the schedule's
     /// first did. One kept replaces every registration before it; they go
-    /// on while it is not to be trusted either. Empty when none ran.
+    /// on while it is not to be trusted either. Last, when the result is
+    /// still named only by moves along what only the starts hold, the
+    /// whole schedule once more with a pipe's threshold (its
+    /// `degeneracy_ratio`). Empty when none ran.
     pub further: Vec<FurtherReport>,
 }
 
@@ -332,11 +335,20 @@ pub struct FurtherReport {
     /// verification names nothing of its, or the verification named scans
     /// of the result before it, names none of its, and the scans disagree
     /// less there at all — or 1.05 times less, where the result before it
-    /// was itself such a rescue.
+    /// was itself such a rescue — or the result before it was named only
+    /// by moves along what only the starts hold (`scans[].held_chi2`),
+    /// the verification names none of its scans, and the scans disagree
+    /// there within 1.5 times the best registration before it.
     pub kept: bool,
     /// The scans the verification names at its poses; null when it failed
     /// or was not verified (it is where it may be kept).
     pub untrusted: Option<Vec<usize>>,
+    /// The blind-direction threshold it ran with where not the set's:
+    /// 0.01, a pipe's, with the line test — the whole schedule from the
+    /// starts, run last when the result is still named only by moves
+    /// along what only the starts hold (docs/match.md). Null for the
+    /// shorter schedules.
+    pub degeneracy_ratio: Option<f64>,
 }
 
 /// A scan two registrations of the set place apart ([`RestartReport::undecided`]).

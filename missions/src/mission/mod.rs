@@ -244,11 +244,12 @@ impl FusionMode {
 /// Mode names `[fusion] mode` accepts.
 pub const FUSION_MODES: [&str; 3] = ["direct", "icp", "cps-icp"];
 
-/// `[fusion] line_ratio` when `degeneracy_ratio` is set and it is not: the
-/// rig's scanner takes its scans in slices, and where they lie far apart
-/// (fewer `slices`) a pipe's axis looked seen through their lines'
-/// normals (docs/fusion.md, the sewer at 60 slices).
-pub const DEFAULT_LINE_RATIO: f64 = 0.1;
+/// `[fusion] line_ratio` when `degeneracy_ratio` is set and it is not
+/// ([`fusion::links::DEFAULT_LINE_RATIO`]): the rig's scanner takes its
+/// scans in slices, and where they lie far apart (fewer `slices`) a
+/// pipe's axis looked seen through their lines' normals (docs/fusion.md,
+/// the sewer at 60 slices).
+pub const DEFAULT_LINE_RATIO: f64 = fusion::links::DEFAULT_LINE_RATIO;
 
 /// Fusion settings (`[fusion]`).
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -2267,13 +2267,13 @@ fn a_links_blind_directions_are_in_the_worlds_axes_in_every_mode() {
 /// which graph mode's links report blind and pairwise mode's matches hold
 /// no better than the start (they report nothing blind), yet moved along
 /// them 15–51 in χ² of the scans' own covariance there. Each scan is
-/// named for it; in graph mode the further restart from the starts with
-/// the finest stage alone names nothing, and is kept though the scans
-/// agree 1.05× better at the slid poses — so graph mode lands, exit 0 —;
-/// pairwise mode's finest stage alone still slides some scans, so it
-/// names them, exit 1, with what a pipe needs. With it
-/// (`--degeneracy-ratio 0.01`) every scan lands within 3 mm of the
-/// simulator's truth, exit 0.
+/// named for it, and a result named only so gives way to one that names
+/// nothing within 1.5× of the best agreement: in graph mode the further
+/// restart from the starts with the finest stage alone (kept though the
+/// scans agree 1.05× better at the slid poses); in pairwise mode, whose
+/// finest stage alone still slides scans, the whole schedule again with a
+/// pipe's threshold (0.01) — both exit 0. Given that threshold, every
+/// scan lands within 3 mm of the simulator's truth.
 #[test]
 fn a_pipe_slid_along_what_only_its_start_holds_is_named() {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -2326,33 +2326,39 @@ fn a_pipe_slid_along_what_only_its_start_holds_is_named() {
     }
 
     // Pairwise mode: its matches report nothing blind, yet hold the axis
-    // and the roll no better than the start; named, with what a pipe needs.
+    // and the roll no better than the start; the schedule named every
+    // scan so, its finest stage alone some, and the whole schedule with a
+    // pipe's threshold none: kept.
     let pairwise = [scans.clone(), "--mode".into(), "pairwise".into()];
     let (r, v) = run(&pairwise, &dir.path().join("pairwise"));
     let v = v.unwrap_or_else(|| panic!("{}", r.stderr));
-    assert_eq!(r.code, 1, "{}", r.stderr);
-    assert_eq!(v["restart"]["schedule_untrusted"], serde_json::json!(all), "{}", v["restart"]);
-    for s in &v["scans"].as_array().expect("scans")[1..] {
-        let held = s["held_directions"].as_array().expect("directions");
-        let chi2 = s["held_chi2"].as_f64().expect("a held scan's move");
-        assert!(s["degenerate_directions"].as_array().expect("directions").is_empty(), "{s}");
-        // The axis within their span (with the roll).
-        let directions: Vec<nalgebra::Vector6<f64>> =
-            held.iter().map(|d| nalgebra::Vector6::from_fn(|i, _| d[i].as_f64().expect("number"))).collect();
-        let basis = fusion::icp::degeneracy::orthonormal(&directions);
-        assert_eq!(basis.len(), 2, "{s}");
-        assert!(basis.iter().map(|q| q[3].powi(2)).sum::<f64>().sqrt() > 0.95, "{s}");
-        assert!(basis.iter().map(|q| q[0].powi(2)).sum::<f64>().sqrt() > 0.95, "{s}");
-        // (Measured 16.8–50.7, 75–334 mm.)
-        assert!(chi2 > fusion::scanset::held_limit(2), "{s}");
-        assert!(s["held_m"].as_f64().expect("metres") > 0.05, "{s}");
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let restart = &v["restart"];
+    assert_eq!(restart["schedule_untrusted"], serde_json::json!(all), "{restart}");
+    let further = restart["further"].as_array().expect("further restarts");
+    let (shorter, pipe) = further.split_at(further.len() - 1);
+    assert!(shorter.iter().all(|f| f["kept"] == false && f["degeneracy_ratio"].is_null()), "{restart}");
+    assert!(shorter.last().is_some_and(|f| f["untrusted"].as_array().is_some_and(|u| !u.is_empty())), "{restart}");
+    assert_eq!(pipe[0]["degeneracy_ratio"], 0.01, "{restart}");
+    assert_eq!((pipe[0]["kept"].clone(), pipe[0]["untrusted"].clone()), (Value::Bool(true), serde_json::json!([])));
+    assert_eq!(pipe[0]["stages"].as_array().expect("stages").len(), 4, "the whole schedule: {restart}");
+    for (k, (d, s)) in off(&v).iter().zip(v["scans"].as_array().expect("scans")).enumerate() {
+        assert!(d.norm() < 0.005, "scan {k}: {d:?} m from the truth");
+        // The axis and the roll reported blind, the move along them nil.
+        if k > 0 {
+            let held = s["held_directions"].as_array().expect("directions");
+            let directions: Vec<nalgebra::Vector6<f64>> =
+                held.iter().map(|d| nalgebra::Vector6::from_fn(|i, _| d[i].as_f64().expect("number"))).collect();
+            let basis = fusion::icp::degeneracy::orthonormal(&directions);
+            assert!(basis.iter().map(|q| q[3].powi(2)).sum::<f64>().sqrt() > 0.95, "{s}");
+            assert!(basis.iter().map(|q| q[0].powi(2)).sum::<f64>().sqrt() > 0.95, "{s}");
+            assert!(s["held_chi2"].as_f64().is_some_and(|c| c < 1.0), "{s}");
+        }
     }
-    let untrusted = v["untrusted"].as_array().expect("untrusted");
-    assert!(!untrusted.is_empty(), "{}", v["untrusted"]);
     let said = run_text(&pairwise, &dir.path().join("said"));
-    assert_eq!(said.code, 1, "{}", said.stderr);
+    assert_eq!(said.code, 0, "{}", said.stderr);
     let text = format!("{}{}", said.stdout, said.stderr);
-    assert!(text.contains("no better than its start does") && text.contains("--degeneracy-ratio 0.01"), "{text}");
+    assert!(text.contains("again from the starts with a pipe's blind-direction threshold, 0.01"), "{text}");
 
     // With the threshold a pipe needs: the axis and the roll held, nothing named.
     let (r, v) = run(&[scans, "--degeneracy-ratio".into(), "0.01".into()], &dir.path().join("pipe"));

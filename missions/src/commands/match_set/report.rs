@@ -124,6 +124,7 @@ pub(super) fn report(
                     error: f.error.clone(),
                     kept: f.kept,
                     untrusted: f.untrusted.clone(),
+                    degeneracy_ratio: f.degeneracy_ratio,
                 })
                 .collect(),
         }),

@@ -125,12 +125,22 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
                         _ if f.kept => "its poses kept".to_string(),
                         Some(named) if !named.is_empty() =>
                             format!("not kept (the verification names {})", names(named)),
+                        _ if f.degeneracy_ratio.is_some() =>
+                            "not kept (the scans disagree there beyond 1.5× the best before)".to_string(),
                         _ => "not kept (not 1.5× better than the best before)".to_string(),
                     }
                 ),
                 (None, e) => format!("it failed ({}): not kept", e.as_deref().unwrap_or("")),
             };
-            writeln!(out, "  again without the first {} stages ({}), {outcome}", k + 2, stages(&f.stages))?;
+            match f.degeneracy_ratio {
+                Some(ratio) => writeln!(
+                    out,
+                    "  again from the starts with a pipe's blind-direction threshold, {ratio} ({}): named only by \
+                     moves along what only the starts hold, {outcome}",
+                    stages(&f.stages)
+                )?,
+                None => writeln!(out, "  again without the first {} stages ({}), {outcome}", k + 2, stages(&f.stages))?,
+            }
         }
     }
     for i in unlinked(report) {
