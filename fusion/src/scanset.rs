@@ -1604,21 +1604,14 @@ mod tests {
     /// −2 ln 0.001, exactly).
     #[test]
     fn a_move_along_what_only_the_start_holds_is_judged_in_its_own_sigma() {
-        let start = Isometry3::translation(1000.0, 500.0, 0.0);
-        let c = nalgebra::Vector3::new(1000.0, 500.0, 0.0);
-        // About the centroid (ω, the centroid's v) → about the origin: v − ω × c.
-        let mut n = Matrix6::<f64>::identity();
-        n.fixed_view_mut::<3, 3>(3, 0).copy_from(&crate::se3::skew(&c));
+        let (start, n) = far_from_the_origin();
+        let moved = |turn, shift| turned(&start, turn, shift);
         // Blind: the roll about the centroid and the shift along x; σ 0.01
         // rad and 0.02 m there, 1e-4 in every seen direction.
         let blind = [n * Vector6::new(1.0, 0.0, 0.0, 0.0, 0.0, 0.0), Vector6::new(0.0, 0.0, 0.0, 1.0, 0.0, 0.0)]
             .map(|d| d.normalize());
         let about_centroid = Matrix6::from_diagonal(&Vector6::new(1e-4, 1e-8, 1e-8, 4e-4, 1e-8, 1e-8));
         let covariance = n * about_centroid * n.transpose();
-        // Turned about the centroid, then shifted.
-        let moved = |turn: nalgebra::Vector3<f64>, shift: nalgebra::Vector3<f64>| {
-            Isometry3::new(c + shift, turn) * Isometry3::translation(-c.x, -c.y, -c.z) * start
-        };
         let judged = |roll: f64, along: f64, yaw: f64, across: f64| {
             let pose = moved(nalgebra::Vector3::new(roll, 0.0, yaw), nalgebra::Vector3::new(along, across, 0.0));
             held_move(&pose, &start, &blind, &covariance, &Point3::origin(), 2.0, 0.01)
@@ -1645,6 +1638,22 @@ mod tests {
         assert_eq!(held_move(&start, &start, &[], &covariance, &Point3::origin(), 2.0, 0.01), Held::default());
         assert!((held_limit(2) + 2.0 * 0.001f64.ln()).abs() < 1e-3);
         assert!((1..6).all(|k| held_limit(k) < held_limit(k + 1)));
+    }
+
+    /// A scan at its start 1.1 km from the frame's origin, its points'
+    /// centroid c there, and `n`, which takes ξ about the centroid (ω, the
+    /// centroid's v) to ξ about the origin (v − ω × c).
+    fn far_from_the_origin() -> (Isometry3<f64>, Matrix6<f64>) {
+        let start = Isometry3::translation(1000.0, 500.0, 0.0);
+        let mut n = Matrix6::<f64>::identity();
+        n.fixed_view_mut::<3, 3>(3, 0).copy_from(&crate::se3::skew(&start.translation.vector));
+        (start, n)
+    }
+
+    /// `start` turned about its centroid (its origin here), then shifted.
+    fn turned(start: &Isometry3<f64>, turn: nalgebra::Vector3<f64>, shift: nalgebra::Vector3<f64>) -> Isometry3<f64> {
+        let c = start.translation.vector;
+        Isometry3::new(c + shift, turn) * Isometry3::translation(-c.x, -c.y, -c.z) * start
     }
 
     /// The pipe's threshold for the last further restart: 0.01 with the
@@ -1679,17 +1688,12 @@ mod tests {
     /// seen: nothing of them is judged.
     #[test]
     fn what_the_matches_hold_no_better_than_the_start_is_judged_in_its_own_sigma() {
-        let start = Isometry3::translation(1000.0, 500.0, 0.0);
-        let c = nalgebra::Vector3::new(1000.0, 500.0, 0.0);
-        let mut n = Matrix6::<f64>::identity();
-        n.fixed_view_mut::<3, 3>(3, 0).copy_from(&crate::se3::skew(&c));
+        let (start, n) = far_from_the_origin();
+        let moved = |turn, shift| turned(&start, turn, shift);
         let about_centroid = Vector6::new(1e-4, 1e-4, 1e-4, 4e-4, 4e-4, 4e-4);
         let steps = n * Matrix6::from_diagonal(&about_centroid) * n.transpose();
         let share = Vector6::new(0.8, 1e-4, 1e-4, 0.8, 1e-4, 1e-4);
         let covariance = n * Matrix6::from_diagonal(&about_centroid.component_mul(&share)) * n.transpose();
-        let moved = |turn: nalgebra::Vector3<f64>, shift: nalgebra::Vector3<f64>| {
-            Isometry3::new(c + shift, turn) * Isometry3::translation(-c.x, -c.y, -c.z) * start
-        };
         let judged = |roll: f64, along: f64, yaw: f64, across: f64| {
             let pose = moved(nalgebra::Vector3::new(roll, 0.0, yaw), nalgebra::Vector3::new(along, across, 0.0));
             held_by_start(&pose, &start, &covariance, &steps, &Point3::origin(), 2.0, 0.01)
