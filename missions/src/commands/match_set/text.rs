@@ -185,13 +185,17 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
         }
     }
     let tolerance = report.stages.last().map_or(0.0, |s| s.voxel_m);
+    // Whether the pipe's threshold ran already (the last further restart).
+    let pipe_tried = report.restart.iter().flat_map(|r| &r.further).any(|f| f.degeneracy_ratio.is_some());
     for &i in &report.untrusted {
         let undecided =
             report.restart.iter().filter(|r| !r.corroborated).flat_map(|r| &r.undecided).any(|u| u.scan == i);
         let departed =
             report.scans.get(i).map_or(Ok(false), |s| why_departed(out, &scans[i].name, &report.mode, s, tolerance))?;
-        let held =
-            report.scans.get(i).map_or(Ok(false), |s| why_held(out, &scans[i].name, &report.mode, s, tolerance))?;
+        let held = report
+            .scans
+            .get(i)
+            .map_or(Ok(false), |s| why_held(out, &scans[i].name, &report.mode, s, tolerance, pipe_tried))?;
         why_untrusted(out, scans, &report.checks, &report.untrusted, i, undecided || departed || held, tolerance)?;
     }
     for l in report.links.iter().filter(|l| !l.accepted || l.cycle.is_some()) {
@@ -267,8 +271,17 @@ fn why_departed(out: &mut dyn Write, name: &str, mode: &str, s: &ScanReport, tol
 /// start holds beyond [`fusion::scanset::held_beyond`]'s limits
 /// (`tolerance`: the finest voxel), and if so the message that says so:
 /// in graph mode (`mode`) the directions its links do not see, in the
-/// others those its matches hold no better than the start.
-fn why_held(out: &mut dyn Write, name: &str, mode: &str, s: &ScanReport, tolerance: f64) -> std::io::Result<bool> {
+/// others those its matches hold no better than the start; the remedy a
+/// pipe's threshold unless it was tried already (`pipe_tried`: the last
+/// further restart).
+fn why_held(
+    out: &mut dyn Write,
+    name: &str,
+    mode: &str,
+    s: &ScanReport,
+    tolerance: f64,
+    pipe_tried: bool,
+) -> std::io::Result<bool> {
     let (Some(chi2), Some(moved)) = (s.held_chi2, s.held_m) else { return Ok(false) };
     let k = s.held_directions.len();
     if !fusion::scanset::held_beyond(chi2, k, moved, tolerance) {
@@ -286,11 +299,15 @@ fn why_held(out: &mut dyn Write, name: &str, mode: &str, s: &ScanReport, toleran
             "along what the scans barely see, the matches' pull is no evidence",
         )
     };
+    let remedy = if pipe_tried {
+        "the pipe's threshold, tried from the starts (restart), named scans too: give better starts"
+    } else {
+        "a pipe or a tunnel needs --degeneracy-ratio 0.01; or give better starts"
+    };
     writeln!(
         out,
         "  not trusted: {name}: {what}, yet the stages moved it {moved:.3} m from its start along them ({chi2:.1} in \
-         χ² of its covariance there, above {limit:.1}): {cause} — a pipe or a tunnel needs --degeneracy-ratio 0.01; \
-         or give better starts"
+         χ² of its covariance there, above {limit:.1}): {cause} — {remedy}"
     )?;
     Ok(true)
 }
@@ -479,7 +496,7 @@ mod tests {
         };
         let said = |s: &ScanReport| {
             let mut out = Vec::new();
-            let held = why_held(&mut out, "b", "graph", s, 0.0085).expect("written");
+            let held = why_held(&mut out, "b", "graph", s, 0.0085, false).expect("written");
             (held, String::from_utf8(out).expect("UTF-8"))
         };
         let (held, text) = said(&scan(2, 18.8, 0.074));
@@ -500,13 +517,24 @@ mod tests {
         let mut pairwise = scan(2, 18.8, 0.074);
         pairwise.degenerate_directions.clear();
         let mut out = Vec::new();
-        assert!(why_held(&mut out, "b", "pairwise", &pairwise, 0.0085).expect("written"));
+        assert!(why_held(&mut out, "b", "pairwise", &pairwise, 0.0085, false).expect("written"));
         assert_eq!(
             String::from_utf8(out).expect("UTF-8"),
             "  not trusted: b: its matches hold 2 direction(s) no better than its start does, yet the stages moved it \
              0.074 m from its start along them (18.8 in χ² of its covariance there, above 13.8): along what the scans \
              barely see, the matches' pull is no evidence — a pipe or a tunnel needs --degeneracy-ratio 0.01; or give \
              better starts\n"
+        );
+        // Where the pipe's threshold ran already, it is not the remedy.
+        let mut out = Vec::new();
+        assert!(why_held(&mut out, "b", "pairwise", &pairwise, 0.0085, true).expect("written"));
+        let text = String::from_utf8(out).expect("UTF-8");
+        assert!(
+            text.ends_with(
+                "no evidence — the pipe's threshold, tried from the starts (restart), named scans too: give better \
+                 starts\n"
+            ),
+            "{text}"
         );
     }
 
