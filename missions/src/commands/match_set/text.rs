@@ -300,9 +300,12 @@ fn why_held(
         )
     };
     let remedy = if pipe_tried {
-        "the pipe's threshold, tried from the starts (restart), named scans too: give better starts"
+        "the pipe's threshold, tried from the starts (restart), named scans too: give better starts".to_string()
     } else {
-        "a pipe or a tunnel needs --degeneracy-ratio 0.01; or give better starts"
+        format!(
+            "a pipe or a tunnel needs --degeneracy-ratio {}; or give better starts",
+            fusion::links::PIPE_DEGENERACY_RATIO
+        )
     };
     writeln!(
         out,
