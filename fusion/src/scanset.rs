@@ -461,8 +461,9 @@ pub struct Restart {
     /// 1.6 mm RMS), and was named before with exit 1.
     pub corroborated: bool,
     /// Further restarts from the starts, each without one more of the
-    /// schedule's stages (the first without its first two, …, the last
-    /// with the finest stage alone), run in turn while the result is not
+    /// schedule's stages (the first without its first two — without its
+    /// first after the pipe's restart, [`degeneracy_ratio`](Self::degeneracy_ratio)
+    /// —, …, the last with the finest stage alone), run in turn while the result is not
     /// to be trusted — the verification names some of its scans, the
     /// restart left some [`undecided`](Self::undecided), or the scans
     /// agree no better there than at their starts
@@ -495,6 +496,23 @@ pub struct Restart {
     /// and after a schedule that failed ([`Trigger::Failed`]: the restart
     /// alone).
     pub further: Vec<Further>,
+    /// The blind-direction threshold the restart ran with where it is not
+    /// the set's: the whole schedule from the starts with a pipe's
+    /// ([`crate::links::PIPE_DEGENERACY_RATIO`], the line test on), in
+    /// place of the schedule without its first stage, when the schedule's
+    /// result is named only by moves along what only the starts hold
+    /// ([`SetResult::named_only_held`]) and a simultaneous queue of it was
+    /// abandoned at its cap: the queue chased a slide the data do not
+    /// hold, and each shorter schedule would chase it again from the same
+    /// starts (the sewer example's, simultaneous mode: the restart and
+    /// both shorter schedules abandoned at the cap and named, 150 s of
+    /// 190; the pipe's threshold settled in 2.4 s, within 3 mm of the
+    /// truth). Kept where the verification names nothing of it and the
+    /// scans agree with it within [`RESTART_RATIO`] of the schedule's
+    /// result; else the [`further`](Self::further) restarts begin with
+    /// the schedule without its first stage. `None` for the usual
+    /// restart.
+    pub degeneracy_ratio: Option<f64>,
 }
 
 /// A further restart from the starts ([`Restart::further`]).
@@ -848,6 +866,7 @@ fn restart_after_failure<S: AsRef<[Point3<f32>]> + Sync>(
         undecided: Vec::new(),
         corroborated: false,
         further: Vec::new(),
+        degeneracy_ratio: None,
     });
     Ok(r)
 }
@@ -956,25 +975,49 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
         let named = r.named();
         Ok((r, named))
     };
+    // Named only by moves along what only the starts hold, with a
+    // simultaneous queue abandoned at its cap on the way: the queue chased
+    // a slide the data do not hold (a pipe's scans along its axis), and
+    // every shorter schedule runs the same queue from the same starts
+    // along the same slide (the sewer example's: the restart and both
+    // shorter schedules abandoned at the cap and named, 150 s of its 190;
+    // the pipe's threshold settled in 2.4 s within 3 mm of the truth). The
+    // restart is then the whole schedule with a pipe's threshold — what
+    // the pipe's fallback runs last otherwise ([`Restart::degeneracy_ratio`]).
+    let pipe_first = pipe_config(config).filter(|_| first.named_only_held() && first.stages.iter().any(|s| !s.settled));
+    let restart_config = pipe_first.as_ref().unwrap_or(config);
     // The restart is verified where its verdict decides (an impossible
-    // first result, a named one) or where it is kept: a verification of a
-    // large set costs as much as its last stage.
-    let (mut second, error) = match without_first(scans, starts, config, 1, progress) {
-        Ok(r) => (Some(r), None),
-        Err(e) => (None, Some(e.to_string())),
-    };
+    // first result, a named one, the pipe's) or where it is kept: a
+    // verification of a large set costs as much as its last stage.
+    let (mut second, error) =
+        match without_first(scans, starts, restart_config, usize::from(pipe_first.is_none()), progress) {
+            Ok(r) => (Some(r), None),
+            Err(e) => (None, Some(e.to_string())),
+        };
     let mut named_after = None;
     if impossible {
         (second, named_after) = second.take().map(verify).transpose()?.unzip();
     }
     let after = second.as_ref().map(|r| crate::agreement::disagreement(&prepared, &r.world_from_scan, tau));
+    if let Some(pipe) = &pipe_first {
+        let r = second.take().map(|r| verified(scans, starts, r, pipe)).transpose()?;
+        named_after = r.as_ref().map(SetResult::named);
+        second = r;
+    }
     // An impossible result gives way to one the verification names
     // nothing of (the disagreement may prefer the impossible: a slide
     // lays floors and walls on each other); else the disagreement decides.
     // (Only free space, not a doubt: the room's wedges trapped 90° off
     // were named by their motion, and a restart that landed them in
     // another wrong fit, 41° off, was named by nothing.)
-    let mut kept = keeps_restart(impossible, named_after.as_deref(), before, after);
+    let mut kept = match &pipe_first {
+        // (Along what the data do not hold, their agreement is no
+        // evidence: within [`RESTART_RATIO`], better or not.)
+        Some(_) => {
+            named_after.as_ref().is_some_and(Vec::is_empty) && after.is_some_and(|a| a <= RESTART_RATIO * before)
+        }
+        None => keeps_restart(impossible, named_after.as_deref(), before, after),
+    };
     // Two registrations that place a scan apart, the verification naming
     // nothing of either and neither clearly the one the scans agree with:
     // the data cannot tell which is right (small_gicp's street cut into
@@ -986,10 +1029,11 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     // scans the data do tell (the 3DTK set from `--init global`: a restart
     // 1.02× better put scan002 in the others' free space), and where it
     // names the schedule's the exit is 1 already.
-    let mut restart_verified = impossible;
+    let mut restart_verified = impossible || pipe_first.is_some();
     let mut undecided = Vec::new();
     if let (Some(r), Some(a)) = (&second, after)
         && !impossible
+        && pipe_first.is_none()
         && !kept
         && named.is_empty()
         && before <= RESTART_RATIO * a
@@ -1018,6 +1062,7 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     let mut rescued = false;
     if let (Some(a), false, false) = (after, kept, named.is_empty())
         && a < before
+        && pipe_first.is_none()
     {
         if !restart_verified {
             (second, named_after) = second.take().map(verify).transpose()?.unzip();
@@ -1044,13 +1089,18 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     let mut current_named = if kept { named_after.clone().unwrap_or_default() } else { named.clone() };
     let mut only_held =
         if kept { second.as_ref().is_some_and(SetResult::named_only_held) } else { first.named_only_held() };
-    let mut doubted = in_doubt(&current_named, if kept { after.unwrap_or(before) } else { before })
-        || !undecided.is_empty()
-        || rescued;
+    // (The pipe's restart kept: held by the starts along what its matches
+    // find blind, the scans' agreement no evidence there.)
+    let mut doubted = !(kept && pipe_first.is_some())
+        && (in_doubt(&current_named, if kept { after.unwrap_or(before) } else { before })
+            || !undecided.is_empty()
+            || rescued);
     // Where scans are undecided: how many further restarts landed where
     // the registration kept places them, and whether any did not.
     let (mut reached_again, mut strayed) = (0usize, false);
-    for skip in 2..config.stages.len() {
+    // (After the pipe's restart, the schedule without its first stage is
+    // the first of them.)
+    for skip in usize::from(pipe_first.is_none()) + 1..config.stages.len() {
         if !doubted {
             break;
         }
@@ -1136,7 +1186,7 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     // nothing of it and the scans agree with it within [`RESTART_RATIO`]
     // of the best (along what the data do not hold, their agreement is no
     // evidence).
-    if let Some(pipe) = pipe_config(config).filter(|_| only_held) {
+    if let Some(pipe) = pipe_config(config).filter(|_| only_held && pipe_first.is_none()) {
         let ratio = pipe.link.multiview.icp.degeneracy_ratio;
         let report = match without_first(scans, starts, &pipe, 0, progress).and_then(|f| {
             let a = crate::agreement::disagreement(&prepared, &f.world_from_scan, tau);
@@ -1187,6 +1237,7 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
         corroborated: !undecided.is_empty() && reached_again > 0 && !strayed,
         undecided,
         further,
+        degeneracy_ratio: pipe_first.and_then(|p| p.link.multiview.icp.degeneracy_ratio),
     };
     let mut r = match (second.take(), alone.take()) {
         (_, Some(a)) => SetResult { stages: first.stages, ..a },
@@ -1554,6 +1605,7 @@ mod tests {
             undecided: vec![(2, 1.94, 0.03), (3, 1.93, 0.03)],
             corroborated,
             further: Vec::new(),
+            degeneracy_ratio: None,
         };
         let result = |corroborated: bool| SetResult {
             world_from_scan: vec![Isometry3::identity(); 4],

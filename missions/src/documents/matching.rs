@@ -232,7 +232,8 @@ pub struct StageReport {
 }
 
 /// The second registration from the starts, without the schedule's first
-/// stage.
+/// stage (or, after a slide along what only the starts hold, the whole
+/// schedule with a pipe's threshold: `degeneracy_ratio`).
 #[derive(Debug, Clone, Serialize, schemars::JsonSchema)]
 pub struct RestartReport {
     /// The scan the schedule moved furthest from its start, or that its
@@ -304,7 +305,8 @@ pub struct RestartReport {
     /// shorter schedule reaches from the starts.
     pub corroborated: bool,
     /// Further restarts from the starts, each without one more of the
-    /// schedule's stages (the first without its first two, …, the last
+    /// schedule's stages (the first without its first two — without its
+    /// first after the pipe's restart, `degeneracy_ratio` —, …, the last
     /// with the finest stage alone), run in turn while the result is not
     /// to be trusted — the verification names scans of it, the restart
     /// left some `undecided`, or its disagreement is no less than
@@ -316,6 +318,17 @@ pub struct RestartReport {
     /// whole schedule once more with a pipe's threshold (its
     /// `degeneracy_ratio`). Empty when none ran.
     pub further: Vec<FurtherReport>,
+    /// The blind-direction threshold the restart ran with where it is not
+    /// the set's: 0.01, a pipe's (the line test on), the whole schedule
+    /// from the starts in place of the schedule without its first stage —
+    /// when the schedule's result is named only by moves along what only
+    /// the starts hold and a simultaneous queue of it was abandoned at its
+    /// cap (each shorter schedule would chase the same slide from the same
+    /// starts). Kept where the verification names nothing of it and the
+    /// scans agree with it within 1.5× of the schedule's result; else
+    /// `further` begins with the schedule without its first stage. Null
+    /// for the usual restart.
+    pub degeneracy_ratio: Option<f64>,
 }
 
 /// A further restart from the starts ([`RestartReport::further`]).

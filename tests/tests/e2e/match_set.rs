@@ -2360,6 +2360,30 @@ fn a_pipe_slid_along_what_only_its_start_holds_is_named() {
     let text = format!("{}{}", said.stdout, said.stderr);
     assert!(text.contains("again from the starts with a pipe's blind-direction threshold, 0.01"), "{text}");
 
+    // Simultaneous mode: the schedule's last queue abandoned at its cap,
+    // chasing the slide; the restart is the pipe's threshold at once
+    // (each shorter schedule would chase the slide again): kept, and no
+    // further restart runs (it took 190 s against 20 s before, and lands
+    // where the pairwise mode's fallback does).
+    let simultaneous = [scans.clone(), "--mode".into(), "simultaneous".into()];
+    let (r, v) = run(&simultaneous, &dir.path().join("simultaneous"));
+    let v = v.unwrap_or_else(|| panic!("{}", r.stderr));
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let restart = &v["restart"];
+    assert!(v["stages"].as_array().expect("stages").iter().any(|s| s["settled"] == false), "{}", v["stages"]);
+    assert_eq!(restart["schedule_untrusted"], serde_json::json!(all), "{restart}");
+    assert_eq!(restart["degeneracy_ratio"], 0.01, "{restart}");
+    assert_eq!(
+        (restart["kept"].clone(), restart["restart_untrusted"].clone()),
+        (Value::Bool(true), serde_json::json!([]))
+    );
+    assert_eq!(restart["stages"].as_array().expect("stages").len(), 4, "the whole schedule: {restart}");
+    assert_eq!(restart["further"], serde_json::json!([]), "{restart}");
+    for (k, d) in off(&v).iter().enumerate() {
+        // (Measured within 3 mm.)
+        assert!(d.norm() < 0.005, "scan {k}: {d:?} m from the truth");
+    }
+
     // With the threshold a pipe needs: the axis and the roll held, nothing named.
     let (r, v) = run(&[scans, "--degeneracy-ratio".into(), "0.01".into()], &dir.path().join("pipe"));
     let v = v.unwrap_or_else(|| panic!("{}", r.stderr));

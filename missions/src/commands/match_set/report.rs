@@ -127,6 +127,7 @@ pub(super) fn report(
                     degeneracy_ratio: f.degeneracy_ratio,
                 })
                 .collect(),
+            degeneracy_ratio: x.degeneracy_ratio,
         }),
         checks: r
             .checks

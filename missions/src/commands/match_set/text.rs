@@ -2,7 +2,7 @@
 
 use std::io::Write;
 
-use crate::documents::matching::{CheckReport, MatchReport, ScanReport, StageReport};
+use crate::documents::matching::{CheckReport, MatchReport, RestartReport, ScanReport, StageReport};
 use crate::scans::inputs::InputScan;
 
 pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &MatchReport) -> std::io::Result<()> {
@@ -35,16 +35,6 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
         report.matches,
         report.seconds
     )?;
-    let stages = |stages: &[StageReport]| -> String {
-        let each: Vec<String> = stages
-            .iter()
-            .map(|s| {
-                let cap = if s.settled { "" } else { ", abandoned at its cap" };
-                format!("{:.3}/{:.3} m: {} runs, {:.3} s{cap}", s.voxel_m, s.max_correspondence_m, s.matches, s.seconds)
-            })
-            .collect();
-        each.join("; ")
-    };
     writeln!(out, "stages: {}", stages(&report.stages))?;
     if let Some(n) = &report.noise {
         writeln!(
@@ -62,86 +52,7 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
         )?;
     }
     if let Some(r) = &report.restart {
-        let names = |list: &[usize]| -> String {
-            if list.is_empty() {
-                "none".into()
-            } else {
-                list.iter().map(|&i| scans[i].name.as_str()).collect::<Vec<_>>().join(", ")
-            }
-        };
-        let why = match (r.trigger.as_str(), r.moved_m, &r.schedule_error) {
-            ("disagreeing", ..) => format!(
-                "the schedule's links disagree more than their covariances allow (variance factor above {})",
-                fusion::scanset::RESTART_VARIANCE_FACTOR
-            ),
-            ("untrusted", ..) => format!(
-                "the schedule's poses put points in another scanner's free space (named: {})",
-                names(r.schedule_untrusted.as_deref().unwrap_or_default())
-            ),
-            ("named", ..) => format!(
-                "the verification names scans of the schedule's result ({})",
-                names(r.schedule_untrusted.as_deref().unwrap_or_default())
-            ),
-            (_, Some(m), _) => format!(
-                "the schedule moved {} {m:.3} m from its start",
-                r.scan.map_or("a scan", |i| scans[i].name.as_str())
-            ),
-            (_, None, e) => format!("the schedule failed ({})", e.as_deref().unwrap_or("")),
-        };
-        let named = match (&r.schedule_untrusted, &r.restart_untrusted) {
-            (Some(before), Some(after)) if before.len() != after.len() => format!(
-                "the verification names {} there against {} at the schedule's poses",
-                names(after),
-                names(before)
-            ),
-            _ => String::new(),
-        };
-        let verdict = match (r.kept, r.further.iter().any(|f| f.kept)) {
-            (true, _) => "its poses kept",
-            (false, true) => "not kept, nor the schedule's",
-            (false, false) => "the schedule's poses kept",
-        };
-        let outcome = match (r.restart_disagreement_m2, r.schedule_disagreement_m2, &r.error) {
-            _ if !named.is_empty() => format!("{named}: {verdict}"),
-            (Some(after), Some(before), _) => format!(
-                "the scans disagree {after:.3e} m² a point there against {before:.3e} at the schedule's poses: {verdict}"
-            ),
-            (_, _, Some(e)) => format!("it failed ({e}): {verdict}"),
-            _ => "its poses kept".into(),
-        };
-        writeln!(out, "restart: {why}; from the starts without the first stage ({}), {outcome}", stages(&r.stages))?;
-        if !r.further.is_empty() {
-            writeln!(
-                out,
-                "  not to be trusted (scans named, or the scans agree no better than at their starts, {:.3e} m² a point):",
-                r.starts_disagreement_m2.unwrap_or(f64::NAN)
-            )?;
-        }
-        for (k, f) in r.further.iter().enumerate() {
-            let outcome = match (f.disagreement_m2, &f.error) {
-                (Some(a), _) => format!(
-                    "the scans disagree {a:.3e} m² a point there: {}",
-                    match f.untrusted.as_deref() {
-                        _ if f.kept => "its poses kept".to_string(),
-                        Some(named) if !named.is_empty() =>
-                            format!("not kept (the verification names {})", names(named)),
-                        _ if f.degeneracy_ratio.is_some() =>
-                            "not kept (the scans disagree there beyond 1.5× the best before)".to_string(),
-                        _ => "not kept (not 1.5× better than the best before)".to_string(),
-                    }
-                ),
-                (None, e) => format!("it failed ({}): not kept", e.as_deref().unwrap_or("")),
-            };
-            match f.degeneracy_ratio {
-                Some(ratio) => writeln!(
-                    out,
-                    "  again from the starts with a pipe's blind-direction threshold, {ratio} ({}): named only by \
-                     moves along what only the starts hold, {outcome}",
-                    stages(&f.stages)
-                )?,
-                None => writeln!(out, "  again without the first {} stages ({}), {outcome}", k + 2, stages(&f.stages))?,
-            }
-        }
+        write_restart(out, scans, r)?;
     }
     for i in unlinked(report) {
         writeln!(
@@ -185,8 +96,12 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
         }
     }
     let tolerance = report.stages.last().map_or(0.0, |s| s.voxel_m);
-    // Whether the pipe's threshold ran already (the last further restart).
-    let pipe_tried = report.restart.iter().flat_map(|r| &r.further).any(|f| f.degeneracy_ratio.is_some());
+    // Whether the pipe's threshold ran already (the restart or the last
+    // further one).
+    let pipe_tried = report
+        .restart
+        .iter()
+        .any(|r| r.degeneracy_ratio.is_some() || r.further.iter().any(|f| f.degeneracy_ratio.is_some()));
     for &i in &report.untrusted {
         let undecided =
             report.restart.iter().filter(|r| !r.corroborated).flat_map(|r| &r.undecided).any(|u| u.scan == i);
@@ -272,8 +187,8 @@ fn why_departed(out: &mut dyn Write, name: &str, mode: &str, s: &ScanReport, tol
 /// (`tolerance`: the finest voxel), and if so the message that says so:
 /// in graph mode (`mode`) the directions its links do not see, in the
 /// others those its matches hold no better than the start; the remedy a
-/// pipe's threshold unless it was tried already (`pipe_tried`: the last
-/// further restart).
+/// pipe's threshold unless it was tried already (`pipe_tried`: the
+/// restart or the last further one).
 fn why_held(
     out: &mut dyn Write,
     name: &str,
@@ -395,9 +310,123 @@ fn why_untrusted(
     Ok(())
 }
 
+/// A stage list's line: each stage's voxel, distance, runs and time.
+fn stages(stages: &[StageReport]) -> String {
+    let each: Vec<String> = stages
+        .iter()
+        .map(|s| {
+            let cap = if s.settled { "" } else { ", abandoned at its cap" };
+            format!("{:.3}/{:.3} m: {} runs, {:.3} s{cap}", s.voxel_m, s.max_correspondence_m, s.matches, s.seconds)
+        })
+        .collect();
+    each.join("; ")
+}
+
+/// The restart's lines: why it ran, what it did, and each further
+/// restart's.
+fn write_restart(out: &mut dyn Write, scans: &[InputScan], r: &RestartReport) -> std::io::Result<()> {
+    let names = |list: &[usize]| -> String {
+        if list.is_empty() {
+            "none".into()
+        } else {
+            list.iter().map(|&i| scans[i].name.as_str()).collect::<Vec<_>>().join(", ")
+        }
+    };
+    let why = match (r.trigger.as_str(), r.moved_m, &r.schedule_error) {
+        ("disagreeing", ..) => format!(
+            "the schedule's links disagree more than their covariances allow (variance factor above {})",
+            fusion::scanset::RESTART_VARIANCE_FACTOR
+        ),
+        ("untrusted", ..) => format!(
+            "the schedule's poses put points in another scanner's free space (named: {})",
+            names(r.schedule_untrusted.as_deref().unwrap_or_default())
+        ),
+        ("named", ..) => format!(
+            "the verification names scans of the schedule's result ({})",
+            names(r.schedule_untrusted.as_deref().unwrap_or_default())
+        ),
+        (_, Some(m), _) => format!(
+            "the schedule moved {} {m:.3} m from its start",
+            r.scan.map_or("a scan", |i| scans[i].name.as_str())
+        ),
+        (_, None, e) => format!("the schedule failed ({})", e.as_deref().unwrap_or("")),
+    };
+    let named = match (&r.schedule_untrusted, &r.restart_untrusted) {
+        (Some(before), Some(after)) if before.len() != after.len() => {
+            format!("the verification names {} there against {} at the schedule's poses", names(after), names(before))
+        }
+        _ => String::new(),
+    };
+    let verdict = match (r.kept, r.further.iter().any(|f| f.kept)) {
+        (true, _) => "its poses kept",
+        (false, true) => "not kept, nor the schedule's",
+        (false, false) => "the schedule's poses kept",
+    };
+    let outcome = match (r.restart_disagreement_m2, r.schedule_disagreement_m2, &r.error) {
+        _ if !named.is_empty() => format!("{named}: {verdict}"),
+        (Some(after), Some(before), _) => format!(
+            "the scans disagree {after:.3e} m² a point there against {before:.3e} at the schedule's poses: {verdict}"
+        ),
+        (_, _, Some(e)) => format!("it failed ({e}): {verdict}"),
+        _ => "its poses kept".into(),
+    };
+    match r.degeneracy_ratio {
+        Some(ratio) => writeln!(
+            out,
+            "restart: {why}, named only by moves along what only the starts hold, a queue abandoned at its cap; \
+             from the starts with a pipe's blind-direction threshold, {ratio} ({}), {outcome}",
+            stages(&r.stages)
+        )?,
+        None => {
+            writeln!(out, "restart: {why}; from the starts without the first stage ({}), {outcome}", stages(&r.stages))?
+        }
+    }
+    if !r.further.is_empty() {
+        writeln!(
+            out,
+            "  not to be trusted (scans named, or the scans agree no better than at their starts, {:.3e} m² a point):",
+            r.starts_disagreement_m2.unwrap_or(f64::NAN)
+        )?;
+    }
+    for (k, f) in r.further.iter().enumerate() {
+        let outcome = match (f.disagreement_m2, &f.error) {
+            (Some(a), _) => format!(
+                "the scans disagree {a:.3e} m² a point there: {}",
+                match f.untrusted.as_deref() {
+                    _ if f.kept => "its poses kept".to_string(),
+                    Some(named) if !named.is_empty() => format!("not kept (the verification names {})", names(named)),
+                    _ if f.degeneracy_ratio.is_some() =>
+                        "not kept (the scans disagree there beyond 1.5× the best before)".to_string(),
+                    _ => "not kept (not 1.5× better than the best before)".to_string(),
+                }
+            ),
+            (None, e) => format!("it failed ({}): not kept", e.as_deref().unwrap_or("")),
+        };
+        match f.degeneracy_ratio {
+            Some(ratio) => writeln!(
+                out,
+                "  again from the starts with a pipe's blind-direction threshold, {ratio} ({}): named only by \
+                 moves along what only the starts hold, {outcome}",
+                stages(&f.stages)
+            )?,
+            // (After the pipe's restart, the first is without the
+            // first stage.)
+            None => writeln!(
+                out,
+                "  again without the first {} stage{} ({}), {outcome}",
+                k + 1 + usize::from(r.degeneracy_ratio.is_none()),
+                if k == 0 && r.degeneracy_ratio.is_some() { "" } else { "s" },
+                stages(&f.stages)
+            )?,
+        }
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::documents::matching::FurtherReport;
 
     fn check(target: usize, source: usize, moved_m: f64, consistent: bool) -> CheckReport {
         CheckReport {
@@ -539,6 +568,70 @@ mod tests {
             ),
             "{text}"
         );
+    }
+
+    /// The restart with a pipe's threshold says so, and the further
+    /// restarts after it count the stages they leave out from one.
+    #[test]
+    fn a_restart_with_the_pipes_threshold_says_why_and_the_further_count_on() {
+        let stage = |voxel_m: f64, settled: bool| StageReport {
+            voxel_m,
+            max_correspondence_m: 4.0 * voxel_m,
+            matches: 16,
+            seconds: 0.5,
+            settled,
+        };
+        let further = |n: usize| FurtherReport {
+            stages: [0.02, 0.01][2 - n..].iter().map(|&v| stage(v, false)).collect(),
+            disagreement_m2: Some(3.2e-5),
+            error: None,
+            kept: false,
+            untrusted: Some(vec![1]),
+            degeneracy_ratio: None,
+        };
+        let restart = |ratio: Option<f64>, further: Vec<FurtherReport>| RestartReport {
+            scan: Some(1),
+            moved_m: Some(0.77),
+            schedule_error: None,
+            stages: vec![stage(0.04, true), stage(0.02, true), stage(0.01, true)],
+            schedule_disagreement_m2: Some(3.2e-5),
+            restart_disagreement_m2: Some(3.8e-5),
+            starts_disagreement_m2: Some(3.9e-5),
+            error: None,
+            kept: false,
+            trigger: "moved".into(),
+            schedule_untrusted: Some(vec![1]),
+            restart_untrusted: Some(vec![1]),
+            undecided: Vec::new(),
+            corroborated: false,
+            further,
+            degeneracy_ratio: ratio,
+        };
+        let said = |r: &RestartReport| {
+            let scans: Vec<InputScan> = ["a", "b"].iter().map(|n| InputScan::empty(n, n)).collect();
+            let mut out = Vec::new();
+            write_restart(&mut out, &scans, r).expect("written");
+            String::from_utf8(out).expect("UTF-8")
+        };
+        let pipe = said(&restart(Some(0.01), vec![further(2), further(1)]));
+        assert!(
+            pipe.starts_with(
+                "restart: the schedule moved b 0.770 m from its start, named only by moves along what only the \
+                 starts hold, a queue abandoned at its cap; from the starts with a pipe's blind-direction threshold, \
+                 0.01 (0.040/0.160 m: 16 runs, 0.500 s; "
+            ),
+            "{pipe}"
+        );
+        assert!(pipe.contains("\n  again without the first 1 stage (0.020/0.080 m"), "{pipe}");
+        assert!(pipe.contains("\n  again without the first 2 stages (0.010/0.040 m"), "{pipe}");
+        let usual = said(&restart(None, vec![further(1)]));
+        assert!(
+            usual.starts_with(
+                "restart: the schedule moved b 0.770 m from its start; from the starts without the first stage (0.040"
+            ),
+            "{usual}"
+        );
+        assert!(usual.contains("\n  again without the first 2 stages (0.010/0.040 m"), "{usual}");
     }
 
     #[test]
