@@ -211,6 +211,115 @@ pub fn fit_pipe(points: &[Point3<f32>], initial: &Pipe, config: &PipeConfig) -> 
     Ok(PipeFit { pipe, iterations, converged: last.0, inliers: last.1, rmse_m: last.2, gate_m: gate })
 }
 
+/// A scan's points within this share of the radius from a tube's
+/// surface are on it ([`tube_of`]).
+pub const TUBE_BAND: f64 = 0.05;
+/// A scan is a pipe's when at least this share of its points is on the
+/// tube ([`Tube::is_pipe`]).
+pub const TUBE_SHARE: f64 = 0.8;
+/// … and they fill at least this share of the 36 sectors of 10° about
+/// its axis (a plane fits a tube of a huge radius, seen from one side).
+pub const TUBE_AROUND: f64 = 0.75;
+/// [`tube_of`] fits at most this many of a scan's points (evenly taken).
+const TUBE_SAMPLE: usize = 20_000;
+const SECTORS: usize = 36;
+
+/// The tube a scan's points lie on ([`tube_of`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Tube {
+    /// The fitted tube, in the points' frame.
+    pub pipe: Pipe,
+    /// The share of the points within [`TUBE_BAND`] of the radius from its
+    /// surface.
+    pub share: f64,
+    /// The share of the 36 sectors of 10° about the axis those points
+    /// fill (a sector counts with at least a fifth of the mean sector's
+    /// points).
+    pub around: f64,
+}
+
+impl Tube {
+    /// Whether the scan is a pipe's: [`TUBE_SHARE`] of its points on the
+    /// tube, all around it ([`TUBE_AROUND`]).
+    pub fn is_pipe(&self) -> bool {
+        self.share >= TUBE_SHARE && self.around >= TUBE_AROUND
+    }
+}
+
+/// The tube `points` lie on best: fitted ([`fit_pipe`], its gates scaled to
+/// the tube's first radius) from each of their three principal axes
+/// through their centroid, with the median distance from it as the
+/// radius, the fit with the most points on it kept. Scale- and
+/// frame-free: every length is the radius's share. A tube wider than
+/// the points' reach (their 90th-percentile distance from the centroid:
+/// a plane is a tube of a huge radius) is none. `None` when no fit
+/// holds (fewer than 6 points near every start).
+pub fn tube_of(points: &[Point3<f32>]) -> Option<Tube> {
+    let step = points.len().div_ceil(TUBE_SAMPLE).max(1);
+    let sample: Vec<Point3<f32>> =
+        points.iter().step_by(step).copied().filter(|p| p.coords.iter().all(|v| v.is_finite())).collect();
+    if sample.len() < 6 {
+        return None;
+    }
+    let n = sample.len() as f64;
+    let c = sample.iter().fold(Vector3::zeros(), |s, p| s + p.coords.cast::<f64>()) / n;
+    let spread = sample.iter().fold(Matrix3::zeros(), |s, p| {
+        let d = p.coords.cast::<f64>() - c;
+        s + d * d.transpose()
+    }) / n;
+    let mut reach: Vec<f64> = sample.iter().map(|p| (p.coords.cast::<f64>() - c).norm()).collect();
+    let k = (reach.len() * 9) / 10;
+    let reach = *reach.select_nth_unstable_by(k.min(sample.len() - 1), f64::total_cmp).1;
+    let axes = spread.symmetric_eigen().eigenvectors;
+    (0..3)
+        .filter_map(|i| {
+            let axis: Vector3<f64> = axes.column(i).into_owned();
+            let along: Vec<f64> = sample.iter().map(|p| (p.coords.cast::<f64>() - c).dot(&axis)).collect();
+            let mut radial: Vec<f64> =
+                sample.iter().zip(&along).map(|(p, &s)| (p.coords.cast::<f64>() - c - s * axis).norm()).collect();
+            let mid = radial.len() / 2;
+            let r0 = *radial.select_nth_unstable_by(mid, f64::total_cmp).1;
+            let (lo, hi) = along.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &s| (l.min(s), h.max(s)));
+            if !(r0 > 0.0 && hi > lo) {
+                return None;
+            }
+            let start = Pipe { a: Point3::from(c + lo * axis), b: Point3::from(c + hi * axis), radius_m: r0 };
+            let config = PipeConfig {
+                coarse_voxel_m: 0.1 * r0,
+                initial_gate_m: 0.3 * r0,
+                gate_sigmas: 3.0,
+                min_gate_m: 1e-3 * r0,
+                max_iterations: 50,
+                tolerance_m: 1e-6 * r0,
+            };
+            let pipe = fit_pipe(&sample, &start, &config).ok()?.pipe;
+            (pipe.radius_m < reach).then(|| on_tube(&sample, pipe))
+        })
+        .max_by(|a, b| a.share.total_cmp(&b.share))
+}
+
+/// How many of `points` lie on `pipe`, and how far around it.
+fn on_tube(points: &[Point3<f32>], pipe: Pipe) -> Tube {
+    let n = pipe.direction();
+    let e1 = perpendicular(&n);
+    let e2 = n.cross(&e1);
+    let band = TUBE_BAND * pipe.radius_m;
+    let mut sectors = [0usize; SECTORS];
+    for p in points {
+        let x = p.cast::<f64>();
+        let (_, u, _) = pipe.project(&x);
+        if (u.norm() - pipe.radius_m).abs() <= band {
+            let angle = u.dot(&e2).atan2(u.dot(&e1)) + std::f64::consts::PI;
+            let k = ((angle / std::f64::consts::TAU * SECTORS as f64) as usize).min(SECTORS - 1);
+            sectors[k] += 1;
+        }
+    }
+    let on: usize = sectors.iter().sum();
+    let floor = 0.2 * on as f64 / SECTORS as f64;
+    let filled = sectors.iter().filter(|&&k| on > 0 && k as f64 >= floor).count();
+    Tube { pipe, share: on as f64 / points.len() as f64, around: filled as f64 / SECTORS as f64 }
+}
+
 /// What a group of deviating points is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum AnomalyKind {
@@ -383,6 +492,60 @@ mod tests {
         let pipe = Pipe { a: Point3::origin(), b: Point3::new(10.0, 0.0, 0.0), radius_m: 0.5 };
         assert!((pipe.deviation_m(&Point3::new(2.0, 0.0, 0.45)) + 0.05).abs() < 1e-12);
         assert!((pipe.deviation_m(&Point3::new(2.0, 0.6, 0.0)) - 0.1).abs() < 1e-12);
+    }
+
+    /// Points on a tube seen from inside: `around` of the way about its
+    /// axis, `length` along it, with 2 % of the radius of noise; turned
+    /// and 50 radii from the origin.
+    fn inside_a_tube(radius: f64, length: f64, around: f64, seed: u64) -> Vec<Point3<f32>> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let turn = nalgebra::Isometry3::new(Vector3::new(30.0, -41.0, 1.2) * radius, Vector3::new(0.3, -0.7, 1.1));
+        (0..30_000)
+            .map(|_| {
+                let t = rng.random_range(0.0..around * std::f64::consts::TAU);
+                let r = radius * (1.0 + 0.02 * (rng.random::<f64>() - 0.5) * 2.0);
+                let x = Point3::new(rng.random_range(-0.5..0.5) * length, r * t.cos(), r * t.sin());
+                (turn * x).cast::<f32>()
+            })
+            .collect()
+    }
+
+    /// A pipe's scan is found a pipe at any scale, position and turn, long
+    /// or short (its axis then the points' least spread); a box, a plane
+    /// and half a pipe are not.
+    #[test]
+    fn a_pipes_scan_is_a_tube_all_round_and_nothing_else_is() {
+        for (radius, length) in [(0.5, 4.0), (0.005, 0.04), (50.0, 400.0), (0.5, 0.3)] {
+            let tube = tube_of(&inside_a_tube(radius, length, 1.0, 5)).expect("a tube");
+            assert!(tube.is_pipe(), "r {radius}, length {length}: {tube:?}");
+            assert!((tube.pipe.radius_m / radius - 1.0).abs() < 0.01, "r {radius}: {tube:?}");
+            assert!(tube.share > 0.99 && tube.around == 1.0, "{tube:?}");
+        }
+        // Half a pipe (a culvert's vault) is not one all round.
+        let half = tube_of(&inside_a_tube(0.5, 4.0, 0.5, 6)).expect("a tube");
+        assert!(!half.is_pipe() && half.around <= 0.55, "{half:?}");
+        // A corridor's box, 2 m × 2.5 m × 10 m, and a flat ground patch.
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let walls: Vec<Point3<f32>> = (0..30_000)
+            .map(|k| {
+                let x = rng.random_range(-5.0..5.0);
+                let (a, b) = (rng.random_range(-1.0..1.0), rng.random_range(-1.25..1.25));
+                match k % 4 {
+                    0 => Point3::new(x, -1.0, b),
+                    1 => Point3::new(x, 1.0, b),
+                    2 => Point3::new(x, a, -1.25),
+                    _ => Point3::new(x, a, 1.25),
+                }
+            })
+            .collect();
+        assert!(tube_of(&walls).is_none_or(|t| !t.is_pipe() && t.share < 0.6), "{:?}", tube_of(&walls));
+        let ground: Vec<Point3<f32>> = (0..30_000)
+            .map(|_| {
+                Point3::new(rng.random_range(-30.0..30.0), rng.random_range(-30.0..30.0), rng.random_range(-0.02..0.02))
+            })
+            .collect();
+        assert!(tube_of(&ground).is_none_or(|t| !t.is_pipe()), "{:?}", tube_of(&ground));
+        assert!(tube_of(&[Point3::origin(); 3]).is_none());
     }
 
     #[test]

@@ -995,10 +995,12 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
             Err(e) => (None, Some(e.to_string())),
         };
     let mut named_after = None;
-    if impossible {
+    if impossible && pipe_first.is_none() {
         (second, named_after) = second.take().map(verify).transpose()?.unzip();
     }
     let after = second.as_ref().map(|r| crate::agreement::disagreement(&prepared, &r.world_from_scan, tau));
+    // (The pipe's restart verified with its own threshold, as the
+    // pipe's last further restart is.)
     if let Some(pipe) = &pipe_first {
         let r = second.take().map(|r| verified(scans, starts, r, pipe)).transpose()?;
         named_after = r.as_ref().map(SetResult::named);

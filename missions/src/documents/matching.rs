@@ -404,9 +404,35 @@ pub struct SettingsReport {
     /// `--only-covered`: pairs beyond what the other scan sampled around
     /// their partner left out at the finest stage.
     pub only_covered: bool,
+    /// The blind-direction threshold the matches ran with (0: off):
+    /// `--degeneracy-ratio`, else 0.01 where the scans are a pipe
+    /// (`pipe`), else the default, 2e-3.
+    pub degeneracy_ratio: f64,
+    /// The line test's ratio (0: off): `--line-ratio`, else 0.1 with a
+    /// threshold given or a pipe found, else 0.
+    pub line_ratio: f64,
+    /// Where no `--degeneracy-ratio` is given and every scan's points lie
+    /// on a tube all round it: the pipe found, whose threshold the matches
+    /// then ran with. Null otherwise.
+    pub pipe: Option<PipeReport>,
     /// With `--init global`: how the starts were found.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub global: Option<GlobalReport>,
+}
+
+/// The pipe the scans are ([`SettingsReport::pipe`]): each scan's tube
+/// fitted from its points' principal axes, with no guess.
+#[derive(Debug, Clone, Serialize, schemars::JsonSchema)]
+pub struct PipeReport {
+    /// The median of the scans' tubes' radii, metres.
+    pub radius_m: f64,
+    /// The least share of a scan's points within 5 % of the radius from
+    /// its tube's surface (at least 0.8 for a pipe).
+    pub share: f64,
+    /// The least share of the 36 sectors of 10° about a tube's axis that
+    /// those points fill (at least 0.75 for a pipe: a plane is a tube of a
+    /// huge radius seen from one side).
+    pub around: f64,
 }
 
 /// `--init global`'s starts.

@@ -2252,6 +2252,14 @@ fn a_links_blind_directions_are_in_the_worlds_axes_in_every_mode() {
         let settled = v["stages"].as_array().expect("stages").iter().all(|s| s["settled"] == true);
         assert!(settled, "{mode}: {}", v["stages"]);
     }
+    // At the defaults the scans are found a pipe and matched as above:
+    // where they collapsed 3.7 m along it and were named, exit 1 (before
+    // session 51), they land.
+    let (r, v) = run(&inputs, &dir.path().join("found"));
+    let v = v.unwrap_or_else(|| panic!("{}", r.stderr));
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(v["settings"]["pipe"]["radius_m"].as_f64().is_some_and(|r| (r - 0.5).abs() < 0.005), "{}", v["settings"]);
+    assert_parts_land("graph", &v, &cps, 0.8, 0.015);
     // The ratio is checked.
     let mut args = inputs.clone();
     args.extend(["--line-ratio", "1.5"].map(OsString::from));
@@ -2273,7 +2281,10 @@ fn a_links_blind_directions_are_in_the_worlds_axes_in_every_mode() {
 /// scans agree 1.05× better at the slid poses); in pairwise mode, whose
 /// finest stage alone still slides scans, the whole schedule again with a
 /// pipe's threshold (0.01) — both exit 0. Given that threshold, every
-/// scan lands within 3 mm of the simulator's truth.
+/// scan lands within 3 mm of the simulator's truth. Since session 51 the
+/// scans are found a pipe at the defaults (each on its tube, all round)
+/// and matched with that threshold from the first; the fallback is
+/// tested with the former defaults given.
 #[test]
 fn a_pipe_slid_along_what_only_its_start_holds_is_named() {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -2307,10 +2318,40 @@ fn a_pipe_slid_along_what_only_its_start_holds_is_named() {
     let scans: OsString = run_dir.join("scans").into();
     let all: Vec<usize> = (1..9).collect();
 
+    // At the defaults the scans are found a pipe (each on its tube, all
+    // round it, no guess given) and matched with the pipe's threshold
+    // and line test: the axis and the roll held, nothing named, nothing
+    // restarted.
+    let (r, v) = run(std::slice::from_ref(&scans), &dir.path().join("found"));
+    let v = v.unwrap_or_else(|| panic!("{}", r.stderr));
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let settings = &v["settings"];
+    let radius = settings["pipe"]["radius_m"].as_f64().unwrap_or_else(|| panic!("no pipe found: {settings}"));
+    assert!((radius - 0.5).abs() < 0.005, "{settings}");
+    assert!(settings["pipe"]["share"].as_f64().is_some_and(|s| s > 0.95), "{settings}");
+    assert_eq!((settings["degeneracy_ratio"].as_f64(), settings["line_ratio"].as_f64()), (Some(0.01), Some(0.1)));
+    assert!(v["restart"].is_null(), "{}", v["restart"]);
+    for (k, (d, s)) in off(&v).iter().zip(v["scans"].as_array().expect("scans")).enumerate() {
+        // (Measured 1.1–2.8 mm.)
+        assert!(d.norm() < 0.005, "scan {k}: {d:?} m from the truth");
+        assert!(s["held_chi2"].as_f64().is_none_or(|c| c < 1.0), "{s}");
+    }
+    let said = run_text(std::slice::from_ref(&scans), &dir.path().join("found-said"));
+    assert!(said.stdout.contains("the scans are a pipe (radius 0.50"), "{}", said.stdout);
+
+    // The former defaults given (`--degeneracy-ratio 0.002 --line-ratio
+    // 0`, no pipe assumed): the fallback when the scans are not found a
+    // pipe (a tunnel's section, a pipe with its floor under water).
+    let former = |mode: &str| -> Vec<OsString> {
+        [scans.clone()]
+            .into_iter()
+            .chain(["--mode", mode, "--degeneracy-ratio", "0.002", "--line-ratio", "0"].map(OsString::from))
+            .collect()
+    };
     // Graph mode: the schedule named every scan for its move along what
     // its links do not see; the finest stage alone from the starts names
     // nothing and is kept.
-    let (r, v) = run(std::slice::from_ref(&scans), &dir.path().join("graph"));
+    let (r, v) = run(&former("graph"), &dir.path().join("graph"));
     let v = v.unwrap_or_else(|| panic!("{}", r.stderr));
     assert_eq!(r.code, 0, "{}", r.stderr);
     let restart = &v["restart"];
@@ -2329,7 +2370,7 @@ fn a_pipe_slid_along_what_only_its_start_holds_is_named() {
     // and the roll no better than the start; the schedule named every
     // scan so, its finest stage alone some, and the whole schedule with a
     // pipe's threshold none: kept.
-    let pairwise = [scans.clone(), "--mode".into(), "pairwise".into()];
+    let pairwise = former("pairwise");
     let (r, v) = run(&pairwise, &dir.path().join("pairwise"));
     let v = v.unwrap_or_else(|| panic!("{}", r.stderr));
     assert_eq!(r.code, 0, "{}", r.stderr);
@@ -2365,8 +2406,7 @@ fn a_pipe_slid_along_what_only_its_start_holds_is_named() {
     // (each shorter schedule would chase the slide again): kept, and no
     // further restart runs (it took 190 s against 20 s before, and lands
     // where the pairwise mode's fallback does).
-    let simultaneous = [scans.clone(), "--mode".into(), "simultaneous".into()];
-    let (r, v) = run(&simultaneous, &dir.path().join("simultaneous"));
+    let (r, v) = run(&former("simultaneous"), &dir.path().join("simultaneous"));
     let v = v.unwrap_or_else(|| panic!("{}", r.stderr));
     assert_eq!(r.code, 0, "{}", r.stderr);
     let restart = &v["restart"];
@@ -2382,16 +2422,6 @@ fn a_pipe_slid_along_what_only_its_start_holds_is_named() {
     for (k, d) in off(&v).iter().enumerate() {
         // (Measured within 3 mm.)
         assert!(d.norm() < 0.005, "scan {k}: {d:?} m from the truth");
-    }
-
-    // With the threshold a pipe needs: the axis and the roll held, nothing named.
-    let (r, v) = run(&[scans, "--degeneracy-ratio".into(), "0.01".into()], &dir.path().join("pipe"));
-    let v = v.unwrap_or_else(|| panic!("{}", r.stderr));
-    assert_eq!(r.code, 0, "{}", r.stderr);
-    for (k, (d, s)) in off(&v).iter().zip(v["scans"].as_array().expect("scans")).enumerate() {
-        // (Measured 1.1–2.8 mm.)
-        assert!(d.norm() < 0.005, "scan {k}: {d:?} m from the truth");
-        assert!(s["held_chi2"].as_f64().is_none_or(|c| c < 1.0), "{s}");
     }
 }
 

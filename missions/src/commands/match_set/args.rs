@@ -81,7 +81,9 @@ pub struct MatchArgs {
     /// Directions a match cannot see — eigenvalue of its normal matrix
     /// (about the scan's centroid, rotation scaled by its radius) below
     /// this ratio of the largest — are held where the start put them and
-    /// reported (0: off). Default 2e-3.
+    /// reported (0: off). Default 2e-3 — or 0.01 where the scans are found
+    /// a pipe: every scan's points on a tube fitted to them, all round it
+    /// (`settings.pipe`, docs/match.md).
     #[arg(long)]
     pub degeneracy_ratio: Option<f64>,
     /// Judge those directions without the points whose normal is not a
@@ -93,8 +95,8 @@ pub struct MatchArgs {
     /// normal. Sparse scan lines of a pipe (a rotating scanner's slices
     /// far apart) make its axis look seen that way and the scans slide
     /// along it; 0.1 holds it (docs/match.md). 0: off. Default 0.1 when
-    /// --degeneracy-ratio is given, as a mission's `[fusion] line_ratio`
-    /// with its `degeneracy_ratio`; else 0 (at the default threshold it
+    /// --degeneracy-ratio is given or the scans are found a pipe, as a
+    /// mission's `[fusion] line_ratio` with its `degeneracy_ratio`; else 0 (at the default threshold it
     /// held a street's weakly seen direction where a start 2° off put it).
     #[arg(long)]
     pub line_ratio: Option<f64>,

@@ -23,7 +23,7 @@ use args::{GLOBAL_CELL_OF_RADIUS, bag_options, mode, output_crs};
 pub use args::{InitArg, MatchArgs, ModeArg};
 use outputs::{check_out, write_outputs};
 
-use crate::documents::matching::{GlobalMatchReport, GlobalReport, SettingsReport};
+use crate::documents::matching::{GlobalMatchReport, GlobalReport, PipeReport, SettingsReport};
 use report::report;
 use text::{unlinked, write_text};
 
@@ -110,7 +110,20 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
     config.viewpoints =
         scans.iter().map(|s| s.viewpoint.or(args.scanner_at_origin.then(nalgebra::Point3::origin))).collect();
     config.only_covered = args.only_covered;
+    // A pipe — every scan's points on a tube, all round it — holds its
+    // axis and its roll by its small features alone, which the matches'
+    // pull along the scans' sampling outweighs: without a threshold of the
+    // user's own, the pipe's (docs/match.md, "A pipe or a tunnel").
+    let pipe = if args.degeneracy_ratio.is_none() { pipe_of(&points, &config.viewpoints) } else { None };
+    if pipe.is_some() {
+        let icp = &mut config.link.multiview.icp;
+        icp.degeneracy_ratio = Some(fusion::links::PIPE_DEGENERACY_RATIO);
+        if args.line_ratio.is_none() && icp.method == Method::PointToPlane {
+            icp.line_ratio = Some(fusion::links::DEFAULT_LINE_RATIO);
+        }
+    }
     let mut settings = scale_settings(args, given, &scans, &points, &mut config)?;
+    settings.pipe = pipe;
     let starts: Vec<Isometry3<f64>> = match args.init {
         None => scans.iter().map(|s| s.start).collect(),
         Some(InitArg::Global) => {
@@ -264,7 +277,36 @@ fn scale_settings(
         translation_tolerance_m: scaled.translation_tolerance_m,
         moved_translation_m: scaled.moved_translation_m,
         only_covered: config.only_covered,
+        degeneracy_ratio: config.link.multiview.icp.degeneracy_ratio.unwrap_or(0.0),
+        line_ratio: config.link.multiview.icp.line_ratio.unwrap_or(0.0),
+        pipe: None,
         global: None,
+    })
+}
+
+/// The pipe the scans are, when every one's points lie on a tube all round
+/// it ([`fusion::pipe::Tube::is_pipe`]) — with its scanner inside, where
+/// the scan says where it stood (`viewpoints`: a cylinder scanned all round
+/// from outside is not a pipe) —: the median radius, the least share on
+/// the tube and the least share of the way round.
+fn pipe_of(points: &[&[nalgebra::Point3<f32>]], viewpoints: &[Option<nalgebra::Point3<f64>>]) -> Option<PipeReport> {
+    use rayon::prelude::*;
+    let tubes: Vec<Option<fusion::pipe::Tube>> = points.par_iter().map(|p| fusion::pipe::tube_of(p)).collect();
+    let tubes: Vec<fusion::pipe::Tube> = tubes.into_iter().collect::<Option<Vec<_>>>()?;
+    let inside = |(t, v): (&fusion::pipe::Tube, Option<&Option<nalgebra::Point3<f64>>>)| {
+        v.copied().flatten().is_none_or(|v| t.pipe.deviation_m(&v) < 0.0)
+    };
+    let pipe = tubes.iter().all(fusion::pipe::Tube::is_pipe)
+        && tubes.iter().enumerate().map(|(i, t)| (t, viewpoints.get(i))).all(inside);
+    if !pipe {
+        return None;
+    }
+    let mut radii: Vec<f64> = tubes.iter().map(|t| t.pipe.radius_m).collect();
+    radii.sort_by(f64::total_cmp);
+    Some(PipeReport {
+        radius_m: radii[radii.len() / 2],
+        share: tubes.iter().map(|t| t.share).fold(1.0, f64::min),
+        around: tubes.iter().map(|t| t.around).fold(1.0, f64::min),
     })
 }
 

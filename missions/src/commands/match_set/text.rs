@@ -36,6 +36,18 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
         report.seconds
     )?;
     writeln!(out, "stages: {}", stages(&report.stages))?;
+    if let Some(p) = &report.settings.pipe {
+        writeln!(
+            out,
+            "the scans are a pipe (radius {:.3} m; at least {:.0} % of each scan's points on its tube, all round): \
+             matched with the blind-direction threshold {} and the line test {}, as a pipe needs (--degeneracy-ratio \
+             chooses another)",
+            p.radius_m,
+            100.0 * p.share,
+            report.settings.degeneracy_ratio,
+            report.settings.line_ratio
+        )?;
+    }
     if let Some(n) = &report.noise {
         writeln!(
             out,
