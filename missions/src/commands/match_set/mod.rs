@@ -342,6 +342,32 @@ mod tests {
         InputScan::empty(file, file)
     }
 
+    /// A pipe is every scan on a tube all round it with its scanner inside
+    /// where known: a column scanned all round from outside is not one,
+    /// nor a set with one scan that is not a pipe's.
+    #[test]
+    fn a_pipe_is_every_scan_on_its_tube_with_the_scanner_inside() {
+        use nalgebra::Point3;
+        let tube = |radius: f64, seed: usize| -> Vec<Point3<f32>> {
+            (0..20_000)
+                .map(|k| {
+                    let t = (k * 7919 + seed) as f64 * 0.618_033_988_7 * std::f64::consts::TAU;
+                    let x = ((k * 104_729 + seed) % 20_000) as f64 / 20_000.0 * 8.0 - 4.0;
+                    Point3::new(x, radius * t.cos(), radius * t.sin()).cast::<f32>()
+                })
+                .collect()
+        };
+        let (a, b) = (tube(0.5, 1), tube(0.5, 2));
+        let found = pipe_of(&[&a, &b], &[Some(Point3::new(0.0, 0.1, -0.2)), None]).expect("a pipe");
+        assert!((found.radius_m - 0.5).abs() < 0.005 && found.share > 0.99 && found.around == 1.0, "{found:?}");
+        // Scanned from outside (the scanner 2 m from the axis): a column.
+        assert!(pipe_of(&[&a, &b], &[Some(Point3::new(0.0, 2.0, 0.0)), None]).is_none());
+        // One scan of a floor among them: not a pipe.
+        let floor: Vec<Point3<f32>> =
+            (0..20_000).map(|k| Point3::new((k % 200) as f32 * 0.05, (k / 200) as f32 * 0.05, 0.0)).collect();
+        assert!(pipe_of(&[&a, &floor], &[None, None]).is_none());
+    }
+
     #[test]
     fn no_overlap_blames_the_starts_only_at_the_first_stage() {
         let scans = [scan("a.ply"), scan("b.ply")];
