@@ -256,8 +256,10 @@ impl Tube {
 /// radius, the fit with the most points on it kept. Scale- and
 /// frame-free: every length is the radius's share. A tube wider than
 /// the points' reach (their 90th-percentile distance from the centroid:
-/// a plane is a tube of a huge radius) is none. `None` when no fit
-/// holds (fewer than 6 points near every start).
+/// a plane is a tube of a huge radius) is none, and an axis is fitted
+/// only where half the points lie within a quarter of the radius from
+/// its first tube (a box's or a plane's do not: the fit's cost spared).
+/// `None` when no axis passes or no fit holds.
 pub fn tube_of(points: &[Point3<f32>]) -> Option<Tube> {
     let step = points.len().div_ceil(TUBE_SAMPLE).max(1);
     let sample: Vec<Point3<f32>> =
@@ -284,9 +286,6 @@ pub fn tube_of(points: &[Point3<f32>]) -> Option<Tube> {
             let mid = radial.len() / 2;
             let r0 = *radial.select_nth_unstable_by(mid, f64::total_cmp).1;
             let (lo, hi) = along.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &s| (l.min(s), h.max(s)));
-            // (Screened before the fit: about an axis through a pipe's
-            // centroid most of its points lie near the median distance;
-            // a box's or a plane's do not — the fit's cost spared.)
             let near = radial.iter().filter(|&&r| (r - r0).abs() <= SCREEN_BAND * r0).count();
             if !(r0 > 0.0 && hi > lo) || (near as f64) < SCREEN_SHARE * radial.len() as f64 {
                 return None;

@@ -113,7 +113,8 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
     // A pipe — every scan's points on a tube, all round it — holds its
     // axis and its roll by its small features alone, which the matches'
     // pull along the scans' sampling outweighs: without a threshold of the
-    // user's own, the pipe's (docs/match.md, "A pipe or a tunnel").
+    // user's own, the pipe's (docs/match.md, Blind directions: "A pipe is
+    // found").
     let pipe = if args.degeneracy_ratio.is_none() { pipe_of(&points, &config.viewpoints) } else { None };
     if pipe.is_some() {
         let icp = &mut config.link.multiview.icp;
