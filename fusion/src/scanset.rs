@@ -617,6 +617,16 @@ fn keeps_restart(impossible: bool, named_after: Option<&[usize]>, before: f64, a
     }
 }
 
+/// Whether the whole schedule with a pipe's threshold — the restart
+/// ([`Restart::degeneracy_ratio`]) or the last further restart — is the
+/// result: the verification names nothing of it (`named`; `None` when it
+/// failed) and the scans agree with it (`a`) within [`RESTART_RATIO`] of
+/// the best so far, better or not (along what the data do not hold, their
+/// agreement is no evidence).
+fn keeps_pipe(named: Option<&[usize]>, a: Option<f64>, best: f64) -> bool {
+    named.is_some_and(<[usize]>::is_empty) && a.is_some_and(|a| a <= RESTART_RATIO * best)
+}
+
 /// What one stage of the schedule did.
 #[derive(Debug, Clone, PartialEq)]
 pub struct StageRun {
@@ -1013,11 +1023,7 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     // were named by their motion, and a restart that landed them in
     // another wrong fit, 41° off, was named by nothing.)
     let mut kept = match &pipe_first {
-        // (Along what the data do not hold, their agreement is no
-        // evidence: within [`RESTART_RATIO`], better or not.)
-        Some(_) => {
-            named_after.as_ref().is_some_and(Vec::is_empty) && after.is_some_and(|a| a <= RESTART_RATIO * before)
-        }
+        Some(_) => keeps_pipe(named_after.as_deref(), after, before),
         None => keeps_restart(impossible, named_after.as_deref(), before, after),
     };
     // Two registrations that place a scan apart, the verification naming
@@ -1201,7 +1207,7 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
                     stages: f.stages.clone(),
                     disagreement_m2: Some(a),
                     error: None,
-                    kept: named.is_empty() && a <= RESTART_RATIO * best,
+                    kept: keeps_pipe(Some(&named), Some(a), best),
                     untrusted: Some(named),
                     degeneracy_ratio: ratio,
                 };

@@ -294,11 +294,10 @@ fn pipe_of(points: &[&[nalgebra::Point3<f32>]], viewpoints: &[Option<nalgebra::P
     use rayon::prelude::*;
     let tubes: Vec<Option<fusion::pipe::Tube>> = points.par_iter().map(|p| fusion::pipe::tube_of(p)).collect();
     let tubes: Vec<fusion::pipe::Tube> = tubes.into_iter().collect::<Option<Vec<_>>>()?;
-    let inside = |(t, v): (&fusion::pipe::Tube, Option<&Option<nalgebra::Point3<f64>>>)| {
-        v.copied().flatten().is_none_or(|v| t.pipe.deviation_m(&v) < 0.0)
-    };
-    let pipe = tubes.iter().all(fusion::pipe::Tube::is_pipe)
-        && tubes.iter().enumerate().map(|(i, t)| (t, viewpoints.get(i))).all(inside);
+    let pipe = tubes
+        .iter()
+        .enumerate()
+        .all(|(i, t)| t.is_pipe() && viewpoints.get(i).copied().flatten().is_none_or(|v| t.pipe.deviation_m(&v) < 0.0));
     if !pipe {
         return None;
     }

@@ -108,12 +108,19 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
         }
     }
     let tolerance = report.stages.last().map_or(0.0, |s| s.voxel_m);
-    // Whether the pipe's threshold ran already (the restart or the last
-    // further one).
-    let pipe_tried = report
+    // Whether the pipe's threshold ran already: the set's own (given, or
+    // the scans found a pipe), or the restart's or the last further one's.
+    let pipe_ran = if report.settings.degeneracy_ratio >= fusion::links::PIPE_DEGENERACY_RATIO {
+        PipeRan::Set
+    } else if report
         .restart
         .iter()
-        .any(|r| r.degeneracy_ratio.is_some() || r.further.iter().any(|f| f.degeneracy_ratio.is_some()));
+        .any(|r| r.degeneracy_ratio.is_some() || r.further.iter().any(|f| f.degeneracy_ratio.is_some()))
+    {
+        PipeRan::Restart
+    } else {
+        PipeRan::No
+    };
     for &i in &report.untrusted {
         let undecided =
             report.restart.iter().filter(|r| !r.corroborated).flat_map(|r| &r.undecided).any(|u| u.scan == i);
@@ -122,7 +129,7 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
         let held = report
             .scans
             .get(i)
-            .map_or(Ok(false), |s| why_held(out, &scans[i].name, &report.mode, s, tolerance, pipe_tried))?;
+            .map_or(Ok(false), |s| why_held(out, &scans[i].name, &report.mode, s, tolerance, pipe_ran))?;
         why_untrusted(out, scans, &report.checks, &report.untrusted, i, undecided || departed || held, tolerance)?;
     }
     for l in report.links.iter().filter(|l| !l.accepted || l.cycle.is_some()) {
@@ -194,20 +201,31 @@ fn why_departed(out: &mut dyn Write, name: &str, mode: &str, s: &ScanReport, tol
     Ok(true)
 }
 
+/// Where a pipe's blind-direction threshold ran already, for the held
+/// message's remedy ([`why_held`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum PipeRan {
+    /// Nowhere: the remedy is that threshold.
+    No,
+    /// From the starts, as the restart or the last further restart.
+    Restart,
+    /// As the set's own (given, or the scans found a pipe).
+    Set,
+}
+
 /// Whether scan `s` moved from its start along the directions only the
 /// start holds beyond [`fusion::scanset::held_beyond`]'s limits
 /// (`tolerance`: the finest voxel), and if so the message that says so:
 /// in graph mode (`mode`) the directions its links do not see, in the
 /// others those its matches hold no better than the start; the remedy a
-/// pipe's threshold unless it was tried already (`pipe_tried`: the
-/// restart or the last further one).
+/// pipe's threshold unless it ran already (`pipe_ran`).
 fn why_held(
     out: &mut dyn Write,
     name: &str,
     mode: &str,
     s: &ScanReport,
     tolerance: f64,
-    pipe_tried: bool,
+    pipe_ran: PipeRan,
 ) -> std::io::Result<bool> {
     let (Some(chi2), Some(moved)) = (s.held_chi2, s.held_m) else { return Ok(false) };
     let k = s.held_directions.len();
@@ -226,13 +244,15 @@ fn why_held(
             "along what the scans barely see, the matches' pull is no evidence",
         )
     };
-    let remedy = if pipe_tried {
-        "the pipe's threshold, tried from the starts (restart), named scans too: give better starts".to_string()
-    } else {
-        format!(
+    let remedy = match pipe_ran {
+        PipeRan::Set => "the matches ran with a pipe's threshold already: give better starts".to_string(),
+        PipeRan::Restart => {
+            "the pipe's threshold, tried from the starts (restart), named scans too: give better starts".to_string()
+        }
+        PipeRan::No => format!(
             "a pipe or a tunnel needs --degeneracy-ratio {}; or give better starts",
             fusion::links::PIPE_DEGENERACY_RATIO
-        )
+        ),
     };
     writeln!(
         out,
@@ -540,7 +560,7 @@ mod tests {
         };
         let said = |s: &ScanReport| {
             let mut out = Vec::new();
-            let held = why_held(&mut out, "b", "graph", s, 0.0085, false).expect("written");
+            let held = why_held(&mut out, "b", "graph", s, 0.0085, PipeRan::No).expect("written");
             (held, String::from_utf8(out).expect("UTF-8"))
         };
         let (held, text) = said(&scan(2, 18.8, 0.074));
@@ -561,7 +581,7 @@ mod tests {
         let mut pairwise = scan(2, 18.8, 0.074);
         pairwise.degenerate_directions.clear();
         let mut out = Vec::new();
-        assert!(why_held(&mut out, "b", "pairwise", &pairwise, 0.0085, false).expect("written"));
+        assert!(why_held(&mut out, "b", "pairwise", &pairwise, 0.0085, PipeRan::No).expect("written"));
         assert_eq!(
             String::from_utf8(out).expect("UTF-8"),
             "  not trusted: b: its matches hold 2 direction(s) no better than its start does, yet the stages moved it \
@@ -571,13 +591,21 @@ mod tests {
         );
         // Where the pipe's threshold ran already, it is not the remedy.
         let mut out = Vec::new();
-        assert!(why_held(&mut out, "b", "pairwise", &pairwise, 0.0085, true).expect("written"));
+        assert!(why_held(&mut out, "b", "pairwise", &pairwise, 0.0085, PipeRan::Restart).expect("written"));
         let text = String::from_utf8(out).expect("UTF-8");
         assert!(
             text.ends_with(
                 "no evidence — the pipe's threshold, tried from the starts (restart), named scans too: give better \
                  starts\n"
             ),
+            "{text}"
+        );
+        // Where the set ran with it (given, or the scans found a pipe), neither.
+        let mut out = Vec::new();
+        assert!(why_held(&mut out, "b", "pairwise", &pairwise, 0.0085, PipeRan::Set).expect("written"));
+        let text = String::from_utf8(out).expect("UTF-8");
+        assert!(
+            text.ends_with("no evidence — the matches ran with a pipe's threshold already: give better starts\n"),
             "{text}"
         );
     }
