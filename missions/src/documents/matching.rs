@@ -351,7 +351,10 @@ pub struct FurtherReport {
     /// was itself such a rescue — or the result before it was named only
     /// by moves along what only the starts hold (`scans[].held_chi2`),
     /// the verification names none of its scans, and the scans disagree
-    /// there within 1.5 times the best registration before it.
+    /// there within 1.5 times the best registration before it — or the
+    /// scans agreed with the result before it no better than with their
+    /// starts, and this one, within 1.5 times the best and named nothing
+    /// of, moves them less (`nearer_starts`).
     pub kept: bool,
     /// The scans the verification names at its poses; null when it failed
     /// or was not verified (it is where it may be kept).
@@ -362,6 +365,16 @@ pub struct FurtherReport {
     /// along what only the starts hold (docs/match.md). Null for the
     /// shorter schedules.
     pub degeneracy_ratio: Option<f64>,
+    /// The largest move of a scan from its start at its poses, metres (as
+    /// the restart's `moved_m`); null when it failed.
+    pub moved_m: Option<f64>,
+    /// Kept as nearer the starts: the scans agreed with the result before
+    /// it no better than with their starts (`starts_disagreement_m2`) —
+    /// its moves no evidence of the data's —, they agree with this one
+    /// within 1.5 times the best registration before it, the verification
+    /// names none of its scans and ties each to another by an agreeing
+    /// pair, and it moves them less (`moved_m`).
+    pub nearer_starts: bool,
 }
 
 /// A scan two registrations of the set place apart ([`RestartReport::undecided`]).

@@ -125,6 +125,8 @@ pub(super) fn report(
                     kept: f.kept,
                     untrusted: f.untrusted.clone(),
                     degeneracy_ratio: f.degeneracy_ratio,
+                    moved_m: f.moved_m,
+                    nearer_starts: f.nearer_starts,
                 })
                 .collect(),
             degeneracy_ratio: x.degeneracy_ratio,

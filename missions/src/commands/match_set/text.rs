@@ -425,6 +425,11 @@ fn write_restart(out: &mut dyn Write, scans: &[InputScan], r: &RestartReport) ->
             (Some(a), _) => format!(
                 "the scans disagree {a:.3e} m² a point there: {}",
                 match f.untrusted.as_deref() {
+                    _ if f.nearer_starts => format!(
+                        "its poses kept, nearer the starts (it moves a scan at most {:.3} m from its start; the scans \
+                         agreed no better with the result before it than with their starts)",
+                        f.moved_m.unwrap_or(f64::NAN)
+                    ),
                     _ if f.kept => "its poses kept".to_string(),
                     Some(named) if !named.is_empty() => format!("not kept (the verification names {})", names(named)),
                     _ if f.degeneracy_ratio.is_some() =>
@@ -628,6 +633,8 @@ mod tests {
             kept: false,
             untrusted: Some(vec![1]),
             degeneracy_ratio: None,
+            moved_m: Some(0.3),
+            nearer_starts: false,
         };
         let restart = |ratio: Option<f64>, further: Vec<FurtherReport>| RestartReport {
             scan: Some(1),
@@ -672,6 +679,18 @@ mod tests {
             "{usual}"
         );
         assert!(usual.contains("\n  again without the first 2 stages (0.010/0.040 m"), "{usual}");
+        // One kept as nearer the starts says so, and how far it moves a scan.
+        let nearer = FurtherReport { kept: true, nearer_starts: true, untrusted: Some(Vec::new()), ..further(1) };
+        let kept = said(&restart(None, vec![nearer]));
+        assert!(
+            kept.contains(
+                "\n  again without the first 2 stages (0.010/0.040 m: 16 runs, 0.500 s, abandoned at its cap), the scans \
+                 disagree 3.200e-5 m² \
+                 a point there: its poses kept, nearer the starts (it moves a scan at most 0.300 m from its start; the \
+                 scans agreed no better with the result before it than with their starts)\n"
+            ),
+            "{kept}"
+        );
     }
 
     #[test]
