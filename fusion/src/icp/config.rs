@@ -93,6 +93,22 @@ pub struct IcpConfig {
     /// the name is that of its first model, the variance by range bins).
     /// Nothing else changes. Default false.
     pub range_noise: bool,
+    /// Point-to-plane, in a match both ways
+    /// ([`crate::icp::solve::align_both`]): leave out a pair whose two
+    /// points' own normals — the source point's, turned into the target's
+    /// frame, and its partner's — meet at a cosine below this (|cos|: the
+    /// normals' sides do not count). Where one scan samples a surface far
+    /// more sparsely than the other — a façade seen at grazing angles in a
+    /// rotating scanner's slices 2 m apart — its points' neighbourhoods are
+    /// lines, and PCA gives them the plane across the surface: the other
+    /// scan's points pair with them off that plane, and which of them pair
+    /// with which changes with the scans' sampling as they slide, so the
+    /// cost bumps every few decimetres along the surface and the coarse
+    /// stages drag the scans there (BENCHMARKS.md, "Agreeing no better than
+    /// the starts"). Both scans sample a surface alike when their normals
+    /// agree. A one-way match (no source normals) is not affected.
+    /// Default none.
+    pub normal_agreement_cos: Option<f64>,
     /// Point-to-plane: what the residuals' own scatter misjudges of the
     /// estimate's variance, as a factor on the reported covariance —
     /// measured on the data by [`crate::noise::calibrate`] (random halves
@@ -146,6 +162,7 @@ impl Default for IcpConfig {
             only_covered: false,
             edge_bias: false,
             range_noise: false,
+            normal_agreement_cos: None,
             noise_scale: 1.0,
         }
     }

@@ -182,7 +182,11 @@ const CHUNK: usize = 4096;
 /// at most angle·|p| + length — or `None` on the first pass. A point whose
 /// distance bound, less that motion, still exceeds the correspondence
 /// distance cannot have a partner and is not searched (where scans overlap
-/// partly, that is most of the points beyond the overlap).
+/// partly, that is most of the points beyond the overlap). `own`: the
+/// source points' own model (the same points, in the same order, with
+/// their normals), for [`IcpConfig::normal_agreement_cos`]; a model of
+/// other points is not used.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn accumulate(
     source: &[Point3<f32>],
     target: &Target,
@@ -191,7 +195,13 @@ pub(crate) fn accumulate(
     config: &IcpConfig,
     partners: &mut Partners,
     moved: Option<(f64, f64)>,
+    own: Option<&Target>,
 ) -> Sums {
+    // The source's own normals, where they are the source points'.
+    let agreement = config.normal_agreement_cos.and_then(|cos| {
+        own.filter(|o| o.len() == source.len() && o.has_normals() && o.points().eq(source.iter().copied()))
+            .map(|o| (cos, o))
+    });
     let r: Matrix3<f64> = estimate.rotation.to_rotation_matrix().into_inner();
     let t = estimate.translation.vector;
     // The source scanner in the target frame.
@@ -232,6 +242,11 @@ pub(crate) fn accumulate(
                 }
                 match config.method {
                     Method::PointToPlane => {
+                        if let Some((cos, o)) = agreement
+                            && (r * o.normal(c * CHUNK + k)).dot(&target.normal(i)).abs() < cos
+                        {
+                            continue;
+                        }
                         let (res, j, edge) = plane_pair(target, i, &pt, config);
                         if edge && config.only_covered {
                             continue;
@@ -407,17 +422,46 @@ mod tests {
         let second =
             Isometry3::rotation(Vector3::new(0.0, 0.0, 0.004)) * Isometry3::translation(0.02, -0.03, 0.0) * first;
         let mut kept = Partners::new(source.len());
-        accumulate(&source, &target, &first, max_sq, &config, &mut kept, None);
+        accumulate(&source, &target, &first, max_sq, &config, &mut kept, None, None);
         let step = second * first.inverse();
         let moved = (step.rotation.angle(), (second.translation.vector - first.translation.vector).norm());
-        let bounded = accumulate(&source, &target, &second, max_sq, &config, &mut kept, Some(moved));
+        let bounded = accumulate(&source, &target, &second, max_sq, &config, &mut kept, Some(moved), None);
         let skipped = kept.lower_m.iter().filter(|&&l| f64::from(l) > 0.3).count();
-        let full = accumulate(&source, &target, &second, max_sq, &config, &mut Partners::new(source.len()), None);
+        let full = accumulate(&source, &target, &second, max_sq, &config, &mut Partners::new(source.len()), None, None);
         assert!(skipped > source.len() / 3, "{skipped} of {} points known to be beyond the distance", source.len());
         assert_eq!(bounded.n, full.n);
         assert!((bounded.h - full.h).amax() <= 1e-9 * full.h.amax());
         assert!((bounded.b - full.b).amax() <= 1e-9 * full.b.amax().max(1e-12));
         assert!((bounded.sq - full.sq).abs() <= 1e-9 * full.sq);
+    }
+
+    /// With a normal agreement asked for, a pair counts only where the
+    /// source point's own normal (turned into the target's frame) meets
+    /// its partner's within it, either side; without it, or with a model
+    /// of other points, every pair counts.
+    #[test]
+    fn pairs_whose_normals_disagree_are_left_out_when_asked() {
+        let grid: Vec<Point3<f32>> =
+            (0..30).flat_map(|i| (0..30).map(move |j| Point3::new(i as f32 * 0.1, j as f32 * 0.1, 0.0))).collect();
+        let target = Target::with_normals(&grid, vec![Vector3::z(); grid.len()]).expect("target");
+        // The source: the grid turned 90° about x (its plane y = 0 in its
+        // own frame), a third of its normals across the plane and the
+        // rest along −y, which the turn takes to ±z.
+        let turn = Isometry3::rotation(Vector3::x() * std::f64::consts::FRAC_PI_2);
+        let source: Vec<Point3<f32>> =
+            grid.iter().map(|p| Point3::from((turn.inverse() * p.cast::<f64>()).coords.cast::<f32>())).collect();
+        let own_normals: Vec<Vector3<f64>> =
+            (0..source.len()).map(|k| if k % 3 == 0 { Vector3::x() } else { -Vector3::y() }).collect();
+        let own = Target::with_normals(&source, own_normals).expect("own");
+        let asked = IcpConfig { normal_agreement_cos: Some(0.95), max_correspondence_m: 0.05, ..IcpConfig::default() };
+        let pass = |config: &IcpConfig, own: Option<&Target>| {
+            accumulate(&source, &target, &turn, 0.0025, config, &mut Partners::new(source.len()), None, own).n
+        };
+        assert_eq!(pass(&asked, Some(&own)), source.len() - source.len().div_ceil(3));
+        assert_eq!(pass(&IcpConfig { normal_agreement_cos: None, ..asked }, Some(&own)), source.len());
+        let others = Target::with_normals(&grid, vec![Vector3::x(); grid.len()]).expect("other points");
+        assert_eq!(pass(&asked, Some(&others)), source.len());
+        assert_eq!(pass(&asked, None), source.len());
     }
 
     /// A match started from the neighbours an overlap count found

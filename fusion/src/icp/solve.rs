@@ -255,11 +255,13 @@ fn align_impl(
     let (centre, lever_arm_m) =
         config.degeneracy_ratio.map_or((Point3::origin(), 1.0), |_| super::degeneracy::centroid_and_lever_arm(source));
     while iterations < config.max_iterations {
-        let mut sums = accumulate(source, target, &estimate, max_sq, config, &mut partners, moved);
+        let own = reverse.as_ref().map(|r| r.model);
+        let mut sums = accumulate(source, target, &estimate, max_sq, config, &mut partners, moved, own);
         forward = sums.n;
         if let Some(r) = &reverse {
             let inverse = estimate.inverse();
-            let back = accumulate(r.points, r.model, &inverse, max_sq, config, &mut back_partners, back_moved);
+            let back =
+                accumulate(r.points, r.model, &inverse, max_sq, config, &mut back_partners, back_moved, Some(target));
             sums = sums.both_ways(&back, &estimate);
         }
         last = sums;
@@ -456,6 +458,15 @@ fn check(c: &IcpConfig) -> Result<()> {
         });
     }
 
+    if let Some(cos) = c.normal_agreement_cos
+        && !(cos.is_finite() && cos > 0.0 && cos <= 1.0)
+    {
+        return Err(FusionError::OutOfRange {
+            what: "normal agreement cosine".into(),
+            value: cos,
+            expected: "in (0, 1]".into(),
+        });
+    }
     if c.max_iterations == 0 {
         return Err(FusionError::OutOfRange { what: "iteration cap".into(), value: 0.0, expected: "≥ 1".into() });
     }

@@ -424,6 +424,10 @@ pub struct SettingsReport {
     /// The line test's ratio (0: off): `--line-ratio`, else 0.1 with a
     /// threshold given or a pipe found, else 0.
     pub line_ratio: f64,
+    /// `--normal-agreement`: in the matches made both ways, pairs whose
+    /// two normals differ by more than this many degrees left out (0:
+    /// off).
+    pub normal_agreement_deg: f64,
     /// Where no `--degeneracy-ratio` is given and every scan's points lie
     /// on a tube all round it: the pipe found, whose threshold the matches
     /// then ran with. Null otherwise.

@@ -77,6 +77,9 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
     if line_ratio > 0.0 && degeneracy_ratio == 0.0 {
         bail!("--line-ratio {line_ratio} judges the blind directions: it needs --degeneracy-ratio above 0");
     }
+    if !(args.normal_agreement.is_finite() && (0.0..90.0).contains(&args.normal_agreement)) {
+        bail!("--normal-agreement {}: expected degrees in [0, 90) (0: off)", args.normal_agreement);
+    }
     if args.max_partners == 0 {
         bail!("--max-partners 0: expected at least 1");
     }
@@ -89,6 +92,7 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
     let icp = &mut config.link.multiview.icp;
     icp.degeneracy_ratio = (degeneracy_ratio > 0.0).then_some(degeneracy_ratio);
     icp.line_ratio = (line_ratio > 0.0).then_some(line_ratio);
+    icp.normal_agreement_cos = (args.normal_agreement > 0.0).then(|| args.normal_agreement.to_radians().cos());
     if args.method == MethodArg::PointToPoint {
         icp.method = Method::PointToPoint;
         // Back faces need the target's normals, which point-to-point does not estimate.
@@ -280,6 +284,7 @@ fn scale_settings(
         only_covered: config.only_covered,
         degeneracy_ratio: config.link.multiview.icp.degeneracy_ratio.unwrap_or(0.0),
         line_ratio: config.link.multiview.icp.line_ratio.unwrap_or(0.0),
+        normal_agreement_deg: config.link.multiview.icp.normal_agreement_cos.map_or(0.0, |c| c.acos().to_degrees()),
         pipe: None,
         global: None,
     })
