@@ -65,6 +65,19 @@ fn run_text(args: &[OsString], out: &Path) -> tests::Run {
     cps_survey(all)
 }
 
+/// Runs the example mission `name` (with `edits` to its text, and no
+/// `.rrd`) into `dir/run`: the run directory and how the run ended.
+fn example_run(name: &str, edits: &[(&str, &str)], dir: &Path) -> (std::path::PathBuf, tests::Run) {
+    let text = edits
+        .iter()
+        .fold(std::fs::read_to_string(tests::example(name)).expect("example"), |t, (from, to)| t.edit(from, to))
+        .edit("[output]", "[output]\nrerun = false");
+    let mission = tests::temp_mission(&text);
+    let run_dir = dir.join("run");
+    let done = tests::run_mission(&mission.path, &run_dir);
+    (run_dir, done)
+}
+
 /// `cps-survey match ARGS --out OUT --json`, and its JSON.
 fn run(args: &[OsString], out: &Path) -> (tests::Run, Option<Value>) {
     let mut args = args.to_vec();
@@ -1317,14 +1330,11 @@ fn init_global_registers_scans_that_come_with_no_guess() {
 #[test]
 fn the_corridor_registers_and_its_slides_along_the_axis_are_not_disagreements() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let text = std::fs::read_to_string(tests::example("corridor-icp.toml"))
-        .expect("corridor")
-        .edit("mode = \"icp\"", "mode = \"direct\"")
-        .edit("max_station_error_m = 0.25", "max_station_error_m = 100.0")
-        .edit("[output]", "[output]\nrerun = false");
-    let mission = tests::temp_mission(&text);
-    let run_dir = dir.path().join("run");
-    let done = tests::run_mission(&mission.path, &run_dir);
+    let (run_dir, done) = example_run(
+        "corridor-icp.toml",
+        &[("mode = \"icp\"", "mode = \"direct\""), ("max_station_error_m = 0.25", "max_station_error_m = 100.0")],
+        dir.path(),
+    );
     assert_eq!(done.code, 0, "{}", done.stderr);
     let (r, v) = run(&[run_dir.join("scans").into_os_string()], &dir.path().join("out"));
     let v = v.expect("JSON");
@@ -1773,12 +1783,7 @@ fn a_slide_along_the_street_lands_by_a_further_restart() {
 #[test]
 fn a_registration_the_scans_agree_with_no_better_than_their_starts_gives_way_to_one_nearer_them() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let text = std::fs::read_to_string(tests::example("building.toml"))
-        .expect("building")
-        .edit("[output]", "[output]\nrerun = false");
-    let mission = tests::temp_mission(&text);
-    let run_dir = dir.path().join("run");
-    let done = tests::run_mission(&mission.path, &run_dir);
+    let (run_dir, done) = example_run("building.toml", &[], dir.path());
     assert_eq!(done.code, 0, "{}", done.stderr);
     // The simulator's truth at each scan: position, heading and tilt
     // (world_from_body = T · Rz(heading) · Ry(pitch) · Rx(roll)).
@@ -1815,15 +1820,17 @@ fn a_registration_the_scans_agree_with_no_better_than_their_starts_gives_way_to_
     // (Measured 0.13 m against the schedule's 0.72 m.)
     let moved = last["moved_m"].as_f64().expect("moved");
     assert!(moved < 0.5 * restart["moved_m"].as_f64().expect("schedule's move"), "{restart}");
-    // Scan 0 holds the frame at its start: each scan against the truth
-    // carried into that frame.
-    let poses: Vec<Isometry3<f64>> =
-        v["scans"].as_array().expect("scans").iter().map(|s| pose(&s["world_from_scan"])).collect();
-    let frame = poses[0] * truths[0].inverse();
-    for (k, (p, t)) in poses.iter().zip(&truths).enumerate().skip(1) {
-        let off = (p.translation.vector - (frame * t).translation.vector).norm();
+    // Scan 0 holds the frame at its start: each scan's offset from the
+    // truth carried into that frame, metres.
+    let offsets = |v: &Value| -> Vec<f64> {
+        let poses: Vec<Isometry3<f64>> =
+            v["scans"].as_array().expect("scans").iter().map(|s| pose(&s["world_from_scan"])).collect();
+        let frame = poses[0] * truths[0].inverse();
+        poses.iter().zip(&truths).map(|(p, t)| (p.translation.vector - (frame * t).translation.vector).norm()).collect()
+    };
+    for (k, off) in offsets(&v).iter().enumerate() {
         // (Measured 4–118 mm; up to 0.46 m before.)
-        assert!(off < 0.15, "scan {k}: {off:.3} m from the truth");
+        assert!(*off < 0.15, "scan {k}: {off:.3} m from the truth");
     }
     // With the pairs whose normals disagree by more than 18° left out
     // (`--normal-agreement 18`: the far façade's columns, whose normals
@@ -1840,13 +1847,9 @@ fn a_registration_the_scans_agree_with_no_better_than_their_starts_gives_way_to_
         "{}",
         v["settings"]
     );
-    let poses: Vec<Isometry3<f64>> =
-        v["scans"].as_array().expect("scans").iter().map(|s| pose(&s["world_from_scan"])).collect();
-    let frame = poses[0] * truths[0].inverse();
-    for (k, (p, t)) in poses.iter().zip(&truths).enumerate().skip(1) {
-        let off = (p.translation.vector - (frame * t).translation.vector).norm();
+    for (k, off) in offsets(&v).iter().enumerate() {
         // (Measured 2–54 mm.)
-        assert!(off < 0.07, "scan {k}: {off:.3} m from the truth with --normal-agreement 18");
+        assert!(*off < 0.07, "scan {k}: {off:.3} m from the truth with --normal-agreement 18");
     }
 }
 
@@ -2208,13 +2211,7 @@ fn a_slide_in_all_names_the_schedules_result_and_the_restart_is_kept() {
 #[test]
 fn a_links_blind_directions_are_in_the_worlds_axes_in_every_mode() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let text = std::fs::read_to_string(tests::example("sewer.toml"))
-        .expect("sewer")
-        .edit("slices = 180", "slices = 60")
-        .edit("[output]", "[output]\nrerun = false");
-    let mission = tests::temp_mission(&text);
-    let run_dir = dir.path().join("run");
-    let done = tests::run_mission(&mission.path, &run_dir);
+    let (run_dir, done) = example_run("sewer.toml", &[("slices = 180", "slices = 60")], dir.path());
     assert!(done.code <= 1, "{}", done.stderr);
     // The same sparse lines in the mission's own ICP fusion: with the
     // sewer's `[fusion] line_ratio` (0.1, the default with its
@@ -2377,12 +2374,7 @@ fn a_links_blind_directions_are_in_the_worlds_axes_in_every_mode() {
 #[test]
 fn a_pipe_slid_along_what_only_its_start_holds_is_named() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let text = std::fs::read_to_string(tests::example("sewer.toml"))
-        .expect("sewer")
-        .edit("[output]", "[output]\nrerun = false");
-    let mission = tests::temp_mission(&text);
-    let run_dir = dir.path().join("run");
-    let done = tests::run_mission(&mission.path, &run_dir);
+    let (run_dir, done) = example_run("sewer.toml", &[], dir.path());
     assert_eq!(done.code, 0, "{}", done.stderr);
     let report: Value =
         serde_json::from_str(&std::fs::read_to_string(run_dir.join("report.json")).expect("report")).expect("JSON");
