@@ -197,11 +197,7 @@ pub(crate) fn accumulate(
     moved: Option<(f64, f64)>,
     own: Option<&Target>,
 ) -> Sums {
-    // The source's own normals, where they are the source points'.
-    let agreement = config.normal_agreement_cos.and_then(|cos| {
-        own.filter(|o| o.len() == source.len() && o.has_normals() && o.points().eq(source.iter().copied()))
-            .map(|o| (cos, o))
-    });
+    let agreement = agreement(config, source, own);
     let r: Matrix3<f64> = estimate.rotation.to_rotation_matrix().into_inner();
     let t = estimate.translation.vector;
     // The source scanner in the target frame.
@@ -242,9 +238,7 @@ pub(crate) fn accumulate(
                 }
                 match config.method {
                     Method::PointToPlane => {
-                        if let Some((cos, o)) = agreement
-                            && (r * o.normal(c * CHUNK + k)).dot(&target.normal(i)).abs() < cos
-                        {
+                        if disagree(agreement, &r, c * CHUNK + k, target, i) {
                             continue;
                         }
                         let (res, j, edge) = plane_pair(target, i, &pt, config);
@@ -293,6 +287,23 @@ pub(crate) fn accumulate(
         .fold(Sums::default(), Sums::merge)
 }
 
+/// [`IcpConfig::normal_agreement_cos`] and the source points' own model
+/// (`own`), where it is theirs: the same points, in the same order, with
+/// normals.
+fn agreement<'a>(config: &IcpConfig, source: &[Point3<f32>], own: Option<&'a Target>) -> Option<(f64, &'a Target)> {
+    config.normal_agreement_cos.and_then(|cos| {
+        own.filter(|o| o.len() == source.len() && o.has_normals() && o.points().eq(source.iter().copied()))
+            .map(|o| (cos, o))
+    })
+}
+
+/// Whether source point `k`'s own normal, turned by `r` into the target's
+/// frame, meets target point `i`'s at a cosine below the agreement's
+/// (either side); false without one.
+fn disagree(agreement: Option<(f64, &Target)>, r: &Matrix3<f64>, k: usize, target: &Target, i: usize) -> bool {
+    agreement.is_some_and(|(cos, own)| (r * own.normal(k)).dot(&target.normal(i)).abs() < cos)
+}
+
 /// A point-to-plane pair: source point `pt` (target frame) on target
 /// point `i`'s plane — its residual, its Jacobian row and whether it lies
 /// beyond the target's sampled edge (asked only with
@@ -337,7 +348,8 @@ struct ZonePair {
 /// [`EDGE_ZONE_SPACINGS`] target spacings (the median distance of the
 /// edge's samples to their nearest neighbours) of a pair beyond the edge
 /// ([`Target::beyond`]), summed into `zone_h` / `zone_b` (the rest of the
-/// sums zero). Zero when no pair lies beyond the edge.
+/// sums zero). Zero when no pair lies beyond the edge. Pairs whose
+/// normals disagree are left out as [`accumulate`] leaves them (`own`).
 pub(crate) fn edge_zone(
     source: &[Point3<f32>],
     target: &Target,
@@ -345,7 +357,9 @@ pub(crate) fn edge_zone(
     max_sq: f64,
     config: &IcpConfig,
     partners: &Partners,
+    own: Option<&Target>,
 ) -> Sums {
+    let agreement = agreement(config, source, own);
     let r: Matrix3<f64> = estimate.rotation.to_rotation_matrix().into_inner();
     let t = estimate.translation.vector;
     let back_faces = config.reject_back_faces.then(|| r * config.source_viewpoint.coords + t);
@@ -353,7 +367,8 @@ pub(crate) fn edge_zone(
     let pairs: Vec<ZonePair> = source
         .par_iter()
         .zip(&partners.nearest)
-        .filter_map(|(p, &i)| {
+        .enumerate()
+        .filter_map(|(k, (p, &i))| {
             let i = i as usize;
             let q = point(target.points.get(i)?);
             let pt = r * p.coords.cast::<f64>() + t;
@@ -363,6 +378,9 @@ pub(crate) fn edge_zone(
             if let Some(eye) = back_faces
                 && target.normal(i).dot(&(eye - q)) < 0.0
             {
+                return None;
+            }
+            if disagree(agreement, &r, k, target, i) {
                 return None;
             }
             let (res, row, beyond) = plane_pair(target, i, &pt, &config);

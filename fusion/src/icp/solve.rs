@@ -333,9 +333,10 @@ fn align_impl(
     let mut sums = last;
     if config.edge_bias && config.method == Method::PointToPlane {
         // At the last pass's estimate, each point on its partner there.
-        let mut z = edge_zone(source, target, &at_last, max_sq, config, &partners);
+        let own = reverse.as_ref().map(|r| r.model);
+        let mut z = edge_zone(source, target, &at_last, max_sq, config, &partners, own);
         if let Some(r) = &reverse {
-            let back = edge_zone(r.points, r.model, &at_last.inverse(), max_sq, config, &back_partners);
+            let back = edge_zone(r.points, r.model, &at_last.inverse(), max_sq, config, &back_partners, Some(target));
             z = z.both_ways(&back, &at_last);
         }
         sums.zone_h = z.zone_h;
