@@ -550,9 +550,11 @@ pub struct Further {
     /// [`Restart::moved_m`] measures the schedule's); `None` when it
     /// failed.
     pub moved_m: Option<f64>,
-    /// Kept as nearer the starts ([`keeps_nearer_starts`]): the result
-    /// before it the scans agreed with no better than with their starts,
-    /// and this one moves them less.
+    /// Kept as nearer the starts: the result before it the scans agreed
+    /// with no better than with their starts, and this one — named nothing
+    /// of by the verification, every scan tied by an agreeing pair
+    /// ([`SetResult::all_tied`]), the scans agreeing with it within
+    /// [`RESTART_RATIO`] of the best — moves them less.
     pub nearer_starts: bool,
 }
 

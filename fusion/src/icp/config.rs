@@ -93,8 +93,8 @@ pub struct IcpConfig {
     /// the name is that of its first model, the variance by range bins).
     /// Nothing else changes. Default false.
     pub range_noise: bool,
-    /// Point-to-plane, in a match both ways
-    /// ([`crate::icp::solve::align_both`]): leave out a pair whose two
+    /// Point-to-plane, in a match both ways (the source's points also
+    /// into the target's, on the source's normals): leave out a pair whose two
     /// points' own normals — the source point's, turned into the target's
     /// frame, and its partner's — meet at a cosine below this (|cos|: the
     /// normals' sides do not count). Where one scan samples a surface far
