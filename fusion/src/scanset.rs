@@ -218,10 +218,9 @@ impl SetResult {
     /// no pair reaches is held by its start in every direction: its move
     /// is all the stages' doing, and nothing verifies it.)
     pub fn named_only_held(&self) -> bool {
-        let tied = |i: usize| self.checks.iter().any(|c| c.consistent && (c.source == i || c.target == i));
         let held: Vec<usize> = self.held.iter().enumerate().filter(|(_, h)| h.named).map(|(i, _)| i).collect();
         !held.is_empty()
-            && held.iter().all(|&i| tied(i))
+            && held.iter().all(|&i| self.tied(i))
             && self.departed.is_empty()
             && crate::verify::untrusted(self.world_from_scan.len(), &self.checks).is_empty()
     }
@@ -231,8 +230,12 @@ impl SetResult {
     /// scan no pair reaches is held by its start in every direction, and
     /// nothing verifies it).
     pub fn all_tied(&self) -> bool {
-        (1..self.world_from_scan.len())
-            .all(|i| self.checks.iter().any(|c| c.consistent && (c.source == i || c.target == i)))
+        (1..self.world_from_scan.len()).all(|i| self.tied(i))
+    }
+
+    /// Whether a pair matched again that agrees ties scan `i` to another.
+    fn tied(&self, i: usize) -> bool {
+        self.checks.iter().any(|c| c.consistent && (c.source == i || c.target == i))
     }
 
     /// The scans the verification names at these poses: by their pairs
@@ -656,8 +659,9 @@ fn keeps_pipe(named: Option<&[usize]>, a: Option<f64>, best: f64) -> bool {
 /// pair ([`SetResult::all_tied`]) is asked after (it is verified where
 /// this holds): a scan no pair reaches would give way to its start (the
 /// room pair with a 1 mm last stage, whose coarse stages landed it from
-/// an odometry guess 0.69 m off). Measured: the building example's own scans, a façade 20 m
-/// a station seen at grazing angles from 7.5 m — its sparse columns'
+/// an odometry guess 0.69 m off). Measured: the building example's own
+/// scans, a façade 20 m a station seen at grazing angles from 7.5 m — its
+/// sparse columns'
 /// normals (a line's, PCA's plane across the wall) rough the
 /// point-to-plane cost along the wall with a minimum every 0.25 m —:
 /// the coarse stages slid the scans 0.1–0.5 m along the walls from starts

@@ -183,9 +183,8 @@ const CHUNK: usize = 4096;
 /// distance bound, less that motion, still exceeds the correspondence
 /// distance cannot have a partner and is not searched (where scans overlap
 /// partly, that is most of the points beyond the overlap). `own`: the
-/// source points' own model (the same points, in the same order, with
-/// their normals), for [`IcpConfig::normal_agreement_cos`]; a model of
-/// other points is not used.
+/// source points' own model, for [`IcpConfig::normal_agreement_cos`]
+/// ([`own_model`]).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn accumulate(
     source: &[Point3<f32>],
@@ -197,7 +196,7 @@ pub(crate) fn accumulate(
     moved: Option<(f64, f64)>,
     own: Option<&Target>,
 ) -> Sums {
-    let agreement = agreement(config, source, own);
+    let agreement = config.normal_agreement_cos.zip(own);
     let r: Matrix3<f64> = estimate.rotation.to_rotation_matrix().into_inner();
     let t = estimate.translation.vector;
     // The source scanner in the target frame.
@@ -287,14 +286,12 @@ pub(crate) fn accumulate(
         .fold(Sums::default(), Sums::merge)
 }
 
-/// [`IcpConfig::normal_agreement_cos`] and the source points' own model
-/// (`own`), where it is theirs: the same points, in the same order, with
-/// normals.
-fn agreement<'a>(config: &IcpConfig, source: &[Point3<f32>], own: Option<&'a Target>) -> Option<(f64, &'a Target)> {
-    config.normal_agreement_cos.and_then(|cos| {
-        own.filter(|o| o.len() == source.len() && o.has_normals() && o.points().eq(source.iter().copied()))
-            .map(|o| (cos, o))
-    })
+/// `model` as `points`' own for [`IcpConfig::normal_agreement_cos`]
+/// (asked for): the same points, in the same order, with normals; `None`
+/// otherwise (a model of other points is not used). Checked once a match.
+pub(crate) fn own_model<'a>(config: &IcpConfig, points: &[Point3<f32>], model: &'a Target) -> Option<&'a Target> {
+    let theirs = model.len() == points.len() && model.has_normals() && model.points().eq(points.iter().copied());
+    (config.normal_agreement_cos.is_some() && theirs).then_some(model)
 }
 
 /// Whether source point `k`'s own normal, turned by `r` into the target's
@@ -359,7 +356,7 @@ pub(crate) fn edge_zone(
     partners: &Partners,
     own: Option<&Target>,
 ) -> Sums {
-    let agreement = agreement(config, source, own);
+    let agreement = config.normal_agreement_cos.zip(own);
     let r: Matrix3<f64> = estimate.rotation.to_rotation_matrix().into_inner();
     let t = estimate.translation.vector;
     let back_faces = config.reject_back_faces.then(|| r * config.source_viewpoint.coords + t);
@@ -455,8 +452,8 @@ mod tests {
 
     /// With a normal agreement asked for, a pair counts only where the
     /// source point's own normal (turned into the target's frame) meets
-    /// its partner's within it, either side; without it, or with a model
-    /// of other points, every pair counts.
+    /// its partner's within it, either side; without it every pair counts,
+    /// and a model of other points is not the source's own.
     #[test]
     fn pairs_whose_normals_disagree_are_left_out_when_asked() {
         let grid: Vec<Point3<f32>> =
@@ -477,8 +474,10 @@ mod tests {
         };
         assert_eq!(pass(&asked, Some(&own)), source.len() - source.len().div_ceil(3));
         assert_eq!(pass(&IcpConfig { normal_agreement_cos: None, ..asked }, Some(&own)), source.len());
+        assert!(own_model(&asked, &source, &own).is_some());
+        assert!(own_model(&IcpConfig { normal_agreement_cos: None, ..asked }, &source, &own).is_none());
         let others = Target::with_normals(&grid, vec![Vector3::x(); grid.len()]).expect("other points");
-        assert_eq!(pass(&asked, Some(&others)), source.len());
+        assert!(own_model(&asked, &source, &others).is_none(), "a model of other points");
         assert_eq!(pass(&asked, None), source.len());
     }
 

@@ -6,7 +6,7 @@
 use nalgebra::{Isometry3, Matrix3, Matrix4, Matrix6, Point3, SymmetricEigen, Translation3, UnitQuaternion, Vector6};
 
 use super::config::{IcpConfig, Kernel, Method};
-use super::correspondences::{Partners, Sums, accumulate, edge_zone};
+use super::correspondences::{Partners, Sums, accumulate, edge_zone, own_model};
 use super::degeneracy::{Observability, projector_off};
 use super::target::Target;
 use crate::error::{FusionError, Result};
@@ -254,14 +254,17 @@ fn align_impl(
     // translation by the source's RMS radius about it (at least 1 mm).
     let (centre, lever_arm_m) =
         config.degeneracy_ratio.map_or((Point3::origin(), 1.0), |_| super::degeneracy::centroid_and_lever_arm(source));
+    // Each way's points' own normals, for the normal agreement: the
+    // source's model and the target's.
+    let own = reverse.as_ref().and_then(|r| own_model(config, source, r.model));
+    let back_own = reverse.as_ref().and_then(|r| own_model(config, r.points, target));
     while iterations < config.max_iterations {
-        let own = reverse.as_ref().map(|r| r.model);
         let mut sums = accumulate(source, target, &estimate, max_sq, config, &mut partners, moved, own);
         forward = sums.n;
         if let Some(r) = &reverse {
             let inverse = estimate.inverse();
             let back =
-                accumulate(r.points, r.model, &inverse, max_sq, config, &mut back_partners, back_moved, Some(target));
+                accumulate(r.points, r.model, &inverse, max_sq, config, &mut back_partners, back_moved, back_own);
             sums = sums.both_ways(&back, &estimate);
         }
         last = sums;
@@ -333,10 +336,9 @@ fn align_impl(
     let mut sums = last;
     if config.edge_bias && config.method == Method::PointToPlane {
         // At the last pass's estimate, each point on its partner there.
-        let own = reverse.as_ref().map(|r| r.model);
         let mut z = edge_zone(source, target, &at_last, max_sq, config, &partners, own);
         if let Some(r) = &reverse {
-            let back = edge_zone(r.points, r.model, &at_last.inverse(), max_sq, config, &back_partners, Some(target));
+            let back = edge_zone(r.points, r.model, &at_last.inverse(), max_sq, config, &back_partners, back_own);
             z = z.both_ways(&back, &at_last);
         }
         sums.zone_h = z.zone_h;

@@ -1778,15 +1778,14 @@ fn a_slide_along_the_street_lands_by_a_further_restart() {
 /// 0.1–0.5 m along the walls and the scans agreed no better there than
 /// at their starts; the restart and the further restarts were each
 /// within 1.5× of the best, so the slid poses stood (exit 0, scans up to
-/// 0.46 m off, σ 43–121 mm). Now a further restart that moves the scans less is kept:
-/// the finest stage alone, every scan within 0.12 m.
+/// 0.46 m off, σ 43–121 mm). Now a further restart that moves the scans
+/// less is kept: the finest stage alone, every scan within 0.12 m.
 #[test]
 fn a_registration_the_scans_agree_with_no_better_than_their_starts_gives_way_to_one_nearer_them() {
     let dir = tempfile::tempdir().expect("temp dir");
     let (run_dir, done) = example_run("building.toml", &[], dir.path());
     assert_eq!(done.code, 0, "{}", done.stderr);
-    // The simulator's truth at each scan: position, heading and tilt
-    // (world_from_body = T · Rz(heading) · Ry(pitch) · Rx(roll)).
+    // The simulator's truth at each scan: position, heading and tilt.
     let journal = std::fs::read_to_string(run_dir.join("journal.jsonl")).expect("journal");
     let truths: Vec<Isometry3<f64>> = journal
         .lines()
@@ -1796,10 +1795,8 @@ fn a_registration_the_scans_agree_with_no_better_than_their_starts_gives_way_to_
             let t = &e["sim"]["truth"];
             let p: Vec<f64> = serde_json::from_value(t["parent"].clone()).expect("parent");
             let tilt: Vec<f64> = serde_json::from_value(t["tilt"].clone()).expect("tilt");
-            let r = UnitQuaternion::from_axis_angle(&nalgebra::Vector3::z_axis(), p[3])
-                * UnitQuaternion::from_axis_angle(&nalgebra::Vector3::y_axis(), tilt[1])
-                * UnitQuaternion::from_axis_angle(&nalgebra::Vector3::x_axis(), tilt[0]);
-            Isometry3::from_parts(nalgebra::Translation3::new(p[0], p[1], p[2]), r)
+            scanner::Tilt { roll_rad: tilt[0], pitch_rad: tilt[1] }
+                .world_from_body(&cps::ParentPose::new(p[0], p[1], p[2], p[3]))
         })
         .collect();
     assert_eq!(truths.len(), 13, "the building's stations");

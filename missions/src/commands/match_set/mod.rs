@@ -284,7 +284,7 @@ fn scale_settings(
         only_covered: config.only_covered,
         degeneracy_ratio: config.link.multiview.icp.degeneracy_ratio.unwrap_or(0.0),
         line_ratio: config.link.multiview.icp.line_ratio.unwrap_or(0.0),
-        normal_agreement_deg: config.link.multiview.icp.normal_agreement_cos.map_or(0.0, |c| c.acos().to_degrees()),
+        normal_agreement_deg: args.normal_agreement,
         pipe: None,
         global: None,
     })

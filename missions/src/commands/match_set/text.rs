@@ -685,9 +685,8 @@ mod tests {
         assert!(
             kept.contains(
                 "\n  again without the first 2 stages (0.010/0.040 m: 16 runs, 0.500 s, abandoned at its cap), the scans \
-                 disagree 3.200e-5 m² \
-                 a point there: its poses kept, nearer the starts (it moves a scan at most 0.300 m from its start; the \
-                 scans agreed no better with the result before it than with their starts)\n"
+                 disagree 3.200e-5 m² a point there: its poses kept, nearer the starts (it moves a scan at most 0.300 m \
+                 from its start; the scans agreed no better with the result before it than with their starts)\n"
             ),
             "{kept}"
         );
