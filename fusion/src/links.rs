@@ -43,7 +43,8 @@
 //!   residuals do not show) — or, where the links corrected by their
 //!   edges' lean agree better than as measured, that lean, with the
 //!   corrected links' σ̂₀² ([`Pull`]) — and, when σ̂₀² is below 1, the
-//!   scans' shared noise (`shared_noise`).
+//!   scans' shared noise (`shared_own`), and where a scan's links' two
+//!   ways disagree beyond their noise, its own sampling (`sampling_own`).
 
 use nalgebra::{Isometry3, Matrix6, Point3, Vector6};
 use rayon::prelude::*;
@@ -90,6 +91,12 @@ pub struct LinkConfig {
     /// ([`crate::noise::Calibration::range_scale`]) — in the modes without
     /// a link graph, on each placing match's. Default 1.
     pub range_scale: f64,
+    /// What the scans' noise alone makes of a match's two ways'
+    /// disagreement ([`crate::noise::Calibration::asymmetry`]): beyond it
+    /// the links' asymmetry is their scans' sampling, each scan's own in
+    /// every one of its links (the covariances in the [module
+    /// docs](crate::links)). `None` (the default): not modelled.
+    pub asymmetry: Option<f64>,
 }
 
 impl LinkConfig {
@@ -153,6 +160,7 @@ impl Default for LinkConfig {
             max_partners: 10,
             both_ways: true,
             range_scale: 1.0,
+            asymmetry: None,
         }
     }
 }
@@ -300,7 +308,7 @@ fn footprints(
 /// Σ a·b / √(Σ a² · Σ b²): 1 for random shares of one scan, whose every
 /// link uses all of it; about 0 for wedges, each of whose links uses
 /// another part; and 1 for a scan with one link. A scan's own noise is
-/// common to its links in that share ([`shared_noise`]).
+/// common to its links in that share ([`shared_own`]).
 pub(crate) fn shared_shares(n: usize, links: &[Link], footprints: &[[Footprint; 2]]) -> Vec<f64> {
     let mut of_scan: Vec<Vec<&Footprint>> = vec![Vec::new(); n];
     for (l, [on_source, on_target]) in links.iter().zip(footprints).filter(|(l, _)| l.rejected.is_none()) {
@@ -630,7 +638,7 @@ pub fn adjust_matches(
     let g = crate::graph::optimize(poses, &priors, &all, 20)?;
     let variance_factor = judged(&g.world_from_scan, edges).variance_factor;
     let lean_variance_factor = lean_factor(&g.world_from_scan, &priors, &all, steps, pulls)?;
-    let agreement = Agreement { variance_factor, lean_variance_factor, shared };
+    let agreement = Agreement { variance_factor, lean_variance_factor, shared, asymmetry: config.asymmetry };
     let mut joint = adjusted_covariance(&g.world_from_scan, &priors, &all, steps, noise, pulls, &agreement)?;
     joint.hold(0);
     let adjusted = joint.diagonal();
@@ -865,7 +873,7 @@ fn solve(
             steps.len(),
             &noise,
             &pulls,
-            &Agreement { variance_factor, lean_variance_factor, shared },
+            &Agreement { variance_factor, lean_variance_factor, shared, asymmetry: config.asymmetry },
         )?;
         // Scan 0 is the frame: the others' covariances are relative to it.
         joint.hold(0);
@@ -896,7 +904,7 @@ fn solve(
 ///   (`variance_factor`): above 1 the links disagree more than their
 ///   noise says; below 1 they agree better, and the share of their noise
 ///   that is each scan's own, in every one of its links, closes the
-///   cycles ([`shared_noise`]). (σ̂₀² is exactly 1 without redundancy.)
+///   cycles ([`shared_own`]). (σ̂₀² is exactly 1 without redundancy.)
 ///   The start's steps, which hold only what no link sees, are taken as
 ///   they are weighed.
 /// - its edge's pull (`pulls`, [`Pull`]): a bias that its residuals do not
@@ -928,7 +936,15 @@ fn adjusted_covariance(
     let mut covariances = vec![None; steps];
     covariances.extend(noise.iter().zip(&bias).map(|(c, d)| Some(c * f + d * d.transpose())));
     let covariance = crate::graph::sandwich_joint(poses, priors, edges, &covariances)?;
-    Ok(if f < 1.0 { shared_noise(poses, covariance, &edges[steps..], noise, f, shared) } else { covariance })
+    let links = &edges[steps..];
+    let mut own =
+        if f < 1.0 { shared_own(poses, links, noise, f, shared) } else { vec![Matrix6::zeros(); poses.len()] };
+    if let Some(floor) = agreement.asymmetry {
+        for (s, m) in own.iter_mut().zip(sampling_own(poses, links, noise, pulls, floor)) {
+            *s += positive_part(&(m - *s));
+        }
+    }
+    Ok(with_own(covariance, &own))
 }
 
 /// How far a link's error runs along its edge's lean
@@ -950,12 +966,14 @@ pub struct Pull {
     /// By those and the covered pairs nearest the edge
     /// ([`crate::icp::IcpResult::edge_lean`]).
     pub lean: Vector6<f64>,
+    /// Its two ways' disagreement ([`crate::icp::IcpResult::asymmetry`]).
+    pub asymmetry: Vector6<f64>,
 }
 
 impl Pull {
     /// A match's.
     pub fn of(r: &IcpResult) -> Self {
-        Self { bias: r.edge_bias, lean: r.edge_lean }
+        Self { bias: r.edge_bias, lean: r.edge_lean, asymmetry: r.asymmetry }
     }
 }
 
@@ -992,9 +1010,11 @@ struct Agreement<'a> {
     /// Each scan's links' footprint overlap ([`shared_shares`]); empty: 1
     /// for every scan.
     shared: &'a [f64],
+    /// [`LinkConfig::asymmetry`].
+    asymmetry: Option<f64>,
 }
 
-/// The least share of the links' noise taken as independent ([`shared_noise`]).
+/// The least share of the links' noise taken as independent ([`shared_own`]).
 const MIN_INDEPENDENT_SHARE: f64 = 0.05;
 
 /// A match's noise as the link graph takes it, before the variance
@@ -1014,37 +1034,35 @@ pub(crate) fn link_noise(
 
 /// The factor on the links' noise for a variance factor σ̂₀²: σ̂₀² itself,
 /// but never below [`MIN_INDEPENDENT_SHARE`] (below 1 the rest is the
-/// scans' own, [`shared_noise`]), and exactly 1 without redundancy.
+/// scans' own, [`shared_own`]), and exactly 1 without redundancy.
 fn noise_factor(variance_factor: f64) -> f64 {
     if variance_factor == 1.0 { 1.0 } else { variance_factor.max(MIN_INDEPENDENT_SHARE) }
 }
 
-/// The covariances of a graph whose links agree better than their
-/// covariances say (σ̂₀² = `independent_share` < 1). A link's error is
+/// Each scan's own share of the noise of a graph whose links agree
+/// better than their covariances say (σ̂₀² = `independent_share` < 1),
+/// world axes, for [`with_own`]. A link's error is
 /// partly each of its two scans' own — a scan's noise and sampling move
 /// it the same way against every partner (on random shares of one real
 /// scan, almost wholly so) — and partly the pair's. The graph takes its
 /// links as independent, so the scans' shares close every cycle and only
 /// the pairs' show in σ̂₀²: of each link's covariance C, the share σ̂₀² is
 /// the pair's and 1 − σ̂₀² the scans', half each. `noise` is each link's
-/// C; `independent` the graph's covariance with the links' C times σ̂₀²
-/// (the pairs' share, which the adjustment averages down); a scan's own
-/// share S_k — the mean over its links of ½(1 − σ̂₀²)·C, in world axes — passes
-/// through it whole, as does the first scan's, against which every pose
-/// is: P_k = independent_k + S_k + S_0 — and S_0 is what any two poses
-/// share: P_kl = independent_kl + S_0. Four parts of one scan, all
+/// C; the graph's covariance takes the links' C times σ̂₀² (the pairs'
+/// share, which the adjustment averages down); a scan's own share S_k —
+/// the mean over its links of ½(1 − σ̂₀²)·C, in world axes — passes
+/// through it whole ([`with_own`]). Four parts of one scan, all
 /// linked, were up to 2× optimistic without it (BENCHMARKS.md). S_k is
 /// weighed by `shared[k]` (1 where missing): how far scan k's links use
 /// the same part of it ([`shared_shares`]) — wedges' links use each
 /// another part, and their whole S_k made them 2.35× pessimistic.
-fn shared_noise(
+fn shared_own(
     poses: &[Isometry3<f64>],
-    mut independent: JointCovariance,
     links: &[Edge],
     noise: &[Matrix6<f64>],
     independent_share: f64,
     shared: &[f64],
-) -> JointCovariance {
+) -> Vec<Matrix6<f64>> {
     let n = poses.len();
     let mut own = vec![Matrix6::zeros(); n];
     let mut count = vec![0usize; n];
@@ -1061,13 +1079,87 @@ fn shared_noise(
     for (k, (s, &c)) in own.iter_mut().zip(&count).enumerate() {
         *s *= shared.get(k).copied().unwrap_or(1.0) / c.max(1) as f64;
     }
-    for k in 1..n {
-        independent.add(k, k, &own[k]);
+    own
+}
+
+/// Each scan's own error `own` (world axes) added to the poses' joint
+/// covariance, which took the links as independent: it passes through
+/// the adjustment whole, as does the first scan's, against which every
+/// pose is — P_k += S_k + S_0, P_kl += S_0.
+fn with_own(mut covariance: JointCovariance, own: &[Matrix6<f64>]) -> JointCovariance {
+    for k in 1..own.len() {
+        covariance.add(k, k, &own[k]);
         for l in 1..=k {
-            independent.add(k, l, &own[0]);
+            covariance.add(k, l, &own[0]);
         }
     }
-    independent
+    covariance
+}
+
+/// The share of [`sampling_own`]'s estimate that is each scan's own.
+const SAMPLING_SHARE: f64 = 1.0;
+
+/// The level of [`sampling_own`]'s test: a scan's links disagree with
+/// themselves beyond their noise at 99 %.
+const SAMPLING_LEVEL: f64 = 0.99;
+
+/// Each scan's own sampling error, which its links lean on alike. Each
+/// way of a match leans on one scan's sampled surfaces (its normals, its
+/// nearest samples); a scan sampled sparsely or at grazing angles — a
+/// wall 30 m along it, seen from another station — bends them alike in
+/// every one of its links, a bias that no cycle shows (σ̂₀² 1.3–1.5 on a
+/// simulated hall's 165 links, its 22 scans 3.6 m apart NEES 75–130 for
+/// it). The match's two ways disagree by it: each link's asymmetry Δ
+/// ([`Pull::asymmetry`]) is its scans' sampling plus their noise, and the
+/// noise's part is what one scan's halves, which share their sampling,
+/// make of Δ — E[ΔᵀC⁻¹Δ] = `floor` ([`LinkConfig::asymmetry`]) for a
+/// link whose covariance by pair is C (`noise`). A scan whose links' Σ
+/// ΔᵀC⁻¹Δ = χ² stays within that noise (χ²·6/`floor` below the χ²
+/// distribution's [`SAMPLING_LEVEL`] quantile for 6 per link) has none;
+/// beyond it, its own error is the mean over its links of ΔΔᵀ (world
+/// axes), less the noise's share (× (1 − `floor`·links/χ²)), times
+/// [`SAMPLING_SHARE`]. (Tested so, not estimated from every scan: the
+/// positive part of a noisy estimate of nothing is not nothing, and one
+/// real scan's parts, which share their viewpoint, came out 1.3×
+/// pessimistic.)
+fn sampling_own(
+    poses: &[Isometry3<f64>],
+    links: &[Edge],
+    noise: &[Matrix6<f64>],
+    pulls: &[Pull],
+    floor: f64,
+) -> Vec<Matrix6<f64>> {
+    let n = poses.len();
+    let mut own = vec![Matrix6::zeros(); n];
+    let mut chi2 = vec![0.0; n];
+    let mut count = vec![0usize; n];
+    for ((e, c), p) in links.iter().zip(noise).zip(pulls) {
+        let d = p.asymmetry;
+        let information = c.pseudo_inverse(1e-12 * c.amax()).unwrap_or_else(|_| Matrix6::zeros());
+        let x = (d.transpose() * information * d)[0];
+        if !x.is_finite() {
+            continue;
+        }
+        let a = adjoint(&poses[e.target]) * d;
+        for k in [e.source, e.target] {
+            own[k] += a * a.transpose();
+            chi2[k] += x;
+            count[k] += 1;
+        }
+    }
+    for ((s, &x), &m) in own.iter_mut().zip(&chi2).zip(&count) {
+        let expected = floor * m as f64;
+        let beyond = m > 0 && x * 6.0 / floor > cps::stats::chi2_quantile(SAMPLING_LEVEL, 6.0 * m as f64);
+        *s = if beyond { *s * (SAMPLING_SHARE * (1.0 - expected / x) / m as f64) } else { Matrix6::zeros() };
+    }
+    own
+}
+
+/// A symmetric 6×6 with its negative eigenvalues set to zero.
+fn positive_part(m: &Matrix6<f64>) -> Matrix6<f64> {
+    let e = (0.5 * (m + m.transpose())).symmetric_eigen();
+    let values = e.eigenvalues.map(|v| v.max(0.0));
+    e.eigenvectors * Matrix6::from_diagonal(&values) * e.eigenvectors.transpose()
 }
 
 #[cfg(test)]
@@ -1169,7 +1261,7 @@ mod tests {
         let noise = vec![information.try_inverse().expect("invertible"); edges.len()];
         let scaled: Vec<Option<Matrix6<f64>>> = noise.iter().map(|c| Some(c * factor)).collect();
         let independent = crate::graph::sandwich_joint(&poses, &priors, &edges, &scaled).expect("adjusts");
-        let shared = shared_noise(&poses, independent, &edges, &noise, factor, &[]);
+        let shared = with_own(independent, &shared_own(&poses, &edges, &noise, factor, &[]));
         for k in 1..n {
             for d in 0..6 {
                 let (mc, model, naive) = (scatter[k][k][(d, d)], shared.block(k, k)[(d, d)], plain[k][(d, d)]);
@@ -1304,7 +1396,7 @@ mod tests {
         let at = |edges: &[Edge], pulls: &[Pull]| {
             adjust_matches(&truth, edges, &noise, pulls, &[], &LinkConfig::default()).expect("adjusted")
         };
-        let pulls: Vec<Pull> = leans.iter().map(|l| Pull { bias: 0.5 * l, lean: *l }).collect();
+        let pulls: Vec<Pull> = leans.iter().map(|l| Pull { bias: 0.5 * l, lean: *l, ..Pull::default() }).collect();
         let leaning = at(&edges, &pulls);
         let lean = leaning.lean_variance_factor.expect("a ring has redundancy");
         let without = at(&clean, &vec![Pull::default(); ring.len()]);
@@ -1358,6 +1450,86 @@ mod tests {
             assert!(none.covariance[k].trace() < 0.5 * whole.covariance[k].trace(), "scan {k}");
             let middle = (none.covariance[k] + whole.covariance[k]) * 0.5;
             assert!((half.covariance[k] - middle).amax() <= 1e-12 * middle.amax(), "scan {k}");
+        }
+    }
+
+    /// A scan's own sampling error is its links' asymmetry beyond what
+    /// their noise makes of it ([`sampling_own`]): links that do not
+    /// disagree with themselves, or no more than the noise's `floor`,
+    /// change nothing; where scan 3's three links each lean by v (world
+    /// axes), every scan with such a link gets (1 − floor·m/χ²) times
+    /// their mean vvᵀ (m links, χ² their Σ ΔᵀC⁻¹Δ), and every pose
+    /// scan 0's besides — against hand-made sums.
+    #[test]
+    fn a_scans_sampling_error_is_its_links_asymmetry_beyond_their_noise() {
+        use rand::SeedableRng;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(41);
+        let truth: Vec<Isometry3<f64>> =
+            (0..4).map(|k| crate::se3::exp(&Vector6::new(0.02, 0.0, 0.3 * k as f64, k as f64, 0.5, 0.0))).collect();
+        // The links disagree 10× beyond their information (σ̂₀² > 1: no
+        // shared share of the noise to weigh against).
+        let edges: Vec<Edge> = measured(&mut rng, &truth, &ALL_PAIRS)
+            .into_iter()
+            .map(|e| Edge { information: e.information * 10.0, ..e })
+            .collect();
+        let noise: Vec<Matrix6<f64>> =
+            edges.iter().map(|e| (e.information * 0.1).try_inverse().expect("positive definite")).collect();
+        let floor = 3.0;
+        let at = |pulls: &[Pull], asymmetry: Option<f64>| {
+            let config = LinkConfig { asymmetry, ..LinkConfig::default() };
+            adjust_matches(&truth, &edges, &noise, pulls, &[], &config).expect("adjusted").covariance
+        };
+        let plain = at(&vec![Pull::default(); edges.len()], None);
+        assert!(plain[1].trace() > 0.0);
+        // No asymmetry, and asymmetry at the noise's own size: nothing.
+        assert_eq!(at(&vec![Pull::default(); edges.len()], Some(floor)), plain);
+        let at_floor: Vec<Pull> = noise
+            .iter()
+            .map(|c| {
+                let u = Vector6::new(0.3, -0.2, 0.5, 0.1, 0.7, -0.4);
+                let x = (u.transpose() * c.try_inverse().expect("invertible") * u)[0];
+                Pull { asymmetry: u * (floor / x).sqrt(), ..Pull::default() }
+            })
+            .collect();
+        assert_eq!(at(&at_floor, Some(floor)), plain);
+        // Scan 3's links lean by v, in the world's axes.
+        let v = Vector6::new(2e-3, -1e-3, 4e-3, 3e-3, -2e-3, 1e-3);
+        let leaning: Vec<Pull> = edges
+            .iter()
+            .map(|e| Pull {
+                asymmetry: if e.source == 3 || e.target == 3 {
+                    adjoint(&truth[e.target]).try_inverse().expect("invertible") * v
+                } else {
+                    Vector6::zeros()
+                },
+                ..Pull::default()
+            })
+            .collect();
+        let chi2 = |k: usize| -> f64 {
+            edges
+                .iter()
+                .zip(&noise)
+                .zip(&leaning)
+                .filter(|((e, _), _)| e.source == k || e.target == k)
+                .map(|((_, c), p)| (p.asymmetry.transpose() * c.try_inverse().expect("invertible") * p.asymmetry)[0])
+                .sum()
+        };
+        // Each scan has three links; scan 3's all lean, the others' one.
+        let own = |k: usize| {
+            let share = if k == 3 { 1.0 } else { 1.0 / 3.0 };
+            v * v.transpose() * (SAMPLING_SHARE * share * (1.0 - floor * 3.0 / chi2(k)))
+        };
+        let leant = at(&leaning, Some(floor));
+        for k in 1..4 {
+            // (Δ is carried to the world's axes by the adjusted poses, not
+            // the truth: 1e-3 apart here.)
+            let expected = plain[k] + own(k) + own(0);
+            assert!(
+                (leant[k] - expected).amax() <= 1e-2 * (own(k) + own(0)).amax(),
+                "scan {k}: {:?} against {:?}",
+                leant[k] - plain[k],
+                own(k) + own(0)
+            );
         }
     }
 

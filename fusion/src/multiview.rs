@@ -443,6 +443,7 @@ pub(crate) fn in_world(mut r: IcpResult, world_from_j: &Isometry3<f64>) -> IcpRe
     r.unobservable.iter_mut().for_each(|d| *d = (ad * *d).normalize());
     r.edge_bias = ad * r.edge_bias;
     r.edge_lean = ad * r.edge_lean;
+    r.asymmetry = ad * r.asymmetry;
     r.range_covariance = r.range_covariance.map(|c| ad * c * ad.transpose());
     r
 }

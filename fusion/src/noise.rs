@@ -58,6 +58,15 @@ pub struct Calibration {
     /// from the scanner): the factor on it (1 when nothing could be
     /// measured).
     pub range_scale: f64,
+    /// How far each halving's two ways disagree
+    /// ([`crate::icp::IcpResult::asymmetry`] Δ): the halves' mean ΔᵀC⁻¹Δ
+    /// against their covariance by pair C calibrated (× `range_scale`) —
+    /// what the scans' noise alone makes of Δ, one scan's halves sharing
+    /// its viewpoint and sampling —, carried on to the scans' own density
+    /// by the quarters' ([`at_full_density`]: the hall's halves 5.4, its
+    /// quarters 3.9). 0 when nothing could be measured, or matched one way. Beyond it, the links' Δ is their scans' sampling
+    /// ([`crate::links`]).
+    pub asymmetry: f64,
     /// What the halves measured.
     pub halves: Shares,
     /// What two quarters of each scan measured, matched as the halves are.
@@ -72,6 +81,10 @@ pub struct Shares {
     pub variance_scale: f64,
     /// The same against the covariance by pair.
     pub range_scale: f64,
+    /// The mean ΔᵀC⁻¹Δ of the shares' two ways
+    /// ([`crate::icp::IcpResult::asymmetry`]) against their covariance by
+    /// pair C (not scaled); 0 matched one way.
+    pub asymmetry: f64,
     /// The degrees of freedom they rest on.
     pub dof: usize,
     /// Shares matched.
@@ -121,27 +134,28 @@ pub fn calibrate<S: AsRef<[Point3<f32>]> + Sync>(
     let icp = crate::icp::IcpConfig { noise_scale: 1.0, trace: false, range_noise: true, ..config.icp };
     let halves = pooled(&shares(scans, config, both_ways, icp, 1));
     let quarters = pooled(&shares(scans, config, both_ways, icp, 2));
+    let range_scale = at_full_density(halves.range_scale, quarters.range_scale);
     Calibration {
         variance_scale: at_full_density(halves.variance_scale, quarters.variance_scale),
         dof: halves.dof,
         halvings: halves.matched,
         left_out: halves.left_out,
-        range_scale: at_full_density(halves.range_scale, quarters.range_scale),
+        range_scale,
+        asymmetry: at_full_density(halves.asymmetry, quarters.asymmetry) / range_scale,
         halves,
         quarters,
     }
 }
 
 /// Each scan's shares matched, each share `1 / 2^bits` of its points
-/// (halves: 1; quarters: 2), as [`calibrate`] says: a (χ², χ² by pair,
-/// degrees of freedom) for each.
+/// (halves: 1; quarters: 2), as [`calibrate`] says.
 fn shares<S: AsRef<[Point3<f32>]> + Sync>(
     scans: &[S],
     config: &MultiviewConfig,
     both_ways: bool,
     icp: crate::icp::IcpConfig,
     bits: u32,
-) -> Vec<(f64, f64, usize)> {
+) -> Vec<Sample> {
     let jobs: Vec<(usize, u64)> = (0..scans.len()).flat_map(|i| (0..HALVINGS).map(move |h| (i, h))).collect();
     jobs.par_iter()
         .filter_map(|&(i, h)| {
@@ -178,17 +192,23 @@ fn shares<S: AsRef<[Point3<f32>]> + Sync>(
             let xi = crate::se3::left_difference(&r.target_from_source, &truth);
             let dof = 6 - r.unobservable.len().min(6);
             let chi2 = (xi.transpose() * r.information * xi)[0];
-            let by_range = r.range_covariance.map(|c| {
-                // Judged along what the match sees: the covariance by pair
-                // has nothing along its blind directions, but rounding
-                // leaves a trace there that a pseudo-inverse may keep (a
-                // pipe's halves slid along its axis gave 10¹³).
+            let information = r.range_covariance.map(|c| {
+                // The covariance by pair has nothing along its blind
+                // directions, but rounding leaves a trace there that a
+                // pseudo-inverse may keep (a pipe's halves slid along its
+                // axis gave 10¹³): judged along what the match sees.
+                c.pseudo_inverse(1e-12 * c.amax()).unwrap_or_else(|_| nalgebra::Matrix6::zeros())
+            });
+            let by_range = information.map(|information| {
                 let seen = projector_off(&r.unobservable) * xi;
-                let information = c.pseudo_inverse(1e-12 * c.amax()).unwrap_or_else(|_| nalgebra::Matrix6::zeros());
                 (seen.transpose() * information * seen)[0]
             });
             let by_range = by_range.filter(|c| c.is_finite()).unwrap_or(chi2);
-            (dof > 0 && chi2.is_finite()).then_some((chi2, by_range, dof))
+            let asymmetry = information
+                .map(|information| (r.asymmetry.transpose() * information * r.asymmetry)[0])
+                .filter(|c| c.is_finite())
+                .unwrap_or(0.0);
+            (dof > 0 && chi2.is_finite()).then_some(Sample { chi2, by_range, dof, asymmetry })
         })
         .collect()
 }
@@ -223,19 +243,35 @@ fn off(source: &[Point3<f32>], truth: &Isometry3<f64>, max_correspondence_m: f64
     crate::se3::exp(&xi) * truth
 }
 
-/// Σ χ² / Σ dof of the samples (χ², χ² by pair, dof), those whose χ²/dof
-/// is beyond [`GROSS`] times the median left out.
-fn pooled(samples: &[(f64, f64, usize)]) -> Shares {
-    let mut ratios: Vec<f64> = samples.iter().map(|(c, _, d)| c / *d as f64).collect();
+/// One matched share ([`shares`]).
+struct Sample {
+    /// χ² against its reported information.
+    chi2: f64,
+    /// χ² against its covariance by pair.
+    by_range: f64,
+    /// Its degrees of freedom.
+    dof: usize,
+    /// ΔᵀC⁻¹Δ of its two ways against its covariance by pair (0 one way).
+    asymmetry: f64,
+}
+
+/// Σ χ² / Σ dof of the samples, those whose χ²/dof is beyond [`GROSS`]
+/// times the median left out, and their mean asymmetry.
+fn pooled(samples: &[Sample]) -> Shares {
+    let mut ratios: Vec<f64> = samples.iter().map(|s| s.chi2 / s.dof as f64).collect();
     ratios.sort_by(f64::total_cmp);
     let median = ratios.get(ratios.len() / 2).copied().unwrap_or(0.0);
-    let kept: Vec<&(f64, f64, usize)> =
-        samples.iter().filter(|(c, _, d)| c / *d as f64 <= GROSS * median.max(1e-12)).collect();
-    let dof: usize = kept.iter().map(|(_, _, d)| d).sum();
+    let kept: Vec<&Sample> = samples.iter().filter(|s| s.chi2 / s.dof as f64 <= GROSS * median.max(1e-12)).collect();
+    let dof: usize = kept.iter().map(|s| s.dof).sum();
     let scale = |chi2: f64| if dof > 0 && chi2 > 0.0 { chi2 / dof as f64 } else { 1.0 };
     Shares {
-        variance_scale: scale(kept.iter().map(|(c, _, _)| c).sum()),
-        range_scale: scale(kept.iter().map(|(_, r, _)| r).sum()),
+        variance_scale: scale(kept.iter().map(|s| s.chi2).sum()),
+        range_scale: scale(kept.iter().map(|s| s.by_range).sum()),
+        asymmetry: if kept.is_empty() {
+            0.0
+        } else {
+            kept.iter().map(|s| s.asymmetry).sum::<f64>() / kept.len() as f64
+        },
         dof,
         matched: samples.len(),
         left_out: samples.len() - kept.len(),
@@ -341,10 +377,13 @@ mod tests {
     /// A gross halving (a mismatch) is left out of the pool, noise is not.
     #[test]
     fn gross_halvings_are_left_out() {
-        let c = pooled(&[(6.0, 12.0, 6), (5.0, 10.0, 6), (7.0, 14.0, 6), (600.0, 1.0, 6)]);
+        let sample = |chi2, by_range, asymmetry| Sample { chi2, by_range, dof: 6, asymmetry };
+        let c =
+            pooled(&[sample(6.0, 12.0, 2.0), sample(5.0, 10.0, 3.0), sample(7.0, 14.0, 4.0), sample(600.0, 1.0, 90.0)]);
         assert_eq!((c.left_out, c.dof, c.matched), (1, 18, 4));
         assert!((c.variance_scale - 1.0).abs() < 1e-12);
         assert!((c.range_scale - 2.0).abs() < 1e-12);
+        assert!((c.asymmetry - 3.0).abs() < 1e-12);
         let none = pooled(&[]);
         assert_eq!((none.variance_scale, none.dof), (1.0, 0));
     }

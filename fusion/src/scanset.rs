@@ -730,6 +730,7 @@ pub fn register_set<S: AsRef<[Point3<f32>]> + Sync>(
     let mut calibrated = config.clone();
     calibrated.link.multiview.icp.noise_scale *= noise.map_or(1.0, |n| n.variance_scale);
     calibrated.link.range_scale *= noise.map_or(1.0, |n| n.range_scale);
+    calibrated.link.asymmetry = noise.map(|n| n.asymmetry).filter(|a| *a > 0.0).or(config.link.asymmetry);
     let config = &calibrated;
     let r = registered(scans, starts, config, progress)?;
     Ok(SetResult { noise, noise_seconds, ..r })
@@ -802,7 +803,7 @@ fn verified<S: AsRef<[Point3<f32>]> + Sync>(
             if let (Some(e), Some(n)) = (c.edge, c.edge_covariance) {
                 edges.push(e);
                 noise.push(n);
-                pulls.push(crate::links::Pull { bias: c.edge_bias, lean: c.edge_lean });
+                pulls.push(crate::links::Pull { bias: c.edge_bias, lean: c.edge_lean, asymmetry: c.asymmetry });
             }
         }
         let a = crate::links::adjust_matches(&r.world_from_scan, &edges, &noise, &pulls, &shared, &config.link)?;

@@ -171,6 +171,10 @@ pub struct PairCheck {
     /// frame): the bias in its place where it explains the matches'
     /// misfit ([`crate::links::Pull`]).
     pub edge_lean: Vector6<f64>,
+    /// How far its two ways disagree
+    /// ([`crate::icp::IcpResult::asymmetry`], target frame): its scans'
+    /// sampling ([`crate::links::Pull`]).
+    pub asymmetry: Vector6<f64>,
 }
 
 impl PairCheck {
@@ -295,6 +299,7 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
                     .map(|r| crate::links::link_noise(&r.information, r.range_covariance, config.range_scale)),
                 edge_bias: l.result.as_ref().map_or_else(Vector6::zeros, |r| r.edge_bias),
                 edge_lean: l.result.as_ref().map_or_else(Vector6::zeros, |r| r.edge_lean),
+                asymmetry: l.result.as_ref().map_or_else(Vector6::zeros, |r| r.asymmetry),
             };
             check.consistent &= !check.violates_free_space();
             check
@@ -408,6 +413,7 @@ mod tests {
             edge_covariance: None,
             edge_bias: Vector6::zeros(),
             edge_lean: Vector6::zeros(),
+            asymmetry: Vector6::zeros(),
         }
     }
 

@@ -113,6 +113,16 @@ pub struct NoiseReport {
     /// pair, which the reported covariances carry
     /// (`variance_scale` calibrates graph mode's link weights).
     pub range_scale: f64,
+    /// How far a halving's two ways disagree by the scans' noise alone:
+    /// the halves' mean ΔᵀC⁻¹Δ, Δ half the difference of the steps each
+    /// way alone would take (one the first half's points on the second's
+    /// surfaces, the other the reverse), C the calibrated covariance by
+    /// pair. A link's Δ beyond it is its scans' sampling — each way leans
+    /// on one scan's sampled surfaces — and each scan's share of it in
+    /// every one of its links enters the covariances whole (graph mode,
+    /// and the adjustment of the verified pairs in the other modes).
+    /// 0 when nothing could be measured.
+    pub asymmetry: f64,
     /// What the halves measured.
     pub halves: SharesReport,
     /// What two quarters of each scan (halves of a half) measured.
@@ -128,6 +138,9 @@ pub struct SharesReport {
     pub variance_scale: f64,
     /// Σχ²/Σdof against the covariance by pair.
     pub range_scale: f64,
+    /// The mean ΔᵀC⁻¹Δ of their two ways against their covariance by pair
+    /// (not calibrated).
+    pub asymmetry: f64,
     /// The degrees of freedom they rest on.
     pub dof: usize,
     /// Shares matched.

@@ -82,6 +82,7 @@ pub(super) fn report(
             halvings: n.halvings,
             left_out: n.left_out,
             range_scale: n.range_scale,
+            asymmetry: n.asymmetry,
             halves: shares_report(&n.halves),
             quarters: shares_report(&n.quarters),
             seconds: r.noise_seconds,
@@ -220,6 +221,7 @@ fn shares_report(s: &fusion::noise::Shares) -> SharesReport {
     SharesReport {
         variance_scale: s.variance_scale,
         range_scale: s.range_scale,
+        asymmetry: s.asymmetry,
         dof: s.dof,
         matched: s.matched,
         left_out: s.left_out,

@@ -52,7 +52,8 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
         writeln!(
             out,
             "covariances calibrated on the scans' halves and quarters: ×{:.2}, by pair ×{:.2} \
-             (halves ×{:.2}, ×{:.2}; quarters ×{:.2}, ×{:.2}; {} degrees of freedom, {:.3} s)",
+             (halves ×{:.2}, ×{:.2}; quarters ×{:.2}, ×{:.2}; {} degrees of freedom, {:.3} s); \
+             the two ways' disagreement by noise alone {:.2}",
             n.variance_scale,
             n.range_scale,
             n.halves.variance_scale,
@@ -60,7 +61,8 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
             n.quarters.variance_scale,
             n.quarters.range_scale,
             n.dof,
-            n.seconds
+            n.seconds,
+            n.asymmetry
         )?;
     }
     if let Some(r) = &report.restart {
