@@ -1428,16 +1428,7 @@ mod tests {
     /// covariances say (σ̂₀² ≈ 0.1: most of their noise the scans').
     #[test]
     fn a_scans_shared_noise_is_weighed_by_its_matches_footprint_overlap() {
-        use rand::SeedableRng;
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(40);
-        let truth: Vec<Isometry3<f64>> =
-            (0..4).map(|k| crate::se3::exp(&Vector6::new(0.0, 0.0, 0.3 * k as f64, k as f64, 0.5, 0.0))).collect();
-        let edges: Vec<Edge> = measured(&mut rng, &truth, &ALL_PAIRS)
-            .into_iter()
-            .map(|e| Edge { information: e.information * 0.1, ..e })
-            .collect();
-        let noise: Vec<Matrix6<f64>> =
-            edges.iter().map(|e| e.information.try_inverse().expect("positive definite")).collect();
+        let (truth, edges, noise) = four_linked(40, 0.0, 0.1, 1.0);
         let at = |shared: &[f64]| {
             adjust_matches(&truth, &edges, &noise, &vec![Pull::default(); edges.len()], shared, &LinkConfig::default())
                 .expect("adjusted")
@@ -1453,6 +1444,28 @@ mod tests {
         }
     }
 
+    /// Four scans turned `roll` and apart along x, every pair linked
+    /// ([`measured`] with seed `seed`), each link's information × `scale`
+    /// and its noise the inverse of that × `noise_scale`.
+    fn four_linked(
+        seed: u64,
+        roll: f64,
+        scale: f64,
+        noise_scale: f64,
+    ) -> (Vec<Isometry3<f64>>, Vec<Edge>, Vec<Matrix6<f64>>) {
+        use rand::SeedableRng;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let truth: Vec<Isometry3<f64>> =
+            (0..4).map(|k| crate::se3::exp(&Vector6::new(roll, 0.0, 0.3 * k as f64, k as f64, 0.5, 0.0))).collect();
+        let edges: Vec<Edge> = measured(&mut rng, &truth, &ALL_PAIRS)
+            .into_iter()
+            .map(|e| Edge { information: e.information * scale, ..e })
+            .collect();
+        let noise =
+            edges.iter().map(|e| e.information.try_inverse().expect("positive definite") * noise_scale).collect();
+        (truth, edges, noise)
+    }
+
     /// A scan's own sampling error is its links' asymmetry beyond what
     /// their noise makes of it ([`sampling_own`]): links that do not
     /// disagree with themselves, or no more than the noise's `floor`,
@@ -1462,18 +1475,9 @@ mod tests {
     /// scan 0's besides — against hand-made sums.
     #[test]
     fn a_scans_sampling_error_is_its_links_asymmetry_beyond_their_noise() {
-        use rand::SeedableRng;
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(41);
-        let truth: Vec<Isometry3<f64>> =
-            (0..4).map(|k| crate::se3::exp(&Vector6::new(0.02, 0.0, 0.3 * k as f64, k as f64, 0.5, 0.0))).collect();
         // The links disagree 10× beyond their information (σ̂₀² > 1: no
         // shared share of the noise to weigh against).
-        let edges: Vec<Edge> = measured(&mut rng, &truth, &ALL_PAIRS)
-            .into_iter()
-            .map(|e| Edge { information: e.information * 10.0, ..e })
-            .collect();
-        let noise: Vec<Matrix6<f64>> =
-            edges.iter().map(|e| (e.information * 0.1).try_inverse().expect("positive definite")).collect();
+        let (truth, edges, noise) = four_linked(41, 0.02, 10.0, 10.0);
         let floor = 3.0;
         let at = |pulls: &[Pull], asymmetry: Option<f64>| {
             let config = LinkConfig { asymmetry, ..LinkConfig::default() };
