@@ -215,6 +215,10 @@ pub struct LinkGraph {
     /// The poses' joint covariance, [`covariance`](Self::covariance) its
     /// diagonal (scan 0's rows and columns zero).
     pub joint_covariance: JointCovariance,
+    /// Each pose's share of [`covariance`](Self::covariance) that is the
+    /// scans' own sampling ([`Adjusted::sampling`]): left out of every
+    /// judgement of a pose.
+    pub sampling: Vec<Matrix6<f64>>,
     /// Every candidate pair, used or not, in order of (source, target).
     pub links: Vec<Link>,
     /// Each scan's directions its links do not see (unit ξ = (ω, v), world
@@ -594,8 +598,15 @@ pub struct Adjusted {
     /// Each departure against the adjustment's covariance C (without
     /// ξξᵀ): ξᵀ·C⁺·ξ — how far the strategy stopped from where its pairs
     /// agree, in the σ of that agreement (zero for scan 0;
-    /// [`crate::verify::MAX_DEPARTURE_CHI2`]).
+    /// [`crate::verify::MAX_DEPARTURE_CHI2`]), C less its
+    /// [`sampling`](Self::sampling).
     pub departure_chi2: Vec<f64>,
+    /// Each pose's share of [`covariance`](Self::covariance) that is the
+    /// scans' own sampling (its scan's and the first's,
+    /// [`LinkConfig::asymmetry`]; zero without it): left out of every
+    /// judgement of a pose — a wrong pose's two ways disagree by far more
+    /// than a right one's, and a covariance grown by that would hide it.
+    pub sampling: Vec<Matrix6<f64>>,
 }
 
 /// `edges` — relative measurements between the scans at `poses`, e.g. the
@@ -639,9 +650,13 @@ pub fn adjust_matches(
     let variance_factor = judged(&g.world_from_scan, edges).variance_factor;
     let lean_variance_factor = lean_factor(&g.world_from_scan, &priors, &all, steps, pulls)?;
     let agreement = Agreement { variance_factor, lean_variance_factor, shared, asymmetry: config.asymmetry };
-    let mut joint = adjusted_covariance(&g.world_from_scan, &priors, &all, steps, noise, pulls, &agreement)?;
+    let (mut joint, sampling) =
+        adjusted_covariance(&g.world_from_scan, &priors, &all, steps, noise, pulls, &agreement)?;
     joint.hold(0);
-    let adjusted = joint.diagonal();
+    // The departures are judged without the scans' sampling: a wrong pose's
+    // two ways disagree by far more than a right one's, and a covariance
+    // grown by that would hide it.
+    let adjusted: Vec<Matrix6<f64>> = joint.diagonal().iter().zip(&sampling).map(|(c, s)| c - s).collect();
     // Scan 0's prior leaves it within 1e-20 m of its pose: the departures
     // are the others'.
     let departure: Vec<Vector6<f64>> = poses
@@ -671,6 +686,7 @@ pub fn adjust_matches(
         covariance: joint.diagonal(),
         joint_covariance: joint,
         departure_chi2,
+        sampling,
     })
 }
 
@@ -866,7 +882,7 @@ fn solve(
             })
             .unzip();
         let lean_variance_factor = lean_factor(&g.world_from_scan, &priors, &edges, steps.len(), &pulls)?;
-        let mut joint = adjusted_covariance(
+        let (mut joint, sampling) = adjusted_covariance(
             &g.world_from_scan,
             &priors,
             &edges,
@@ -883,6 +899,7 @@ fn solve(
             world_from_scan: g.world_from_scan.iter().map(|p| shift * p).collect(),
             covariance: joint.diagonal(),
             joint_covariance: joint,
+            sampling,
             links,
             unobservable,
             variance_factor,
@@ -924,7 +941,7 @@ fn adjusted_covariance(
     noise: &[Matrix6<f64>],
     pulls: &[Pull],
     agreement: &Agreement,
-) -> Result<JointCovariance> {
+) -> Result<(JointCovariance, Vec<Matrix6<f64>>)> {
     let (variance_factor, shared) = (agreement.variance_factor, agreement.shared);
     let (variance_factor, bias): (f64, Vec<Vector6<f64>>) = match agreement.lean_variance_factor {
         Some(lean) if lean < variance_factor => {
@@ -937,14 +954,19 @@ fn adjusted_covariance(
     covariances.extend(noise.iter().zip(&bias).map(|(c, d)| Some(c * f + d * d.transpose())));
     let covariance = crate::graph::sandwich_joint(poses, priors, edges, &covariances)?;
     let links = &edges[steps..];
-    let mut own =
-        if f < 1.0 { shared_own(poses, links, noise, f, shared) } else { vec![Matrix6::zeros(); poses.len()] };
+    let n = poses.len();
+    let mut own = if f < 1.0 { shared_own(poses, links, noise, f, shared) } else { vec![Matrix6::zeros(); n] };
+    // What the scans' sampling adds beyond the shared noise, each scan's.
+    let mut sampled = vec![Matrix6::zeros(); n];
     if let Some(floor) = agreement.asymmetry {
-        for (s, m) in own.iter_mut().zip(sampling_own(poses, links, noise, pulls, floor)) {
-            *s += positive_part(&(m - *s));
+        for ((s, m), added) in own.iter_mut().zip(sampling_own(poses, links, noise, pulls, floor)).zip(&mut sampled) {
+            *added = positive_part(&(m - *s));
+            *s += *added;
         }
     }
-    Ok(with_own(covariance, &own))
+    // Its share of each pose's covariance: the scan's own and the first's.
+    let sampling = (0..n).map(|k| if k == 0 { Matrix6::zeros() } else { sampled[k] + sampled[0] }).collect();
+    Ok((with_own(covariance, &own), sampling))
 }
 
 /// How far a link's error runs along its edge's lean
@@ -1479,10 +1501,17 @@ mod tests {
         // shared share of the noise to weigh against).
         let (truth, edges, noise) = four_linked(41, 0.02, 10.0, 10.0);
         let floor = 3.0;
-        let at = |pulls: &[Pull], asymmetry: Option<f64>| {
+        // (Poses off the adjustment a little: their departures are judged.)
+        let poses: Vec<Isometry3<f64>> = truth
+            .iter()
+            .enumerate()
+            .map(|(k, t)| crate::se3::exp(&(Vector6::new(1e-3, 0.0, -2e-3, 3e-3, 1e-3, 0.0) * k as f64)) * t)
+            .collect();
+        let adjusted = |pulls: &[Pull], asymmetry: Option<f64>| {
             let config = LinkConfig { asymmetry, ..LinkConfig::default() };
-            adjust_matches(&truth, &edges, &noise, pulls, &[], &config).expect("adjusted").covariance
+            adjust_matches(&poses, &edges, &noise, pulls, &[], &config).expect("adjusted")
         };
+        let at = |pulls: &[Pull], asymmetry: Option<f64>| adjusted(pulls, asymmetry).covariance;
         let plain = at(&vec![Pull::default(); edges.len()], None);
         assert!(plain[1].trace() > 0.0);
         // No asymmetry, and asymmetry at the noise's own size: nothing.
@@ -1534,6 +1563,13 @@ mod tests {
                 leant[k] - plain[k],
                 own(k) + own(0)
             );
+        }
+        // The departures are judged without it, as without the model.
+        let (with, without) = (adjusted(&leaning, Some(floor)), adjusted(&leaning, None));
+        assert!(with.sampling[3].amax() > 0.0);
+        for k in 1..4 {
+            let (a, b) = (with.departure_chi2[k], without.departure_chi2[k]);
+            assert!(b > 1.0 && (a - b).abs() <= 1e-9 * b, "scan {k}: departure χ² {a} against {b}");
         }
     }
 

@@ -121,6 +121,11 @@ pub struct SetResult {
     /// covariances are not an adjustment's (the last matches', before the
     /// verification or without a pair to verify).
     pub joint_covariance: Option<crate::graph::JointCovariance>,
+    /// Each pose's share of [`covariance`](Self::covariance) that is the
+    /// scans' own sampling ([`crate::links::Adjusted::sampling`]; empty
+    /// where the covariances are not an adjustment's): left out where a
+    /// pose is judged (its moves along what only its start holds).
+    pub sampling: Vec<Matrix6<f64>>,
     /// In the modes without a link graph, each pose's departure from the
     /// adjustment of the verification's matches (ξ = (ω, v), world frame,
     /// pose ≈ exp(ξ)·adjusted; zero for the first scan): how far the
@@ -811,6 +816,7 @@ fn verified<S: AsRef<[Point3<f32>]> + Sync>(
         r.lean_variance_factor = a.lean_variance_factor;
         r.covariance = a.covariance;
         r.joint_covariance = Some(a.joint_covariance);
+        r.sampling = a.sampling;
         r.departure = a.departure;
         r.departure_chi2 = a.departure_chi2;
         r.departure_m = lever
@@ -838,6 +844,8 @@ fn verified<S: AsRef<[Point3<f32>]> + Sync>(
                 else {
                     return Held::default();
                 };
+                // Judged without the scans' sampling, as the departures are.
+                let c = &(c - r.sampling.get(i).copied().unwrap_or_else(Matrix6::zeros));
                 if i == 0 {
                     return Held::default();
                 }
@@ -1364,6 +1372,7 @@ fn into_world(mut r: SetResult, world_from_first: &Isometry3<f64>, graph: bool) 
     r.world_from_scan.iter_mut().for_each(|p| *p = world_from_first * *p);
     r.covariance.iter_mut().for_each(|c| *c = ad * *c * ad.transpose());
     r.joint_covariance = r.joint_covariance.map(|j| j.turned(&ad));
+    r.sampling.iter_mut().for_each(|c| *c = ad * *c * ad.transpose());
     r.departure.iter_mut().for_each(|d| *d = ad * *d);
     r.unobservable.iter_mut().flatten().for_each(|d| *d = (ad * *d).normalize());
     r.held.iter_mut().flat_map(|h| &mut h.along).for_each(|d| *d = (ad * *d).normalize());
@@ -1489,6 +1498,7 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
         world_from_scan: poses,
         covariance,
         joint_covariance: None,
+        sampling: Vec::new(),
         departure: Vec::new(),
         departure_chi2: Vec::new(),
         departure_m: Vec::new(),
@@ -1572,6 +1582,7 @@ fn from_graph(g: LinkGraph, matches: usize, settled: bool, stages: Vec<StageRun>
         world_from_scan: g.world_from_scan,
         covariance: g.covariance,
         joint_covariance: Some(g.joint_covariance),
+        sampling: g.sampling,
         departure: Vec::new(),
         departure_chi2: Vec::new(),
         departure_m: Vec::new(),
@@ -1706,6 +1717,7 @@ mod tests {
             world_from_scan: vec![Isometry3::identity(); 4],
             covariance: vec![Matrix6::identity(); 4],
             joint_covariance: None,
+            sampling: Vec::new(),
             departure: Vec::new(),
             departure_chi2: Vec::new(),
             departure_m: Vec::new(),
