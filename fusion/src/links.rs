@@ -1118,7 +1118,12 @@ fn with_own(mut covariance: JointCovariance, own: &[Matrix6<f64>]) -> JointCovar
     covariance
 }
 
-/// The share of [`sampling_own`]'s estimate that is each scan's own.
+/// The share of [`sampling_own`]'s estimate that is each scan's own: all
+/// of it. Were the two ways' biases independent, half of ΔΔᵀ would be
+/// each scan's; they are not — four of five of the hall's pairs erred the
+/// same way both ways, which Δ does not show —, and half left the hall's
+/// NEES at 25–41 against 23–32 (an earlier estimate; BENCHMARKS.md, "The
+/// two ways' disagreement").
 const SAMPLING_SHARE: f64 = 1.0;
 
 /// The level of [`sampling_own`]'s test: a scan's links disagree with
@@ -1153,6 +1158,9 @@ fn sampling_own(
 ) -> Vec<Matrix6<f64>> {
     let n = poses.len();
     let mut own = vec![Matrix6::zeros(); n];
+    if !(floor > 0.0 && floor.is_finite()) {
+        return own;
+    }
     let mut chi2 = vec![0.0; n];
     let mut count = vec![0usize; n];
     for ((e, c), p) in links.iter().zip(noise).zip(pulls) {

@@ -64,7 +64,8 @@ pub struct Calibration {
     /// what the scans' noise alone makes of Δ, one scan's halves sharing
     /// its viewpoint and sampling —, carried on to the scans' own density
     /// by the quarters' ([`at_full_density`]: the hall's halves 5.4, its
-    /// quarters 3.9). 0 when nothing could be measured, or matched one way. Beyond it, the links' Δ is their scans' sampling
+    /// quarters 3.9). 0 when nothing could be measured, or matched one
+    /// way. Beyond it, the links' Δ is their scans' sampling
     /// ([`crate::links`]).
     pub asymmetry: f64,
     /// What the halves measured.
@@ -141,7 +142,11 @@ pub fn calibrate<S: AsRef<[Point3<f32>]> + Sync>(
         halvings: halves.matched,
         left_out: halves.left_out,
         range_scale,
-        asymmetry: at_full_density(halves.asymmetry, quarters.asymmetry) / range_scale,
+        asymmetry: if halves.asymmetry > 0.0 && quarters.asymmetry > 0.0 {
+            at_full_density(halves.asymmetry, quarters.asymmetry) / range_scale
+        } else {
+            0.0
+        },
         halves,
         quarters,
     }
