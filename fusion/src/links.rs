@@ -612,9 +612,8 @@ pub struct Adjusted {
 /// `edges` — relative measurements between the scans at `poses`, e.g. the
 /// verification's matches ([`crate::verify::PairCheck::edge`]), with each
 /// one's `noise` before the variance factor
-/// ([`crate::verify::PairCheck::edge_covariance`]) and its edge's `pulls`
-/// ([`crate::verify::PairCheck::edge_bias`] and
-/// [`edge_lean`](crate::verify::PairCheck::edge_lean)), and each scan's
+/// ([`crate::verify::PairCheck::edge_covariance`]) and its `pulls`
+/// ([`crate::verify::PairCheck::pull`]), and each scan's
 /// `shared` footprint overlap of its edges
 /// ([`crate::verify::PairChecks::shared`]; empty: 1 for every scan) —
 /// adjusted from `poses` as [`adjust`] adjusts its links, the
@@ -1165,8 +1164,7 @@ fn sampling_own(
     let mut count = vec![0usize; n];
     for ((e, c), p) in links.iter().zip(noise).zip(pulls) {
         let d = p.asymmetry;
-        let information = c.pseudo_inverse(1e-12 * c.amax()).unwrap_or_else(|_| Matrix6::zeros());
-        let x = (d.transpose() * information * d)[0];
+        let x = (d.transpose() * crate::icp::solve::pseudo_inverse(c) * d)[0];
         if !x.is_finite() {
             continue;
         }

@@ -808,7 +808,7 @@ fn verified<S: AsRef<[Point3<f32>]> + Sync>(
             if let (Some(e), Some(n)) = (c.edge, c.edge_covariance) {
                 edges.push(e);
                 noise.push(n);
-                pulls.push(crate::links::Pull { bias: c.edge_bias, lean: c.edge_lean, asymmetry: c.asymmetry });
+                pulls.push(c.pull);
             }
         }
         let a = crate::links::adjust_matches(&r.world_from_scan, &edges, &noise, &pulls, &shared, &config.link)?;
@@ -844,11 +844,11 @@ fn verified<S: AsRef<[Point3<f32>]> + Sync>(
                 else {
                     return Held::default();
                 };
-                // Judged without the scans' sampling, as the departures are.
-                let c = &(c - r.sampling.get(i).copied().unwrap_or_else(Matrix6::zeros));
                 if i == 0 {
                     return Held::default();
                 }
+                // Judged without the scans' sampling, as the departures are.
+                let c = &(c - r.sampling.get(i).copied().unwrap_or_else(Matrix6::zeros));
                 let (centroid, radius) = &lever[i];
                 match &steps {
                     Some(steps) => held_by_start(pose, start, c, &steps[i], centroid, *radius, tolerance),

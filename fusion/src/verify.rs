@@ -31,14 +31,14 @@
 //! right scans were named "not trusted", exit 1. The axis is weak, not
 //! blind: its eigenvalue is above the blind-direction threshold.)
 
-use nalgebra::{Isometry3, Matrix6, Point3, Vector6};
+use nalgebra::{Isometry3, Matrix6, Point3};
 use rayon::prelude::*;
 
 use crate::error::Result;
 use crate::free_space::{FreeSpace, MAX_VIOLATION_SHARE, View};
 use crate::graph::Edge;
 use crate::icp::degeneracy::{Observability, centroid_and_lever_arm};
-use crate::links::{LinkConfig, Paired, pair_links, shared_shares};
+use crate::links::{LinkConfig, Paired, Pull, pair_links, shared_shares};
 pub use crate::links::{MAX_RELATIVE_MOTION, MAX_TURN_RAD};
 use crate::multiview::{check, prepare};
 
@@ -162,19 +162,12 @@ pub struct PairCheck {
     /// covariances of the modes without a link graph rest on it
     /// ([`crate::links::adjust_matches`]).
     pub edge_covariance: Option<Matrix6<f64>>,
-    /// How the pairs beyond the target's sampled edge pull the match
-    /// ([`crate::icp::IcpResult::edge_bias`], target frame): a bias its
-    /// residuals do not show, added to its noise as δδᵀ.
-    pub edge_bias: Vector6<f64>,
-    /// How the edge leans the match, those pairs and the covered ones
-    /// nearest the edge ([`crate::icp::IcpResult::edge_lean`], target
-    /// frame): the bias in its place where it explains the matches'
-    /// misfit ([`crate::links::Pull`]).
-    pub edge_lean: Vector6<f64>,
-    /// How far its two ways disagree
-    /// ([`crate::icp::IcpResult::asymmetry`], target frame): its scans'
-    /// sampling ([`crate::links::Pull`]).
-    pub asymmetry: Vector6<f64>,
+    /// What its residuals do not show (target frame; zero without a
+    /// match): how the pairs beyond the target's sampled edge pull it (a
+    /// bias added to its noise as δδᵀ), how the edge leans it (the bias in
+    /// its place where it explains the matches' misfit), and how far its
+    /// two ways disagree (its scans' sampling) — [`crate::links::Pull`].
+    pub pull: Pull,
 }
 
 impl PairCheck {
@@ -297,9 +290,7 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
                 }),
                 edge_covariance: used
                     .map(|r| crate::links::link_noise(&r.information, r.range_covariance, config.range_scale)),
-                edge_bias: l.result.as_ref().map_or_else(Vector6::zeros, |r| r.edge_bias),
-                edge_lean: l.result.as_ref().map_or_else(Vector6::zeros, |r| r.edge_lean),
-                asymmetry: l.result.as_ref().map_or_else(Vector6::zeros, |r| r.asymmetry),
+                pull: l.result.as_ref().map_or_else(Pull::default, Pull::of),
             };
             check.consistent &= !check.violates_free_space();
             check
@@ -411,9 +402,7 @@ mod tests {
             free_space: None,
             edge: None,
             edge_covariance: None,
-            edge_bias: Vector6::zeros(),
-            edge_lean: Vector6::zeros(),
-            asymmetry: Vector6::zeros(),
+            pull: Pull::default(),
         }
     }
 

@@ -283,8 +283,9 @@ fn align_impl(
             let inverse = estimate.inverse();
             let back =
                 accumulate(r.points, r.model, &inverse, max_sq, config, &mut back_partners, back_moved, back_own);
-            ways = Some((sums.clone(), back.clone()));
-            sums = sums.both_ways(&back, &estimate);
+            let both = sums.clone().both_ways(&back, &estimate);
+            ways = Some((sums, back));
+            sums = both;
         }
         last = sums;
         at_last = estimate;
