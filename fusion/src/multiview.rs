@@ -278,8 +278,8 @@ impl Matcher<'_> {
     /// The model set M: the `members`' models in the world frame.
     fn model(&self, members: &[usize]) -> Result<Target> {
         let total: usize = members.iter().map(|&j| self.prepared[j].local.len()).sum();
-        let (mut points, mut normals, mut shares) =
-            (Vec::with_capacity(total), Vec::with_capacity(total), Vec::with_capacity(total));
+        let (mut points, mut normals, mut shares, mut corners) =
+            (Vec::with_capacity(total), Vec::with_capacity(total), Vec::new(), Vec::new());
         for &j in members {
             let pose = self.poses[j];
             let moved: Isometry3<f32> = pose.cast();
@@ -290,8 +290,12 @@ impl Matcher<'_> {
             if self.config.icp.line_ratio.is_some() {
                 shares.extend(local.middle_shares());
             }
+            // Only the corner test reads these (none: every point planar).
+            if self.config.icp.corner_ratio.is_some() {
+                corners.extend(local.corner_shares());
+            }
         }
-        Target::with_oriented_normals(&points, normals)?.with_middle_shares(shares)
+        Target::with_oriented_normals(&points, normals)?.with_middle_shares(shares)?.with_corner_shares(corners)
     }
 
     /// Aligns scan `c` to its `partners` and records the match; returns its

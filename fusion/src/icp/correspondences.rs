@@ -240,6 +240,11 @@ pub(crate) fn accumulate(
                         if disagree(agreement, &r, c * CHUNK + k, target, i) {
                             continue;
                         }
+                        if let Some(ratio) = config.corner_ratio
+                            && f64::from(target.corner_share(i)) > ratio
+                        {
+                            continue;
+                        }
                         let (res, j, edge) = plane_pair(target, i, &pt, config);
                         if edge && config.only_covered {
                             continue;
@@ -479,6 +484,75 @@ mod tests {
         let others = Target::with_normals(&grid, vec![Vector3::x(); grid.len()]).expect("other points");
         assert!(own_model(&asked, &source, &others).is_none(), "a model of other points");
         assert_eq!(pass(&asked, None), source.len());
+    }
+
+    /// With a corner ratio asked for, a pair counts only where its target
+    /// normal's neighbourhood (the point's 10 nearest, found here by brute
+    /// force) has its smallest eigenvalue at most that share of its middle
+    /// one: a floor meeting a wall loses the pairs along where they meet,
+    /// and only there; without it every pair counts. A model whose
+    /// normals were given leaves out the same pairs with the corner shares
+    /// of the target they came from, and none without.
+    #[test]
+    fn pairs_at_a_corner_are_left_out_when_asked() {
+        let mut rng = ChaCha8Rng::seed_from_u64(21);
+        let mut jitter = || rng.random_range(-0.02f32..0.02);
+        let mut cloud = Vec::new();
+        for i in 0..30 {
+            for j in 0..20 {
+                // The floor z = 0 up to the wall x = 3, the wall up to 1.5 m.
+                cloud.push(Point3::new(i as f32 * 0.1 + jitter(), j as f32 * 0.1 + jitter(), 0.0));
+                if i < 15 {
+                    cloud.push(Point3::new(3.0, j as f32 * 0.1 + jitter(), 0.05 + i as f32 * 0.1 + jitter()));
+                }
+            }
+        }
+        let target = Target::new(&cloud, 10).expect("target");
+        let corner = |q: &Point3<f32>| {
+            let mut by: Vec<&Point3<f32>> = cloud.iter().collect();
+            by.sort_by(|a, b| (*a - q).norm_squared().total_cmp(&(*b - q).norm_squared()));
+            let hood: Vec<Vector3<f64>> = by[..10].iter().map(|p| p.coords.cast::<f64>()).collect();
+            let mean = hood.iter().sum::<Vector3<f64>>() / 10.0;
+            let scatter = hood.iter().fold(Matrix3::zeros(), |a, p| a + (p - mean) * (p - mean).transpose());
+            let mut e: Vec<f64> = scatter.symmetric_eigenvalues().iter().copied().collect();
+            e.sort_by(f64::total_cmp);
+            e[0] / e[1]
+        };
+        let at_corner: Vec<bool> = cloud.iter().map(|q| corner(q) > 0.1).collect();
+        let lost = at_corner.iter().filter(|&&c| c).count();
+        assert!(lost > 20, "the corner's points: {lost}");
+        for (q, _) in cloud.iter().zip(&at_corner).filter(|(_, c)| **c) {
+            assert!((3.0 - q.x).abs() + q.z.abs() < 0.45, "a corner point away from the corner: {q}");
+        }
+        let asked = IcpConfig { corner_ratio: Some(0.1), max_correspondence_m: 0.05, ..IcpConfig::default() };
+        let pass = |config: &IcpConfig, target: &Target| {
+            accumulate(
+                &cloud,
+                target,
+                &Isometry3::identity(),
+                0.0025,
+                config,
+                &mut Partners::new(cloud.len()),
+                None,
+                None,
+            )
+            .n
+        };
+        assert_eq!(pass(&asked, &target), cloud.len() - lost);
+        assert_eq!(pass(&IcpConfig { corner_ratio: None, ..asked }, &target), cloud.len());
+        let shares = target.corner_shares();
+        for (k, (&s, &c)) in shares.iter().zip(&at_corner).enumerate() {
+            assert_eq!(f64::from(s) > 0.1, c, "point {k}: corner share {s}");
+        }
+        let given = Target::with_normals(&cloud, target.normals()).expect("given");
+        assert_eq!(pass(&asked, &given), cloud.len(), "no corner shares given: every point planar");
+        let given = given.with_corner_shares(shares).expect("shares");
+        assert_eq!(pass(&asked, &given), cloud.len() - lost);
+        for bad in [0.0, 1.5, f64::NAN] {
+            let config = IcpConfig { corner_ratio: Some(bad), ..asked };
+            let e = crate::icp::align(&cloud, &target, &Isometry3::identity(), &config).expect_err("refused");
+            assert!(e.to_string().contains("corner eigenvalue ratio"), "{e}");
+        }
     }
 
     /// A match started from the neighbours an overlap count found

@@ -514,6 +514,15 @@ fn check(c: &IcpConfig) -> Result<()> {
             expected: "in (0, 1]".into(),
         });
     }
+    if let Some(ratio) = c.corner_ratio
+        && !(ratio.is_finite() && ratio > 0.0 && ratio <= 1.0)
+    {
+        return Err(FusionError::OutOfRange {
+            what: "corner eigenvalue ratio".into(),
+            value: ratio,
+            expected: "in (0, 1]".into(),
+        });
+    }
     if c.max_iterations == 0 {
         return Err(FusionError::OutOfRange { what: "iteration cap".into(), value: 0.0, expected: "≥ 1".into() });
     }

@@ -69,6 +69,9 @@ struct Local {
     normal: Vector3<f64>,
     /// The middle PCA eigenvalue over the largest ([`Target::middle_shares`]).
     middle: f32,
+    /// The smallest PCA eigenvalue over the middle one
+    /// ([`Target::corner_share`]).
+    corner: f32,
     hood: Neighbourhood,
 }
 
@@ -86,6 +89,9 @@ pub struct Target {
     /// With given normals: their neighbourhoods' middle shares (see
     /// [`Target::middle_shares`]); empty when not known.
     given_middle: Vec<f32>,
+    /// With given normals: their neighbourhoods' corner shares (see
+    /// [`Target::corner_shares`]); empty when not known.
+    given_corner: Vec<f32>,
     /// Points of an estimated normal's neighbourhood; 0: none estimated.
     normal_neighbours: usize,
     /// Estimated normals are turned towards this point.
@@ -122,6 +128,7 @@ impl Target {
             points,
             given: Vec::new(),
             given_middle: Vec::new(),
+            given_corner: Vec::new(),
             normal_neighbours,
             viewpoint: None,
             tree,
@@ -168,6 +175,21 @@ impl Target {
             });
         }
         self.given_middle = shares;
+        Ok(self)
+    }
+
+    /// The [`corner_shares`](Self::corner_shares) of the given normals'
+    /// neighbourhoods, from the targets they were estimated in. Empty: not
+    /// known (taken as planar).
+    pub fn with_corner_shares(mut self, shares: Vec<f32>) -> Result<Self> {
+        if !shares.is_empty() && shares.len() != self.points.len() {
+            return Err(FusionError::OutOfRange {
+                what: "corner share count".into(),
+                value: shares.len() as f64,
+                expected: format!("one per point ({})", self.points.len()),
+            });
+        }
+        self.given_corner = shares;
         Ok(self)
     }
 
@@ -241,6 +263,27 @@ impl Target {
             return Vec::new();
         }
         (0..self.points.len()).into_par_iter().map(|i| self.normal(i)).collect()
+    }
+
+    /// Each point's corner share: the smallest PCA eigenvalue of the
+    /// neighbourhood its normal came from over the middle one — near 0 on
+    /// one plane, up to 1 where the neighbourhood is no plane (two
+    /// surfaces meeting among its points, a blob)
+    /// ([`super::IcpConfig::corner_ratio`]; estimating those not yet
+    /// estimated). Empty without normals.
+    pub fn corner_shares(&self) -> Vec<f32> {
+        if !self.has_normals() {
+            return Vec::new();
+        }
+        (0..self.points.len()).into_par_iter().map(|i| self.corner_share(i)).collect()
+    }
+
+    /// Point `i`'s [corner share](Self::corner_shares) (0 when not known).
+    pub(crate) fn corner_share(&self, i: usize) -> f32 {
+        if self.normal_neighbours == 0 {
+            return self.given_corner.get(i).copied().unwrap_or(0.0);
+        }
+        self.local(i).corner
     }
 
     /// Point `i`'s unit normal (the target has normals).
@@ -359,14 +402,14 @@ impl Target {
             let nn = self.tree.query(&self.points[j]).nearest_n::<SquaredEuclidean<f32>>(k).execute();
             let hood = Neighbourhood::new(j, nn.iter().map(|r| (r.item, r.distance)), nn.len() == n);
             if self.normal_neighbours == 0 {
-                return Local { normal: Vector3::zeros(), middle: 1.0, hood };
+                return Local { normal: Vector3::zeros(), middle: 1.0, corner: 0.0, hood };
             }
             let used = &nn[..self.normal_neighbours.min(nn.len())];
-            let (mut normal, middle) = pca_normal(&self.scatter(used.iter().map(|r| r.item)));
+            let (mut normal, middle, corner) = pca_normal(&self.scatter(used.iter().map(|r| r.item)));
             if let Some(v) = &self.viewpoint {
                 orient(&mut normal, &self.points[j], v);
             }
-            Local { normal, middle: middle as f32, hood }
+            Local { normal, middle: middle as f32, corner: corner as f32, hood }
         })
     }
 
@@ -453,24 +496,28 @@ pub const AMBIGUOUS_NORMAL: f64 = 0.2;
 /// form (trigonometric solution of the characteristic cubic), the vector
 /// as the longest cross product of two rows of A − λI, falling back to the
 /// iterative solver when that vector is ill-defined (a repeated smallest
-/// eigenvalue) — and its middle eigenvalue over its largest: 1 for a
-/// zero matrix, 0 when the smallest eigenvalue is above
-/// [`AMBIGUOUS_NORMAL`] of the middle one.
-fn pca_normal(a: &Matrix3<f64>) -> (Vector3<f64>, f64) {
-    let middle_share = |mut e: [f64; 3]| {
+/// eigenvalue) — its middle eigenvalue over its largest (1 for a zero
+/// matrix, 0 when the smallest eigenvalue is above [`AMBIGUOUS_NORMAL`]
+/// of the middle one) and its smallest over its middle (0 when the
+/// middle is 0).
+fn pca_normal(a: &Matrix3<f64>) -> (Vector3<f64>, f64, f64) {
+    let shares = |mut e: [f64; 3]| {
         e.sort_by(f64::total_cmp);
-        if e[2] <= 0.0 {
+        let corner = if e[1] > 0.0 { (e[0].max(0.0) / e[1]).min(1.0) } else { 0.0 };
+        let middle = if e[2] <= 0.0 {
             1.0
         } else if e[0] > AMBIGUOUS_NORMAL * e[1] {
             0.0
         } else {
             (e[1] / e[2]).max(0.0)
-        }
+        };
+        (middle, corner)
     };
     let iterative = || {
         let eig = SymmetricEigen::new(*a);
         let e = eig.eigenvalues;
-        (eig.eigenvectors.column(e.imin()).into_owned(), middle_share([e[0], e[1], e[2]]))
+        let (middle, corner) = shares([e[0], e[1], e[2]]);
+        (eig.eigenvectors.column(e.imin()).into_owned(), middle, corner)
     };
     let p1 = a[(0, 1)].powi(2) + a[(0, 2)].powi(2) + a[(1, 2)].powi(2);
     let q = a.trace() / 3.0;
@@ -483,7 +530,7 @@ fn pca_normal(a: &Matrix3<f64>) -> (Vector3<f64>, f64) {
     let phi = (b.determinant() / 2.0).clamp(-1.0, 1.0).acos() / 3.0;
     let lambda = q + 2.0 * p * (phi + 2.0 * std::f64::consts::FRAC_PI_3).cos();
     let largest = q + 2.0 * p * phi.cos();
-    let middle = middle_share([lambda, largest, 3.0 * q - lambda - largest]);
+    let (middle, corner) = shares([lambda, largest, 3.0 * q - lambda - largest]);
     let m = a - Matrix3::identity() * lambda;
     let (r0, r1, r2) = (m.row(0).transpose(), m.row(1).transpose(), m.row(2).transpose());
     let best = [r0.cross(&r1), r0.cross(&r2), r1.cross(&r2)]
@@ -491,7 +538,7 @@ fn pca_normal(a: &Matrix3<f64>) -> (Vector3<f64>, f64) {
         .max_by(|x, y| x.norm_squared().total_cmp(&y.norm_squared()))
         .unwrap_or_default();
     // |rᵢ × rⱼ| ~ p² when the other two eigenvalues are apart from λ.
-    if best.norm_squared() > 1e-12 * p2 * p2 { (best.normalize(), middle) } else { iterative() }
+    if best.norm_squared() > 1e-12 * p2 * p2 { (best.normalize(), middle, corner) } else { iterative() }
 }
 
 /// A stored point in f64.
@@ -632,7 +679,7 @@ mod tests {
             let a = r * d * r.transpose() * 1e-2;
             let eig = SymmetricEigen::new(a);
             let reference = eig.eigenvectors.column(eig.eigenvalues.imin()).into_owned();
-            let (v, _) = pca_normal(&a);
+            let (v, _, _) = pca_normal(&a);
             assert!((v.norm() - 1.0).abs() < 1e-12);
             assert!(v.dot(&reference).abs() > 1.0 - 1e-9, "case {k}: {v} vs {reference}");
         }
@@ -646,22 +693,27 @@ mod tests {
             let a = r * d * r.transpose() * 1e-2;
             let mut e: Vec<f64> = SymmetricEigen::new(a).eigenvalues.iter().copied().collect();
             e.sort_by(f64::total_cmp);
-            let (_, share) = pca_normal(&a);
+            let (_, share, corner) = pca_normal(&a);
             let expected = if e[0] > AMBIGUOUS_NORMAL * e[1] { 0.0 } else { e[1] / e[2] };
             assert!((share - expected).abs() < 1e-9, "case {k}: {share} against eigenvalues {e:?}");
+            assert!((corner - e[0] / e[1]).abs() < 1e-7, "case {k}: corner {corner} against eigenvalues {e:?}");
         }
         // Repeated eigenvalues go through the fallback and still give a unit
         // eigenvector; the two smaller alike: no clear normal.
-        let (v, share) = pca_normal(&Matrix3::from_diagonal(&Vector3::new(2.0, 1.0, 1.0)));
+        let (v, share, corner) = pca_normal(&Matrix3::from_diagonal(&Vector3::new(2.0, 1.0, 1.0)));
         assert!((v.x.abs() < 1e-12) && (v.norm() - 1.0).abs() < 1e-12);
         assert_eq!(share, 0.0, "a disc's normal is either of two directions");
-        let (_, share) = pca_normal(&Matrix3::from_diagonal(&Vector3::new(1.0, 0.01, 0.01)));
+        assert!((corner - 1.0).abs() < 1e-12, "a disc's corner share: {corner}");
+        let (_, share, _) = pca_normal(&Matrix3::from_diagonal(&Vector3::new(1.0, 0.01, 0.01)));
         assert_eq!(share, 0.0, "a needle");
-        let (_, share) = pca_normal(&Matrix3::from_diagonal(&Vector3::new(1.0, 0.01, 0.002)));
+        let (_, share, corner) = pca_normal(&Matrix3::from_diagonal(&Vector3::new(1.0, 0.01, 0.002)));
         assert!((share - 0.01).abs() < 1e-12, "a flat strip: {share}");
-        let (_, share) = pca_normal(&Matrix3::from_diagonal(&Vector3::new(1.0, 0.5, 0.0)));
+        assert!((corner - 0.2).abs() < 1e-12, "a flat strip's corner share: {corner}");
+        let (_, share, corner) = pca_normal(&Matrix3::from_diagonal(&Vector3::new(1.0, 0.5, 0.0)));
         assert!((share - 0.5).abs() < 1e-12, "a plane: {share}");
+        assert_eq!(corner, 0.0, "a plane is no corner");
         assert_eq!(pca_normal(&Matrix3::zeros()).1, 1.0);
+        assert_eq!(pca_normal(&Matrix3::zeros()).2, 0.0);
     }
 
     /// Normals estimated as they are needed are the PCA normals of each

@@ -441,6 +441,10 @@ pub struct SettingsReport {
     /// two normals differ by more than this many degrees left out (0:
     /// off).
     pub normal_agreement_deg: f64,
+    /// `--corner-ratio`: point-to-plane pairs whose target normal's
+    /// neighbourhood has its smallest PCA eigenvalue above this share of
+    /// its middle one left out, in every match (0: off).
+    pub corner_ratio: f64,
     /// Where no `--degeneracy-ratio` is given and every scan's points lie
     /// on a tube all round it: the pipe found, whose threshold the matches
     /// then ran with. Null otherwise.

@@ -80,6 +80,9 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
     if !(args.normal_agreement.is_finite() && (0.0..90.0).contains(&args.normal_agreement)) {
         bail!("--normal-agreement {}: expected degrees in [0, 90) (0: off)", args.normal_agreement);
     }
+    if !(args.corner_ratio.is_finite() && (0.0..=1.0).contains(&args.corner_ratio)) {
+        bail!("--corner-ratio {}: expected a ratio in [0, 1] (0: off)", args.corner_ratio);
+    }
     if args.max_partners == 0 {
         bail!("--max-partners 0: expected at least 1");
     }
@@ -93,6 +96,7 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
     icp.degeneracy_ratio = (degeneracy_ratio > 0.0).then_some(degeneracy_ratio);
     icp.line_ratio = (line_ratio > 0.0).then_some(line_ratio);
     icp.normal_agreement_cos = (args.normal_agreement > 0.0).then(|| args.normal_agreement.to_radians().cos());
+    icp.corner_ratio = (args.corner_ratio > 0.0).then_some(args.corner_ratio);
     if args.method == MethodArg::PointToPoint {
         icp.method = Method::PointToPoint;
         // Back faces need the target's normals, which point-to-point does not estimate.
@@ -285,6 +289,7 @@ fn scale_settings(
         degeneracy_ratio: config.link.multiview.icp.degeneracy_ratio.unwrap_or(0.0),
         line_ratio: config.link.multiview.icp.line_ratio.unwrap_or(0.0),
         normal_agreement_deg: args.normal_agreement,
+        corner_ratio: args.corner_ratio,
         pipe: None,
         global: None,
     })
