@@ -546,6 +546,8 @@ mod tests {
         }
         let given = Target::with_normals(&cloud, target.normals()).expect("given");
         assert_eq!(pass(&asked, &given), cloud.len(), "no corner shares given: every point planar");
+        let short = Target::with_normals(&cloud, target.normals()).and_then(|t| t.with_corner_shares(vec![0.0; 3]));
+        assert!(short.is_err_and(|e| e.to_string().contains("corner share count")));
         let given = given.with_corner_shares(shares).expect("shares");
         assert_eq!(pass(&asked, &given), cloud.len() - lost);
         for bad in [0.0, 1.5, f64::NAN] {

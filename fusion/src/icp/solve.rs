@@ -505,23 +505,14 @@ fn check(c: &IcpConfig) -> Result<()> {
         });
     }
 
-    if let Some(cos) = c.normal_agreement_cos
-        && !(cos.is_finite() && cos > 0.0 && cos <= 1.0)
+    for (what, value) in
+        [("normal agreement cosine", c.normal_agreement_cos), ("corner eigenvalue ratio", c.corner_ratio)]
     {
-        return Err(FusionError::OutOfRange {
-            what: "normal agreement cosine".into(),
-            value: cos,
-            expected: "in (0, 1]".into(),
-        });
-    }
-    if let Some(ratio) = c.corner_ratio
-        && !(ratio.is_finite() && ratio > 0.0 && ratio <= 1.0)
-    {
-        return Err(FusionError::OutOfRange {
-            what: "corner eigenvalue ratio".into(),
-            value: ratio,
-            expected: "in (0, 1]".into(),
-        });
+        if let Some(v) = value
+            && !(v.is_finite() && v > 0.0 && v <= 1.0)
+        {
+            return Err(FusionError::OutOfRange { what: what.into(), value: v, expected: "in (0, 1]".into() });
+        }
     }
     if c.max_iterations == 0 {
         return Err(FusionError::OutOfRange { what: "iteration cap".into(), value: 0.0, expected: "≥ 1".into() });

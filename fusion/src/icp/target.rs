@@ -167,29 +167,27 @@ impl Target {
     /// neighbourhoods, from the targets they were estimated in. Empty: not
     /// known (taken as planar).
     pub fn with_middle_shares(mut self, shares: Vec<f32>) -> Result<Self> {
+        self.given_middle = self.one_per_point("middle share count", shares)?;
+        Ok(self)
+    }
+
+    /// `shares` when empty or one per point, else an error naming `what`.
+    fn one_per_point(&self, what: &str, shares: Vec<f32>) -> Result<Vec<f32>> {
         if !shares.is_empty() && shares.len() != self.points.len() {
             return Err(FusionError::OutOfRange {
-                what: "middle share count".into(),
+                what: what.into(),
                 value: shares.len() as f64,
                 expected: format!("one per point ({})", self.points.len()),
             });
         }
-        self.given_middle = shares;
-        Ok(self)
+        Ok(shares)
     }
 
     /// The [`corner_shares`](Self::corner_shares) of the given normals'
     /// neighbourhoods, from the targets they were estimated in. Empty: not
     /// known (taken as planar).
     pub fn with_corner_shares(mut self, shares: Vec<f32>) -> Result<Self> {
-        if !shares.is_empty() && shares.len() != self.points.len() {
-            return Err(FusionError::OutOfRange {
-                what: "corner share count".into(),
-                value: shares.len() as f64,
-                expected: format!("one per point ({})", self.points.len()),
-            });
-        }
-        self.given_corner = shares;
+        self.given_corner = self.one_per_point("corner share count", shares)?;
         Ok(self)
     }
 
@@ -272,10 +270,15 @@ impl Target {
     /// ([`super::IcpConfig::corner_ratio`]; estimating those not yet
     /// estimated). Empty without normals.
     pub fn corner_shares(&self) -> Vec<f32> {
+        self.each_point(Self::corner_share)
+    }
+
+    /// `share` of every point, in parallel; empty without normals.
+    fn each_point(&self, share: impl Fn(&Self, usize) -> f32 + Sync + Send) -> Vec<f32> {
         if !self.has_normals() {
             return Vec::new();
         }
-        (0..self.points.len()).into_par_iter().map(|i| self.corner_share(i)).collect()
+        (0..self.points.len()).into_par_iter().map(|i| share(self, i)).collect()
     }
 
     /// Point `i`'s [corner share](Self::corner_shares) (0 when not known).
@@ -305,10 +308,7 @@ impl Target {
     /// point's (a multi-beam lidar's ring on flat ground: the ring's plane
     /// is the ground's). Empty without normals.
     pub fn middle_shares(&self) -> Vec<f32> {
-        if !self.has_normals() {
-            return Vec::new();
-        }
-        (0..self.points.len()).into_par_iter().map(|i| self.middle_share(i)).collect()
+        self.each_point(Self::middle_share)
     }
 
     /// Point `i`'s [middle share](Self::middle_shares) (1 when not known).
