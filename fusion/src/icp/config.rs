@@ -120,7 +120,9 @@ pub struct IcpConfig {
     /// floor's by 25–130 mrad on average 4–13 m out, 6–28 % of them by
     /// more than 0.1 rad), every match leans on its target scan's tilted
     /// normals alike, and a chain of scans bends (BENCHMARKS.md, "Normals
-    /// at corners"). A target whose normals were given keeps every pair.
+    /// at corners"). A target whose normals were given keeps every pair
+    /// unless their corner shares came with them
+    /// ([`Target::with_corner_shares`](super::Target::with_corner_shares)).
     /// Default none.
     pub corner_ratio: Option<f64>,
     /// Point-to-plane: what the residuals' own scatter misjudges of the
