@@ -292,7 +292,7 @@ impl Matcher<'_> {
             }
             // Only the corner test reads these (none: every point planar).
             if self.config.icp.corner_ratio.is_some() {
-                corners.extend(local.corner_shares());
+                corners.extend(local.corner_shares_beyond(self.config.icp.corner_reach_m()));
             }
         }
         Target::with_oriented_normals(&points, normals)?.with_middle_shares(shares)?.with_corner_shares(corners)

@@ -125,6 +125,16 @@ pub struct IcpConfig {
     /// ([`Target::with_corner_shares`](super::Target::with_corner_shares)).
     /// Default none.
     pub corner_ratio: Option<f64>,
+    /// With [`corner_ratio`](Self::corner_ratio): judge every target
+    /// point's neighbourhood. Off (the default), only those whose ten
+    /// nearest other points reach farther than `max_correspondence_m` —
+    /// where the scan is sparse: far from its scanner, the neighbourhood
+    /// spans two surfaces over decimetres and its normal leans most (a
+    /// hall's floor by 25–230 mrad 4–18 m out), while near the scanner
+    /// the lean is a few mrad and the corners are much of what holds a
+    /// small room's scans along its walls (BENCHMARKS.md, "Corners where
+    /// the scan is sparse").
+    pub corner_everywhere: bool,
     /// Point-to-plane: what the residuals' own scatter misjudges of the
     /// estimate's variance, as a factor on the reported covariance —
     /// measured on the data by [`crate::noise::calibrate`] (random halves
@@ -160,6 +170,15 @@ impl Kernel {
     }
 }
 
+impl IcpConfig {
+    /// How far a target point's ten nearest other points must reach for
+    /// the corner test to judge it, metres: the correspondence distance,
+    /// or 0 (every point) with [`corner_everywhere`](Self::corner_everywhere).
+    pub(crate) fn corner_reach_m(&self) -> f64 {
+        if self.corner_everywhere { 0.0 } else { self.max_correspondence_m }
+    }
+}
+
 impl Default for IcpConfig {
     fn default() -> Self {
         Self {
@@ -180,6 +199,7 @@ impl Default for IcpConfig {
             range_noise: false,
             normal_agreement_cos: None,
             corner_ratio: None,
+            corner_everywhere: false,
             noise_scale: 1.0,
         }
     }

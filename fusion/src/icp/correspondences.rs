@@ -202,6 +202,7 @@ pub(crate) fn accumulate(
     // The source scanner in the target frame.
     let back_faces = config.reject_back_faces.then(|| r * config.source_viewpoint.coords + t);
     let max_m = max_sq.sqrt();
+    let corner_reach_sq = config.corner_reach_m().powi(2);
     // The first pass's answers, when known (`Partners::at` at this estimate).
     let known = partners.known_sq.take().filter(|_| moved.is_none());
     source
@@ -241,7 +242,7 @@ pub(crate) fn accumulate(
                             continue;
                         }
                         if let Some(ratio) = config.corner_ratio
-                            && f64::from(target.corner_share(i)) > ratio
+                            && f64::from(target.corner_share_beyond(i, corner_reach_sq)) > ratio
                         {
                             continue;
                         }
@@ -492,7 +493,10 @@ mod tests {
     /// one: a floor meeting a wall loses the pairs along where they meet,
     /// and only there; without it every pair counts. A model whose
     /// normals were given leaves out the same pairs with the corner shares
-    /// of the target they came from, and none without.
+    /// of the target they came from, and none without. Unless asked
+    /// everywhere, only a neighbourhood reaching beyond the pairs'
+    /// distance counts (the farthest of its ten nearest other points), in
+    /// the target's own normals and in the shares a model is given.
     #[test]
     fn pairs_at_a_corner_are_left_out_when_asked() {
         let mut rng = ChaCha8Rng::seed_from_u64(21);
@@ -508,6 +512,8 @@ mod tests {
             }
         }
         let target = Target::new(&cloud, 10).expect("target");
+        // Each point's corner share and its ten nearest other points'
+        // reach, squared.
         let corner = |q: &Point3<f32>| {
             let mut by: Vec<&Point3<f32>> = cloud.iter().collect();
             by.sort_by(|a, b| (*a - q).norm_squared().total_cmp(&(*b - q).norm_squared()));
@@ -516,21 +522,22 @@ mod tests {
             let scatter = hood.iter().fold(Matrix3::zeros(), |a, p| a + (p - mean) * (p - mean).transpose());
             let mut e: Vec<f64> = scatter.symmetric_eigenvalues().iter().copied().collect();
             e.sort_by(f64::total_cmp);
-            e[0] / e[1]
+            (e[0] / e[1], f64::from((by[10] - q).norm_squared()))
         };
-        let at_corner: Vec<bool> = cloud.iter().map(|q| corner(q) > 0.1).collect();
+        let hoods: Vec<(f64, f64)> = cloud.iter().map(corner).collect();
+        let at_corner: Vec<bool> = hoods.iter().map(|&(share, _)| share > 0.1).collect();
         let lost = at_corner.iter().filter(|&&c| c).count();
         assert!(lost > 20, "the corner's points: {lost}");
         for (q, _) in cloud.iter().zip(&at_corner).filter(|(_, c)| **c) {
             assert!((3.0 - q.x).abs() + q.z.abs() < 0.45, "a corner point away from the corner: {q}");
         }
         let asked = IcpConfig { corner_ratio: Some(0.1), max_correspondence_m: 0.05, ..IcpConfig::default() };
-        let pass = |config: &IcpConfig, target: &Target| {
+        let pass_within = |max_sq: f64, config: &IcpConfig, target: &Target| {
             accumulate(
                 &cloud,
                 target,
                 &Isometry3::identity(),
-                0.0025,
+                max_sq,
                 config,
                 &mut Partners::new(cloud.len()),
                 None,
@@ -538,6 +545,8 @@ mod tests {
             )
             .n
         };
+        // Every neighbourhood of this 0.1 m grid reaches beyond 0.05 m.
+        let pass = |config: &IcpConfig, target: &Target| pass_within(0.0025, config, target);
         assert_eq!(pass(&asked, &target), cloud.len() - lost);
         assert_eq!(pass(&IcpConfig { corner_ratio: None, ..asked }, &target), cloud.len());
         let shares = target.corner_shares();
@@ -550,6 +559,25 @@ mod tests {
         assert!(short.is_err_and(|e| e.to_string().contains("corner share count")));
         let given = given.with_corner_shares(shares).expect("shares");
         assert_eq!(pass(&asked, &given), cloud.len() - lost);
+        // Pairs within 0.18–0.21 m: some corner neighbourhoods reach
+        // farther, some not.
+        let everywhere = IcpConfig { corner_everywhere: true, ..asked };
+        for reach_m in [0.18f64, 0.19, 0.21] {
+            let reach_sq = reach_m * reach_m;
+            let at_reach = hoods.iter().any(|&(share, r)| share > 0.1 && (r - reach_sq).abs() < 1e-5);
+            assert!(!at_reach, "a corner's neighbourhood at the reach");
+            let sparse = hoods.iter().filter(|&&(share, r)| share > 0.1 && r > reach_sq).count();
+            assert!(sparse > 0 && sparse < lost, "{sparse} of the corner's {lost} points beyond {reach_m} m");
+            let config = IcpConfig { max_correspondence_m: reach_m, ..asked };
+            assert_eq!(pass_within(reach_sq, &config, &target), cloud.len() - sparse, "beyond {reach_m} m");
+            assert_eq!(pass_within(reach_sq, &everywhere, &target), cloud.len() - lost, "everywhere");
+            let beyond = target.corner_shares_beyond(reach_m);
+            for (k, (&s, &(share, r))) in beyond.iter().zip(&hoods).enumerate() {
+                assert_eq!(f64::from(s) > 0.1, share > 0.1 && r > reach_sq, "point {k}: corner share {s}");
+            }
+            let given = Target::with_normals(&cloud, target.normals()).and_then(|t| t.with_corner_shares(beyond));
+            assert_eq!(pass_within(reach_sq, &config, &given.expect("shares")), cloud.len() - sparse);
+        }
         for bad in [0.0, 1.5, f64::NAN] {
             let config = IcpConfig { corner_ratio: Some(bad), ..asked };
             let e = crate::icp::align(&cloud, &target, &Isometry3::identity(), &config).expect_err("refused");

@@ -270,7 +270,7 @@ impl Target {
     /// ([`super::IcpConfig::corner_ratio`]; estimating those not yet
     /// estimated). Empty without normals.
     pub fn corner_shares(&self) -> Vec<f32> {
-        self.each_point(Self::corner_share)
+        self.corner_shares_beyond(0.0)
     }
 
     /// `share` of every point, in parallel; empty without normals.
@@ -281,12 +281,25 @@ impl Target {
         (0..self.points.len()).into_par_iter().map(|i| share(self, i)).collect()
     }
 
-    /// Point `i`'s [corner share](Self::corner_shares) (0 when not known).
-    pub(crate) fn corner_share(&self, i: usize) -> f32 {
+    /// Point `i`'s [corner share](Self::corner_shares) where its ten
+    /// nearest other points reach farther than `reach_sq` (squared metres),
+    /// 0 where they do not (0 when not known). Given normals' shares are
+    /// taken as given.
+    pub(crate) fn corner_share_beyond(&self, i: usize, reach_sq: f64) -> f32 {
         if self.normal_neighbours == 0 {
             return self.given_corner.get(i).copied().unwrap_or(0.0);
         }
-        self.local(i).corner
+        let local = self.local(i);
+        if f64::from(4.0 * local.hood.reach_sq) > reach_sq { local.corner } else { 0.0 }
+    }
+
+    /// Each point's [corner share](Self::corner_shares) where its ten
+    /// nearest other points reach farther than `reach_m`, 0 where they do
+    /// not: a sparse neighbourhood's (as
+    /// [`super::IcpConfig::corner_everywhere`] off judges them, the
+    /// stage's correspondence distance the reach). Empty without normals.
+    pub fn corner_shares_beyond(&self, reach_m: f64) -> Vec<f32> {
+        self.each_point(|t, i| t.corner_share_beyond(i, reach_m * reach_m))
     }
 
     /// Point `i`'s unit normal (the target has normals).

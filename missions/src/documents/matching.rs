@@ -445,6 +445,10 @@ pub struct SettingsReport {
     /// neighbourhood has its smallest PCA eigenvalue above this share of
     /// its middle one left out, in every match (0: off).
     pub corner_ratio: f64,
+    /// `--corner-everywhere`: with the corner test, every target point's
+    /// neighbourhood judged; false: only those whose ten nearest points
+    /// reach beyond the stage's correspondence distance.
+    pub corner_everywhere: bool,
     /// Where no `--degeneracy-ratio` is given and every scan's points lie
     /// on a tube all round it: the pipe found, whose threshold the matches
     /// then ran with. Null otherwise.

@@ -1851,18 +1851,30 @@ fn a_registration_the_scans_agree_with_no_better_than_their_starts_gives_way_to_
     // With the pairs whose target normal's neighbourhood is no one plane
     // left out (`--corner-ratio 0.1`: the ground's normals at the walls'
     // feet, tilted towards the scanner that saw them), the scans land
-    // nearer still on average.
+    // nearer still on average — judged where the scans are sparse (the
+    // ten nearest points reaching beyond the stage's correspondence
+    // distance) or everywhere (`--corner-everywhere`), alike.
     let (r, _) = run(&[scans.clone(), "--corner-ratio".into(), "1.5".into()], &dir.path().join("bad"));
     assert_eq!(r.code, 2, "{}", r.stderr);
     assert!(r.stderr.contains("--corner-ratio 1.5: expected a ratio in [0, 1] (0: off)"), "{}", r.stderr);
-    let (r, v) = run(&[scans, "--corner-ratio".into(), "0.1".into()], &dir.path().join("corners"));
-    let v = v.unwrap_or_else(|| panic!("{}", r.stderr));
-    assert_eq!(r.code, 0, "{}", r.stderr);
-    assert!(v["settings"]["corner_ratio"].as_f64().is_some_and(|d| (d - 0.1).abs() < 1e-12), "{}", v["settings"]);
-    let off = offsets(&v);
-    let mean = off.iter().sum::<f64>() / off.len() as f64;
-    // (Measured 32 mm on average, 70 mm at most; 67 and 118 mm without.)
-    assert!(mean < 0.045 && off.iter().all(|&o| o < 0.1), "{off:?} m from the truth with --corner-ratio 0.1");
+    let (r, _) = run(&[scans.clone(), "--corner-everywhere".into()], &dir.path().join("bad"));
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(r.stderr.contains("--corner-everywhere widens the corner test: it needs --corner-ratio above 0"));
+    // (Measured 34 mm on average, 73 mm at most; everywhere 32 and 70 mm;
+    // 67 and 118 mm without.)
+    for everywhere in [false, true] {
+        let mut args = vec![scans.clone(), "--corner-ratio".into(), "0.1".into()];
+        args.extend(everywhere.then(|| "--corner-everywhere".into()));
+        let (r, v) = run(&args, &dir.path().join(format!("corners-{everywhere}")));
+        let v = v.unwrap_or_else(|| panic!("{}", r.stderr));
+        assert_eq!(r.code, 0, "{}", r.stderr);
+        let settings = &v["settings"];
+        assert!(settings["corner_ratio"].as_f64().is_some_and(|d| (d - 0.1).abs() < 1e-12), "{settings}");
+        assert_eq!(settings["corner_everywhere"], everywhere, "{settings}");
+        let off = offsets(&v);
+        let mean = off.iter().sum::<f64>() / off.len() as f64;
+        assert!(mean < 0.045 && off.iter().all(|&o| o < 0.1), "{off:?} m from the truth, {args:?}");
+    }
 }
 
 /// Issue 38, a wrong fit the restart reached is named too: the bench's

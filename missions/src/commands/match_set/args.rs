@@ -129,10 +129,18 @@ pub struct MatchArgs {
     /// a wall among the normal's nearest points). Such normals lean
     /// towards the scanner that saw them, and a chain of scans from
     /// different viewpoints bends: 0.1 lands the simulated hall's 22 scans
-    /// 1.5× closer and the corridor's 20 1.6× (docs/match.md). Every mode;
-    /// 0: off, the default.
+    /// 1.5× closer and the corridor's 20 1.6× (docs/match.md). Judged
+    /// where the scan is sparse (see --corner-everywhere); every mode; 0:
+    /// off, the default.
     #[arg(long, default_value_t = 0.0)]
     pub corner_ratio: f64,
+    /// With --corner-ratio: judge every target point's neighbourhood, not
+    /// only those whose ten nearest points reach beyond the stage's
+    /// correspondence distance (where the scan is sparse, far from its
+    /// scanner, and the normals lean most): near the scanner a small
+    /// room's corners hold its scans along the walls (docs/match.md).
+    #[arg(long)]
+    pub corner_everywhere: bool,
     /// Drop points nearer than this to their scan's origin, metres.
     #[arg(long, default_value_t = 0.0)]
     pub min_range: f64,

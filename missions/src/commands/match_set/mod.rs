@@ -83,6 +83,9 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
     if !(args.corner_ratio.is_finite() && (0.0..=1.0).contains(&args.corner_ratio)) {
         bail!("--corner-ratio {}: expected a ratio in [0, 1] (0: off)", args.corner_ratio);
     }
+    if args.corner_everywhere && args.corner_ratio == 0.0 {
+        bail!("--corner-everywhere widens the corner test: it needs --corner-ratio above 0");
+    }
     if args.max_partners == 0 {
         bail!("--max-partners 0: expected at least 1");
     }
@@ -97,6 +100,7 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
     icp.line_ratio = (line_ratio > 0.0).then_some(line_ratio);
     icp.normal_agreement_cos = (args.normal_agreement > 0.0).then(|| args.normal_agreement.to_radians().cos());
     icp.corner_ratio = (args.corner_ratio > 0.0).then_some(args.corner_ratio);
+    icp.corner_everywhere = args.corner_everywhere;
     if args.method == MethodArg::PointToPoint {
         icp.method = Method::PointToPoint;
         // Back faces need the target's normals, which point-to-point does not estimate.
@@ -290,6 +294,7 @@ fn scale_settings(
         line_ratio: config.link.multiview.icp.line_ratio.unwrap_or(0.0),
         normal_agreement_deg: args.normal_agreement,
         corner_ratio: args.corner_ratio,
+        corner_everywhere: args.corner_everywhere,
         pipe: None,
         global: None,
     })
