@@ -129,7 +129,7 @@ pub struct MatchArgs {
     /// a wall among the normal's nearest points). Such normals lean
     /// towards the scanner that saw them, and a chain of scans from
     /// different viewpoints bends: 0.1 lands the simulated hall's 22 scans
-    /// 1.5× closer and the corridor's 20 1.6× (docs/match.md). Judged
+    /// 1.3–1.5× closer and the corridor's 20 1.7× (docs/match.md). Judged
     /// where the scan is sparse (see --corner-everywhere); every mode; 0:
     /// off, the default.
     #[arg(long, default_value_t = 0.0)]
