@@ -134,6 +134,9 @@ pub struct PairCheck {
     /// The same residual at the final poses (the match's first pass),
     /// metres.
     pub start_rmse_m: Option<f64>,
+    /// Whether the match settled (false: stopped at its iteration cap
+    /// still moving); `None` when it failed.
+    pub converged: Option<bool>,
     /// What a right registration of these two scans leaves: the RMS of
     /// their noise floors ([`noise_floor`]), metres.
     pub noise_m: f64,
@@ -271,9 +274,14 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
                 seen_motion_m: motion.map(|m| m.4),
                 rmse_m: l.result.as_ref().map(|r| r.rmse_m),
                 start_rmse_m: l.result.as_ref().map(|r| r.start_rmse_m),
+                converged: l.result.as_ref().map(|r| r.converged),
                 noise_m: (0.5 * (floors[l.source].powi(2) + floors[l.target].powi(2))).sqrt(),
                 // (A match still creeping at its cap but a few millimetres
-                // from the poses agrees with them: the motion judges.)
+                // from the poses agrees with them: the motion judges. One
+                // that crept farther is judged alike — right pairs of the
+                // simulated corridor and of a pipe creep along what they
+                // see weakly —, and puts the result in doubt
+                // ([`crate::scanset::Trigger::Creeping`]).)
                 consistent: motion.is_some_and(|(moved, angle, _, _, seen)| {
                     moved <= tolerance_m
                         || (seen <= MAX_RELATIVE_MOTION * radius
@@ -397,6 +405,7 @@ mod tests {
             seen_motion_m: None,
             rmse_m: None,
             start_rmse_m: None,
+            converged: moved_m.map(|_| true),
             noise_m: 0.001,
             consistent,
             free_space: None,

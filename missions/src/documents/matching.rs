@@ -179,6 +179,10 @@ pub struct CheckReport {
     /// The same residual at the final poses (the match's first pass),
     /// metres; null when the match failed.
     pub start_rmse_m: Option<f64>,
+    /// Whether the match settled: false when it stopped at its iteration
+    /// cap still moving (such a match beyond the finest voxel puts the
+    /// result in doubt: `restart.trigger` "creeping"); null when it failed.
+    pub converged: Option<bool>,
     /// What a right registration of the two scans leaves: the RMS of their
     /// noise floors (each scan's two random halves matched at the
     /// identity), metres.
@@ -286,9 +290,13 @@ pub struct RestartReport {
     /// second stage's reach of its start), "failed" (`schedule_error`),
     /// "untrusted" (the schedule's result put points in another scanner's
     /// free space), "disagreeing" (the schedule's links disagree more
-    /// than their covariances allow: `variance_factor` above 1) or "named"
+    /// than their covariances allow: `variance_factor` above 1), "named"
     /// (the verification names scans of the schedule's result:
-    /// `schedule_untrusted`).
+    /// `schedule_untrusted`) or "creeping" (a pair of `checks` stopped at
+    /// its iteration cap still moving beyond the finest voxel —
+    /// `converged` false — and the scans agree with the schedule's result
+    /// no better than with their starts: `schedule_disagreement_m2` at
+    /// least `starts_disagreement_m2`).
     pub trigger: String,
     /// The scans the verification names at the schedule's poses (indices
     /// into `scans`): by their pairs (`checks`), or in the modes without a

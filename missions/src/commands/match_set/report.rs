@@ -106,6 +106,7 @@ pub(super) fn report(
                 fusion::scanset::Trigger::Untrusted => "untrusted",
                 fusion::scanset::Trigger::Disagreeing => "disagreeing",
                 fusion::scanset::Trigger::Named => "named",
+                fusion::scanset::Trigger::Creeping => "creeping",
             }
             .into(),
             schedule_untrusted: x.untrusted.0.clone(),
@@ -151,6 +152,7 @@ pub(super) fn report(
                     seen_motion_m: c.seen_motion_m,
                     rmse_m: c.rmse_m,
                     start_rmse_m: c.start_rmse_m,
+                    converged: c.converged,
                     noise_m: c.noise_m,
                     relative_sigma_xyz_m: relative.map(|(_, m)| m),
                     relative_sigma_rot_deg: relative.map(|(rad, _)| rad.to_degrees()),

@@ -284,12 +284,13 @@ fn why_untrusted(
         .filter(|c| !c.free_space.as_ref().is_some_and(|f| f.violated()))
         .filter_map(|c| {
             Some(format!(
-                "{} ({:.3} m, {:.2}°, residual {:.4} → {:.4} m)",
+                "{} ({:.3} m, {:.2}°, residual {:.4} → {:.4} m{})",
                 scans[other(c)].name,
                 c.moved_m?,
                 c.angle_deg.unwrap_or_default(),
                 c.start_rmse_m.unwrap_or_default(),
-                c.rmse_m.unwrap_or_default()
+                c.rmse_m.unwrap_or_default(),
+                if c.converged == Some(false) { ", still moving at its iteration cap" } else { "" }
             ))
         })
         .collect();
@@ -379,6 +380,9 @@ fn write_restart(out: &mut dyn Write, scans: &[InputScan], r: &RestartReport) ->
             "the verification names scans of the schedule's result ({})",
             names(r.schedule_untrusted.as_deref().unwrap_or_default())
         ),
+        ("creeping", ..) => "a pair matched again from the schedule's poses still moves at its iteration cap, and the \
+                             scans agree there no better than at their starts"
+            .into(),
         (_, Some(m), _) => format!(
             "the schedule moved {} {m:.3} m from its start",
             r.scan.map_or("a scan", |i| scans[i].name.as_str())
@@ -479,6 +483,7 @@ mod tests {
             seen_motion_m: Some(moved_m),
             rmse_m: Some(0.01),
             start_rmse_m: Some(0.01),
+            converged: Some(true),
             noise_m: 0.01,
             relative_sigma_xyz_m: None,
             relative_sigma_rot_deg: None,
@@ -706,6 +711,20 @@ mod tests {
             "  not trusted: d: matched again from the final poses it moves beyond 0.050 m and 5 % of its radius, or \
              to a fit its residual says is 1.5× closer, against a (0.300 m, 0.17°, residual 0.0256 → 0.0076 m): the \
              poses are not where the data agree (a symmetric fit from rough starts?)\n"
+        );
+    }
+
+    #[test]
+    fn a_pair_stopped_at_its_cap_says_so() {
+        // d's pair with c crept 0.83 m and 3.7° at its iteration cap, its
+        // residual barely lower (named, say, by another pair).
+        let mut crept = check(2, 3, 0.825, false);
+        (crept.start_rmse_m, crept.rmse_m, crept.angle_deg, crept.converged) =
+            (Some(0.0510), Some(0.0488), Some(3.66), Some(false));
+        let d = why(&[crept], &[3], 3, false);
+        assert!(
+            d.contains("against c (0.825 m, 3.66°, residual 0.0510 → 0.0488 m, still moving at its iteration cap)"),
+            "{d}"
         );
     }
 }
