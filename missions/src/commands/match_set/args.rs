@@ -131,8 +131,8 @@ pub struct MatchArgs {
     /// different viewpoints bends: 0.1 lands the simulated hall's 22 scans
     /// 1.3–1.5× closer and the corridor's 20 1.7× (docs/match.md). Judged
     /// where the scan is sparse (see --corner-everywhere); every mode; 0:
-    /// off, the default.
-    #[arg(long, default_value_t = 0.0)]
+    /// off.
+    #[arg(long, default_value_t = 0.1)]
     pub corner_ratio: f64,
     /// With --corner-ratio: judge every target point's neighbourhood, not
     /// only those whose ten nearest points reach beyond the stage's
