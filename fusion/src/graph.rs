@@ -483,6 +483,13 @@ impl JointCovariance {
         }
     }
 
+    /// The covariance of ξ_b − ξₐ, Cₐₐ + C_bb − Cₐ_b − C_bₐ: what scan `b`'s
+    /// pose relative to `a`'s is uncertain by (first order, in the
+    /// perturbations' frame).
+    pub fn relative(&self, a: usize, b: usize) -> Matrix6<f64> {
+        self.block(a, a) + self.block(b, b) - self.block(a, b) - self.block(b, a)
+    }
+
     /// Every pose's own covariance (the diagonal blocks).
     pub fn diagonal(&self) -> Vec<Matrix6<f64>> {
         (0..self.len()).map(|i| self.block(i, i)).collect()

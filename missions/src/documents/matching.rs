@@ -197,11 +197,21 @@ pub struct CheckReport {
     pub relative_sigma_xyz_m: Option<f64>,
     /// … and √ of the trace of its rotation block, degrees.
     pub relative_sigma_rot_deg: Option<f64>,
+    /// The match's departure from the final relative pose in χ² of the
+    /// two poses' relative covariance (first order, its pseudo-inverse),
+    /// and `relative_dof` its degrees of freedom (the covariance's rank);
+    /// null where the match failed.
+    pub relative_chi2: Option<f64>,
+    /// See `relative_chi2`.
+    pub relative_dof: Option<usize>,
     /// The match moved the points by at most the finest stage's voxel, or
     /// along what it sees well by at most 5 % of their RMS radius, turned
     /// them by at most 5° and lowered its residual (`start_rmse_m` →
-    /// `rmse_m`) at most 1.5-fold; and no scanner's free space holds more
-    /// than 12 % of the other scan's points (`free_space`).
+    /// `rmse_m`) at most 1.5-fold — or more, where `relative_chi2` is
+    /// within the 99.9 % point of χ² with `relative_dof` (the poses are
+    /// not known well enough to say the closer fit is elsewhere); and no
+    /// scanner's free space holds more than 12 % of the other scan's
+    /// points (`free_space`).
     pub consistent: bool,
     /// The free-space test from the pair's scanner whose view the other
     /// scan violates most; null when neither scanner's position is known
@@ -274,8 +284,10 @@ pub struct RestartReport {
     pub schedule_disagreement_m2: Option<f64>,
     /// The same at the restart's poses; null when the restart failed.
     pub restart_disagreement_m2: Option<f64>,
-    /// The same at the starts; null when the schedule failed. A result the
-    /// scans agree with no better sets off `further` restarts.
+    /// The same at the starts (also after a schedule that failed, since
+    /// session 57; null before). A result the scans agree with no better
+    /// sets off `further` restarts, and names its long moves
+    /// (`unsupported`).
     pub starts_disagreement_m2: Option<f64>,
     /// Why the restart failed.
     pub error: Option<String>,
@@ -325,6 +337,13 @@ pub struct RestartReport {
     /// apart) — the one the scans agree with better is also the one every
     /// shorter schedule reaches from the starts.
     pub corroborated: bool,
+    /// The scans the result moved from their starts beyond the finest
+    /// stage's reach (its `max_correspondence_m`), where the scans agree
+    /// with the result no better than with their starts (the kept
+    /// registration's disagreement at least `starts_disagreement_m2`): a
+    /// move a coarser stage decided that nothing in the data supports.
+    /// They are in `untrusted` (exit 1). Empty otherwise.
+    pub unsupported: Vec<UnsupportedReport>,
     /// Further restarts from the starts, each without one more of the
     /// schedule's stages (the first without its first two — without its
     /// first after the pipe's restart, `degeneracy_ratio` —, …, the last
@@ -408,6 +427,18 @@ pub struct UndecidedReport {
     pub apart_m: f64,
     /// The turn between the two poses, degrees.
     pub apart_deg: f64,
+}
+
+/// A scan moved beyond the finest stage's reach of its start by a result
+/// the scans agree with no better than with their starts
+/// ([`RestartReport::unsupported`]).
+#[derive(Debug, Clone, Serialize, schemars::JsonSchema)]
+pub struct UnsupportedReport {
+    /// Index into `scans`.
+    pub scan: usize,
+    /// How far from its start: the displacement of its points' centroid
+    /// plus the turn times their RMS radius, metres.
+    pub moved_m: f64,
 }
 
 /// What the scans measured and the settings they were matched with.

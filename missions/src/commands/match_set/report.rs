@@ -117,6 +117,7 @@ pub(super) fn report(
                 .map(|&(scan, apart_m, angle)| UndecidedReport { scan, apart_m, apart_deg: angle.to_degrees() })
                 .collect(),
             corroborated: x.corroborated,
+            unsupported: x.unsupported.iter().map(|&(scan, moved_m)| UnsupportedReport { scan, moved_m }).collect(),
             further: x
                 .further
                 .iter()
@@ -156,6 +157,8 @@ pub(super) fn report(
                     noise_m: c.noise_m,
                     relative_sigma_xyz_m: relative.map(|(_, m)| m),
                     relative_sigma_rot_deg: relative.map(|(rad, _)| rad.to_degrees()),
+                    relative_chi2: c.relative_chi2.map(|(chi2, _)| chi2),
+                    relative_dof: c.relative_chi2.map(|(_, dof)| dof),
                     consistent: c.consistent,
                     free_space: c.free_space.map(|f| FreeSpaceReport {
                         seen_from: f.seen_from,
@@ -180,7 +183,7 @@ pub(super) fn report(
 /// and of its translation block — the displacement of `at` —, metres.
 fn relative_sigma(joint: &fusion::graph::JointCovariance, a: usize, b: usize, at: &Vector3<f64>) -> (f64, f64) {
     let about = fusion::se3::adjoint(&Isometry3::from_parts(Translation3::from(-at), UnitQuaternion::identity()));
-    let c = about * (joint.block(a, a) + joint.block(b, b) - joint.block(a, b) - joint.block(b, a)) * about.transpose();
+    let c = about * joint.relative(a, b) * about.transpose();
     let trace = |k: usize| (c[(k, k)] + c[(k + 1, k + 1)] + c[(k + 2, k + 2)]).max(0.0).sqrt();
     (trace(0), trace(3))
 }

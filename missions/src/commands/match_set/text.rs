@@ -109,6 +109,20 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
             )?;
         }
     }
+    if let Some(r) = report.restart.as_ref().filter(|r| !r.unsupported.is_empty()) {
+        let reach = report.stages.last().map_or(0.0, |s| s.max_correspondence_m);
+        let moved: Vec<String> =
+            r.unsupported.iter().map(|u| format!("{} ({:.3} m)", scans[u.scan].name, u.moved_m)).collect();
+        writeln!(
+            out,
+            "  not trusted: {}: the result moved them from their starts beyond the finest stage's reach ({reach:.3} \
+             m), and the scans agree with it no better than with their starts ({:.4e} against {:.4e} m² a point): \
+             nothing in the data supports such moves",
+            moved.join(", "),
+            kept_disagreement(r).unwrap_or(f64::NAN),
+            r.starts_disagreement_m2.unwrap_or(f64::NAN)
+        )?;
+    }
     let tolerance = report.stages.last().map_or(0.0, |s| s.voxel_m);
     // Whether the pipe's threshold ran already: the set's own (given, or
     // the scans found a pipe), or the restart's or the last further one's.
@@ -132,7 +146,9 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
             .scans
             .get(i)
             .map_or(Ok(false), |s| why_held(out, &scans[i].name, &report.mode, s, tolerance, pipe_ran))?;
-        why_untrusted(out, scans, &report.checks, &report.untrusted, i, undecided || departed || held, tolerance)?;
+        let unsupported = report.restart.iter().flat_map(|r| &r.unsupported).any(|u| u.scan == i);
+        let explained = undecided || departed || held || unsupported;
+        why_untrusted(out, scans, &report.checks, &report.untrusted, i, explained, tolerance)?;
     }
     for l in report.links.iter().filter(|l| !l.accepted || l.cycle.is_some()) {
         let targets: Vec<&str> = l.targets.iter().map(|&t| scans[t].name.as_str()).collect();
@@ -298,8 +314,8 @@ fn why_untrusted(
         writeln!(
             out,
             "  not trusted: {}: matched again from the final poses it moves beyond {tolerance:.3} m and 5 % of its \
-             radius, or to a fit its residual says is {}× closer, against {}: the poses are not where the data agree \
-             (a symmetric fit from rough starts?)",
+             radius, or settles where its residual says it is {}× closer, beyond the σ of the two poses' relative \
+             pose, against {}: the poses are not where the data agree (a symmetric fit from rough starts?)",
             scans[i].name,
             fusion::verify::MAX_RESIDUAL_GAIN,
             moved.join(", ")
@@ -343,6 +359,17 @@ fn why_untrusted(
         )?;
     }
     Ok(())
+}
+
+/// The scans' disagreement at the registration the restart left as the
+/// result: the last kept further restart's, the kept restart's, or the
+/// schedule's.
+fn kept_disagreement(r: &RestartReport) -> Option<f64> {
+    match r.further.iter().rev().find(|f| f.kept) {
+        Some(f) => f.disagreement_m2,
+        None if r.kept => r.restart_disagreement_m2,
+        None => r.schedule_disagreement_m2,
+    }
 }
 
 /// A stage list's line: each stage's voxel, distance, runs and time.
@@ -487,6 +514,8 @@ mod tests {
             noise_m: 0.01,
             relative_sigma_xyz_m: None,
             relative_sigma_rot_deg: None,
+            relative_chi2: None,
+            relative_dof: None,
             consistent,
             free_space: None,
         }
@@ -658,6 +687,7 @@ mod tests {
             restart_untrusted: Some(vec![1]),
             undecided: Vec::new(),
             corroborated: false,
+            unsupported: Vec::new(),
             further,
             degeneracy_ratio: ratio,
         };
@@ -709,8 +739,9 @@ mod tests {
         assert_eq!(
             d,
             "  not trusted: d: matched again from the final poses it moves beyond 0.050 m and 5 % of its radius, or \
-             to a fit its residual says is 1.5× closer, against a (0.300 m, 0.17°, residual 0.0256 → 0.0076 m): the \
-             poses are not where the data agree (a symmetric fit from rough starts?)\n"
+             settles where its residual says it is 1.5× closer, beyond the σ of the two poses' relative pose, against \
+             a (0.300 m, 0.17°, residual 0.0256 → 0.0076 m): the poses are not where the data agree (a symmetric fit \
+             from rough starts?)\n"
         );
     }
 
