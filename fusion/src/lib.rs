@@ -15,6 +15,8 @@
 //!   strategy or the link graph ([`scanset::register_set`]);
 //! - [`graph`]: scan poses adjusted to absolute priors (the CPS poses) and
 //!   relative ICP matches together ([`graph::optimize`], [`graph::cps_prior`]);
+//! - [`chi2`]: the χ² limits every test of a move against its σ uses
+//!   ([`chi2::chi2_999`], [`chi2::within`]);
 //! - [`se3`]: the shared pose convention (ξ = (ω, v), left perturbation)
 //!   and a Gaussian pose prior ([`se3::Prior`]);
 //! - [`pipe`]: tube fitting into scanned pipes and the deviation map
@@ -23,6 +25,7 @@
 
 mod agreement;
 mod candidates;
+pub mod chi2;
 pub mod direct;
 pub mod error;
 pub mod free_space;

@@ -163,7 +163,7 @@ pub fn register_with_priors<S: AsRef<[Point3<f32>]> + Sync>(
 
 /// χ²₆ at 99.9 %: a match whose disagreement with the priors exceeds it
 /// is an outlier.
-pub const GATE_CHI2: f64 = 22.458;
+pub const GATE_CHI2: f64 = crate::chi2::chi2_999(6);
 
 /// Checks that an ICP match between scans j (target) and c (source) agrees
 /// with their priors: e = ξ(Z · (Pⱼ⁻¹ P_c)⁻¹), whose covariance is the

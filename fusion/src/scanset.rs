@@ -287,9 +287,9 @@ pub struct Held {
 }
 
 /// The χ² a [`Held`] move with `directions` degrees of freedom may reach:
-/// the distribution's 99.9 % point ([`crate::verify::chi2_999`]).
+/// the distribution's 99.9 % point ([`crate::chi2::chi2_999`]).
 pub fn held_limit(directions: usize) -> f64 {
-    crate::verify::chi2_999(directions)
+    crate::chi2::chi2_999(directions)
 }
 
 /// Whether a move of `chi2` along `directions` blind directions, moving

@@ -34,6 +34,7 @@
 use nalgebra::{Isometry3, Matrix6, Point3, Vector6};
 use rayon::prelude::*;
 
+use crate::chi2::chi2_999;
 use crate::error::Result;
 use crate::free_space::{FreeSpace, MAX_VIOLATION_SHARE, View};
 use crate::graph::Edge;
@@ -215,7 +216,7 @@ impl PairCheck {
     /// departure is within the relative pose's σ
     /// ([`weigh_residual_gains`]), and no free space is violated.
     fn judged(&self) -> bool {
-        let within = self.relative_chi2.is_some_and(|(chi2, dof)| chi2 <= chi2_999(dof));
+        let within = self.relative_chi2.is_some_and(|(chi2, dof)| dof > 0 && chi2 <= chi2_999(dof));
         self.motion_agrees && (!self.residual_gain || within) && !self.violates_free_space()
     }
 }
@@ -225,14 +226,20 @@ impl PairCheck {
 /// ([`PairCheck::relative_chi2`]), and a pair named only by its
 /// residual's gain ([`MAX_RESIDUAL_GAIN`]) agrees after all when that
 /// departure is within the 99.9 % point of χ² with the covariance's rank
-/// ([`chi2_999`]): the poses are not known well enough
+/// ([`chi2_999`](crate::chi2::chi2_999)): the poses are not known well enough
 /// to say the pair's closer fit is elsewhere. Measured on the simulated
 /// corridor (twenty scans within 18 mm of the truth), the modes without
 /// a link graph: a pair nine stations apart, matched again, settled 34 mm
 /// away with its residual 3× lower (15.6 → 5.1 mm) — within the σ of its
-/// relative pose (28 mm) —, another 38 mm and 0.48° away (1.57×), and
-/// both named right scans (exit 1); the street's wedges the gain names
+/// relative pose (28 mm) — and named right scans (exit 1); this clears
+/// it. (Another, 38 mm and 0.48° away at 1.57×, χ² 500–556 here, is
+/// cleared because it stopped at its cap: not a settled gain,
+/// [`PairCheck::residual_gain`].) The street's wedges the gain names
 /// (0.29 m along the street, 3.5° off) are hundreds of σ away.
+///
+/// A pair whose relative covariance is zero (rank 0: both poses hold the
+/// frame) or that departs along a direction it does not span is never
+/// cleared this way ([`crate::chi2::within`]).
 pub fn weigh_residual_gains(checks: &mut [PairCheck], poses: &[Isometry3<f64>], joint: &crate::graph::JointCovariance) {
     for c in checks.iter_mut() {
         let (Some(e), Some(target)) = (c.departure, poses.get(c.target)) else { continue };
@@ -242,31 +249,9 @@ pub fn weigh_residual_gains(checks: &mut [PairCheck], poses: &[Isometry3<f64>], 
         // ξ_source − ξ_target (world) in the target's frame.
         let ad = crate::se3::adjoint(&target.inverse());
         let relative = ad * joint.relative(c.target, c.source) * ad.transpose();
-        c.relative_chi2 = Some(chi2_within(&relative, &e));
+        c.relative_chi2 = Some(crate::chi2::within(&relative, &e));
         c.consistent = c.judged();
     }
-}
-
-/// The 99.9 % point of χ² with `dof` degrees of freedom (1–6; clamped).
-pub fn chi2_999(dof: usize) -> f64 {
-    const LIMITS: [f64; 6] = [10.828, 13.816, 16.266, 18.467, 20.515, 22.458];
-    LIMITS[dof.clamp(1, 6) - 1]
-}
-
-/// eᵀ·C⁺·e and the rank of `c` (eigenvalues above 10⁻¹² of the largest).
-fn chi2_within(c: &Matrix6<f64>, e: &Vector6<f64>) -> (f64, usize) {
-    let eigen = nalgebra::SymmetricEigen::new(0.5 * (c + c.transpose()));
-    let largest = eigen.eigenvalues.max();
-    let mut chi2 = 0.0;
-    let mut rank = 0;
-    for k in 0..6 {
-        let l = eigen.eigenvalues[k];
-        if l > 1e-12 * largest && l > 0.0 {
-            chi2 += eigen.eigenvectors.column(k).dot(e).powi(2) / l;
-            rank += 1;
-        }
-    }
-    (chi2, rank)
 }
 
 /// Matches every pair of `scans` that overlaps at `poses` (their final
@@ -585,6 +570,13 @@ mod tests {
         weigh_residual_gains(&mut checks, &poses, &joint);
         assert_eq!(checks[0].relative_chi2, Some((0.0, 6)));
         assert!(checks[0].consistent);
+        // Two poses known exactly (rank 0): nothing clears the gain.
+        let mut exact = pair(1, 2, Some(0.3), true);
+        (exact.departure, exact.residual_gain) = (Some(Vector6::zeros()), true);
+        let mut checks = [exact];
+        weigh_residual_gains(&mut checks, &poses, &crate::graph::JointCovariance::zeros(3));
+        assert_eq!(checks[0].relative_chi2, Some((0.0, 0)));
+        assert!(!checks[0].consistent);
     }
 
     /// Four wedges, 2 and 3 left off together: they agree with each
