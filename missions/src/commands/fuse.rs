@@ -42,6 +42,14 @@ pub fn run(args: &FuseArgs, out: &mut dyn Write) -> Result<Outcome> {
         bail!("{}: the journal has no scans to fuse", dir.display());
     }
     let mode = args.mode.unwrap_or(mission.fusion.mode);
+    // As the mission file says of `[fusion] mode`: a robot alone has
+    // odometry, not CPS poses, to take as the priors.
+    if mode == FusionMode::CpsIcp && mission.children.is_empty() {
+        bail!(
+            "{}: --mode cps-icp needs CPS poses, but the mission's team has no children; expected direct or icp",
+            dir.display()
+        );
+    }
     // Where the results go, checked before the fusion runs.
     let target = dir.join("fusion").join(mode.name());
     crate::products::outputs::check_targets(mission, &target, &["fusion.json"])?;

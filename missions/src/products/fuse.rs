@@ -211,6 +211,7 @@ fn multiview_config(plan: &FusionPlan, strategy: Strategy, scanner_in_body: Poin
             kernel: if plan.huber_m > 0.0 { Kernel::Huber { width_m: plan.huber_m } } else { Kernel::None },
             reject_back_faces: true,
             source_viewpoint: scanner_in_body,
+            corner_ratio: (plan.corner_ratio > 0.0).then_some(plan.corner_ratio),
             ..IcpConfig::default()
         },
         source_voxel_m: plan.voxel_m,

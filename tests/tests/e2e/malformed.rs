@@ -427,6 +427,13 @@ const CASES: &[Case] = &[
         "expected degeneracy_ratio above 0 with it",
     ),
     (
+        "corner ratio above 1",
+        ("[plan]", "[fusion]\ncorner_ratio = 1.5\n[plan]"),
+        "15:16",
+        "fusion.corner_ratio",
+        "out of range",
+    ),
+    (
         "a simultaneous queue of no matches",
         ("[plan]", "[fusion]\nmax_matches_per_scan = 0\n[plan]"),
         "15:24",

@@ -329,6 +329,7 @@ pub(super) fn read_fusion(r: &mut Reader<'_>, root: &mut Table<'_, '_>, solo: bo
     let line = fu.optional(r, "line_ratio", |r, v, f| {
         r.number_in(v, f, 0.0, true, Some(0.99)).map(|x| (*x.get_ref(), x.span()))
     });
+    let corner = fu.optional(r, "corner_ratio", within(0.0, 1.0));
     let queue = fu.optional(r, "max_matches_per_scan", |r, v, f| r.integer_in(v, f, 1, 1_000_000));
     let fd = FusionPlan::default();
     let (max_corr, fine_corr) = (max_corr?, fine_corr?);
@@ -369,6 +370,7 @@ pub(super) fn read_fusion(r: &mut Reader<'_>, root: &mut Table<'_, '_>, solo: bo
         icp_variance_factor: variance_factor?.unwrap_or(fd.icp_variance_factor),
         degeneracy_ratio: degeneracy?.unwrap_or(fd.degeneracy_ratio),
         line_ratio: line?,
+        corner_ratio: corner?.unwrap_or(fd.corner_ratio),
         max_matches_per_scan: queue?.map_or(fd.max_matches_per_scan, |n| n as usize),
     })
 }
