@@ -481,6 +481,18 @@ pub struct Restart {
     /// part within 0.1° and 5 mm; seed 7's all-source parts 0.03° and
     /// 1.6 mm RMS), and was named before with exit 1.
     pub corroborated: bool,
+    /// True when the restart only repeated the schedule: a scan moved
+    /// beyond the second stage's reach ([`Trigger::Moved`]), and the
+    /// restart, not kept, landed where the schedule did (no scan
+    /// [`MAX_RELATIVE_MOTION`](crate::verify::MAX_RELATIVE_MOTION) of its
+    /// radius apart). The second stage may drag as the first did, so the
+    /// [`further`](Self::further) restarts run until one lands there too
+    /// — corroborating it — or one is kept. Found on the NEES bench's
+    /// seed 31 (the street's wedges, simultaneous mode, trial 5): the
+    /// schedule and the restart both left three wedges 1.3° and 2.6 m off
+    /// together, nothing named, exit 0; the schedule without its first two
+    /// stages landed them within 0.02°, the scans agreeing 1.58× better.
+    pub repeated: bool,
     /// The scans the result moved from their starts beyond the finest
     /// stage's reach (its correspondence distance), where the scans agree
     /// with the result no better than with their starts
@@ -1006,6 +1018,7 @@ fn restart_after_failure<S: AsRef<[Point3<f32>]> + Sync>(
         untrusted: (None, Some(r.named())),
         undecided: Vec::new(),
         corroborated: false,
+        repeated: false,
         unsupported,
         further: Vec::new(),
         degeneracy_ratio: None,
@@ -1249,18 +1262,32 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
         && (in_doubt(&current_named, if kept { after.unwrap_or(before) } else { before })
             || !undecided.is_empty()
             || rescued);
+    // The restart only repeated the schedule's long move ([`Restart::repeated`]):
+    // the further restarts run until one lands there too or is kept.
+    let repeated = trigger == Trigger::Moved
+        && !kept
+        && pipe_first.is_none()
+        && undecided.is_empty()
+        && second.as_ref().is_some_and(|r| apart(scans, &first.world_from_scan, &r.world_from_scan).is_empty());
+    let mut unconfirmed = repeated;
     // Where scans are undecided: how many further restarts landed where
     // the registration kept places them, and whether any did not.
     let (mut reached_again, mut strayed) = (0usize, false);
     // (After the pipe's restart, the schedule without its first stage is
     // the first of them.)
     for skip in usize::from(pipe_first.is_none()) + 1..config.stages.len() {
-        if !doubted {
+        if !doubted && !unconfirmed {
             break;
         }
         let report = match without_first(scans, starts, config, skip, progress) {
             Ok(f) => {
                 let a = crate::agreement::disagreement(&prepared, &f.world_from_scan, tau);
+                // (Landing where the result so far is corroborates a
+                // repeated schedule.)
+                if unconfirmed {
+                    let current = alone.as_ref().or(second.as_ref().filter(|_| kept)).unwrap_or(&first);
+                    unconfirmed = !apart(scans, &current.world_from_scan, &f.world_from_scan).is_empty();
+                }
                 if !undecided.is_empty() {
                     let kept_so_far = if kept { second.as_ref().unwrap_or(&first) } else { &first };
                     if apart(scans, &kept_so_far.world_from_scan, &f.world_from_scan).is_empty() {
@@ -1315,6 +1342,7 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
                 };
                 best = best.min(a);
                 if report.kept {
+                    unconfirmed = false;
                     (current_a, current_moved) = (a, f_moved);
                     current_named = report.untrusted.clone().unwrap_or_default();
                     only_held = f_only_held;
@@ -1404,6 +1432,7 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
         trigger,
         untrusted: (Some(named), named_after),
         corroborated: !undecided.is_empty() && reached_again > 0 && !strayed,
+        repeated,
         undecided,
         unsupported: Vec::new(),
         further,
@@ -1806,6 +1835,7 @@ mod tests {
             untrusted: (Some(Vec::new()), Some(Vec::new())),
             undecided: vec![(2, 1.94, 0.03), (3, 1.93, 0.03)],
             corroborated,
+            repeated: false,
             unsupported: Vec::new(),
             further: Vec::new(),
             degeneracy_ratio: None,

@@ -226,7 +226,7 @@ impl PairCheck {
 /// ([`PairCheck::relative_chi2`]), and a pair named only by its
 /// residual's gain ([`MAX_RESIDUAL_GAIN`]) agrees after all when that
 /// departure is within the 99.9 % point of χ² with the covariance's rank
-/// ([`chi2_999`](crate::chi2::chi2_999)): the poses are not known well enough
+/// ([`chi2_999`]): the poses are not known well enough
 /// to say the pair's closer fit is elsewhere. Measured on the simulated
 /// corridor (twenty scans within 18 mm of the truth), the modes without
 /// a link graph: a pair nine stations apart, matched again, settled 34 mm

@@ -337,6 +337,13 @@ pub struct RestartReport {
     /// apart) — the one the scans agree with better is also the one every
     /// shorter schedule reaches from the starts.
     pub corroborated: bool,
+    /// True when the restart only repeated the schedule: a scan moved
+    /// beyond the second stage's reach (`trigger` "moved") and the
+    /// restart, not kept, landed where the schedule did (no scan 5 % of
+    /// its radius apart). The second stage may drag as the first did, so
+    /// the `further` restarts run until one lands there too or is kept
+    /// (docs/match.md).
+    pub repeated: bool,
     /// The scans the result moved from their starts beyond the finest
     /// stage's reach (its `max_correspondence_m`), where the scans agree
     /// with the result no better than with their starts (the kept

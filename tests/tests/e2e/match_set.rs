@@ -1525,6 +1525,78 @@ fn pairwise_wedges_dragged_together_land_by_the_disagreeing_restart() {
 }
 
 /// Issue 38, no silent failure: one trial of
+/// `fusion/benches/covariance_nees.py` (seed 31, the street's four 150°
+/// wedges, the first centred at 23.48°, each point of an overlap dealt to
+/// one wedge; starts 0.1 m / 2° off). In simultaneous mode the schedule
+/// left wedges 1–3 1.3° and 2.6 m off together, consistently: the
+/// verification named nothing, and the restart without the first stage
+/// landed them in the same place (the second stage dragged them too) —
+/// exit 0. A restart that only repeats the schedule's long move now sets
+/// off the further restarts (`restart.repeated`): the schedule without its
+/// first two stages lands them, the scans agreeing 1.58× better there.
+#[test]
+fn a_restart_that_repeats_the_schedules_long_move_is_checked_by_a_shorter_one() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let truths: [[[f64; 4]; 3]; 3] = [
+        [
+            [0.9728122403171706, 0.23158705045540265, 0.0019450322502197715, 0.3563493167248065],
+            [-0.23152932254962172, 0.9727014774565963, -0.015684659813589324, -0.0982757490828351],
+            [-0.005524299847115028, 0.014807897052639978, 0.9998750963475777, -0.05071517402555492],
+        ],
+        [
+            [0.9121005806739354, -0.4099111197612434, 0.006738295804835703, -0.18959663968411145],
+            [0.40995154233569525, 0.9120844971457268, -0.006450038993007301, 0.19370814872911768],
+            [-0.0035019524346454074, 0.008645459068798036, 0.9999564952369855, -0.06347145122570375],
+        ],
+        [
+            [0.8615811311919106, -0.5076195261065539, 0.0006091710970878308, 0.22172240444593083],
+            [0.5075198878709064, 0.8613869554376267, -0.02088244280248068, 0.16881177551463833],
+            [0.010075603682681362, 0.018301085138699894, 0.9997817524305871, -0.10452374613457527],
+        ],
+    ];
+    let starts: [[[f64; 4]; 3]; 3] = [
+        [
+            [0.9739905659388777, 0.22551056068205788, -0.02207633309517231, 0.3860404179852083],
+            [-0.22593638424757842, 0.9739535055423286, -0.01916557630075276, -0.08015272013354593],
+            [0.017179282150185677, 0.02365493738468334, 0.9995725667514747, -0.0995581958694494],
+        ],
+        [
+            [0.920507466915959, -0.39070845585655084, 0.003592474656060368, -0.21980390812658723],
+            [0.3907231151854834, 0.9204925264554344, -0.005381077907160592, 0.21251539499420918],
+            [-0.0012044134324335934, 0.006356985282438638, 0.9999790688441448, -0.07244068685194859],
+        ],
+        [
+            [0.8726413983807253, -0.4880873502341384, 0.01636240732747446, 0.1824867651028517],
+            [0.488355031106926, 0.871966916448558, -0.03439564233659288, 0.1597382652927906],
+            [0.002520600064655572, 0.038005725366200685, 0.9992743424178883, -0.13745223780489238],
+        ],
+    ];
+    let (mut inputs, truths) = bench_wedges(dir.path(), STREET, 23.478_531_578_008_702, true, &truths, &starts);
+    inputs.extend(["--mode".into(), "simultaneous".into()]);
+    let (r, v) = run(&inputs, &dir.path().join("out"));
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let v = v.expect("JSON");
+    // (Measured 0.007° / 1.5 mm; the trap was 1.3° / 2.6 m.)
+    assert_parts_land("wedges", &v, &truths, 0.1, 0.01);
+    let restart = &v["restart"];
+    assert_eq!(restart["trigger"], "moved", "{restart}");
+    assert_eq!(restart["repeated"], true, "{restart}");
+    // The restart is the schedule's fit again (measured 1.3e-4 apart).
+    let f = |x: &Value| x.as_f64().expect("a number");
+    let (before, after) = (f(&restart["schedule_disagreement_m2"]), f(&restart["restart_disagreement_m2"]));
+    assert!((before - after).abs() < 1e-3 * before && restart["kept"] == false, "{restart}");
+    // The first further restart lands the wedges, 1.5× better: kept.
+    let further = restart["further"].as_array().expect("further");
+    let kept = further.iter().find(|x| x["kept"] == true).expect("a further restart kept");
+    let a = f(&kept["disagreement_m2"]);
+    assert!(before > fusion::scanset::RESTART_RATIO * a, "{a} against {before}");
+    assert_eq!(kept["untrusted"].as_array().map(Vec::len), Some(0), "{kept}");
+    // Without it the text names the reason the further restarts ran.
+    let text = run_text(&inputs, &dir.path().join("text"));
+    assert!(text.stdout.contains("the restart only repeated the schedule's long move"), "{}", text.stdout);
+}
+
+/// Issue 38, no silent failure: one trial of
 /// `fusion/benches/covariance_nees.py` (seed 23, the street's four 150°
 /// wedges, the first centred at 55.09°, each point of an overlap dealt to
 /// one wedge; starts 0.1 m / 2° off) where simultaneous matching settles

@@ -117,6 +117,7 @@ pub(super) fn report(
                 .map(|&(scan, apart_m, angle)| UndecidedReport { scan, apart_m, apart_deg: angle.to_degrees() })
                 .collect(),
             corroborated: x.corroborated,
+            repeated: x.repeated,
             unsupported: x.unsupported.iter().map(|&(scan, moved_m)| UnsupportedReport { scan, moved_m }).collect(),
             further: x
                 .further

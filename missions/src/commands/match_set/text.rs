@@ -449,8 +449,10 @@ fn write_restart(out: &mut dyn Write, scans: &[InputScan], r: &RestartReport) ->
     if !r.further.is_empty() {
         writeln!(
             out,
-            "  not to be trusted (scans named, or the scans agree no better than at their starts, {:.3e} m² a point):",
-            r.starts_disagreement_m2.unwrap_or(f64::NAN)
+            "  not to be trusted (scans named, or the scans agree no better than at their starts, {:.3e} m² a \
+             point{}):",
+            r.starts_disagreement_m2.unwrap_or(f64::NAN),
+            if r.repeated { "; or the restart only repeated the schedule's long move" } else { "" }
         )?;
     }
     for (k, f) in r.further.iter().enumerate() {
@@ -687,6 +689,7 @@ mod tests {
             restart_untrusted: Some(vec![1]),
             undecided: Vec::new(),
             corroborated: false,
+            repeated: false,
             unsupported: Vec::new(),
             further,
             degeneracy_ratio: ratio,
