@@ -1282,18 +1282,19 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
         let report = match without_first(scans, starts, config, skip, progress) {
             Ok(f) => {
                 let a = crate::agreement::disagreement(&prepared, &f.world_from_scan, tau);
-                // (Landing where the result so far is corroborates a
-                // repeated schedule.)
-                if unconfirmed {
+                // Whether it lands where the result so far places the
+                // scans: that corroborates a repeated schedule, and counts
+                // for (or against) undecided scans.
+                if unconfirmed || !undecided.is_empty() {
                     let current = alone.as_ref().or(second.as_ref().filter(|_| kept)).unwrap_or(&first);
-                    unconfirmed = !apart(scans, &current.world_from_scan, &f.world_from_scan).is_empty();
-                }
-                if !undecided.is_empty() {
-                    let kept_so_far = if kept { second.as_ref().unwrap_or(&first) } else { &first };
-                    if apart(scans, &kept_so_far.world_from_scan, &f.world_from_scan).is_empty() {
-                        reached_again += 1;
-                    } else {
-                        strayed = true;
+                    let there = apart(scans, &current.world_from_scan, &f.world_from_scan).is_empty();
+                    unconfirmed &= !there;
+                    if !undecided.is_empty() {
+                        if there {
+                            reached_again += 1;
+                        } else {
+                            strayed = true;
+                        }
                     }
                 }
                 // Named, the result so far gives way to a better agreement
