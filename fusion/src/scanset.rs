@@ -636,6 +636,24 @@ pub enum Trigger {
     /// a pipe's about and along it —, but there the scans agree better
     /// than at their starts.)
     Creeping,
+    /// A simultaneous queue of the schedule was abandoned at its cap
+    /// ([`StageRun::settled`] false), and nothing above set it off: the
+    /// queue stopped while its scans were still moving, wherever they
+    /// had got to. The NEES bench's seed 41 (the street's wedges,
+    /// simultaneous mode, trial 7): the first stage, abandoned after 174
+    /// runs, left three wedges 1.43 m along the street together, within
+    /// the second stage's reach, nothing named, the variance factor below
+    /// 1 — exit 0; the schedule without that stage landed them.
+    Abandoned,
+    /// The schedule moved a scan beyond the finest stage's reach of its
+    /// start (its correspondence distance), and the scans agree with its
+    /// result no better than with their starts; nothing above set it off.
+    /// The check [`Restart::unsupported`] makes of every restart's result,
+    /// made of a schedule's that set off nothing else: a move the data
+    /// give no evidence for is tried again, and named when no restart
+    /// does better. (The NEES bench's seed 41 trial above: the abandoned
+    /// stage's result agreed 1.42× worse than the starts.)
+    Unsupported,
 }
 
 /// A set whose variance factor σ̂₀² is above this sets off a restart
@@ -1108,28 +1126,12 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     // Points in another scanner's free space: the schedule's poses are
     // physically impossible, not merely in doubt.
     let impossible = first.checks.iter().any(crate::verify::PairCheck::violates_free_space);
-    // Within the second stage's reach of its start, the restart would
-    // begin where the schedule's first stage had no say — unless the
-    // result is impossible: then the restart may land where the first
-    // stage would not let it.
-    let trigger = if moved_m > config.stages[1].max_correspondence_m {
-        Trigger::Moved
-    } else if impossible {
-        Trigger::Untrusted
-    } else if first.variance_factor.is_some_and(|f| f > RESTART_VARIANCE_FACTOR) {
-        Trigger::Disagreeing
-    } else if !named.is_empty() {
-        Trigger::Named
-    } else if first.checks.iter().any(|c| c.converged == Some(false) && c.moved_m.is_some_and(|m| m > finest.voxel_m)) {
-        Trigger::Creeping
-    } else {
-        return Ok(first);
-    };
+    let Some(trigger) = trigger_of(&first, moved_m, &config.stages[1], &finest) else { return Ok(first) };
     let prepared = crate::multiview::prepare(scans, &link.multiview)?;
     let tau = finest.max_correspondence_m;
     let before = crate::agreement::disagreement(&prepared, &first.world_from_scan, tau);
     let at_starts = crate::agreement::disagreement(&prepared, starts, tau);
-    if trigger == Trigger::Creeping && before < at_starts {
+    if matches!(trigger, Trigger::Creeping | Trigger::Unsupported) && before < at_starts {
         return Ok(first);
     }
     // A registration verified, with the scans its verification names.
@@ -1449,6 +1451,36 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     r.check_seconds = check_seconds;
     r.restart = Some(restart);
     Ok(r)
+}
+
+/// What the schedule's result `first` sets off, the first that applies
+/// of [`Trigger`]'s (`moved_m`: its largest move of a scan from its
+/// start; `second` and `finest`: the schedule's second and finest
+/// stages); `None` for a result that sets off nothing. (Creeping and
+/// unsupported moves restart only where the scans agree with the result
+/// no better than with their starts, which the caller measures.) Within
+/// the second stage's reach of its start the restart would begin where
+/// the schedule's first stage had no say — unless the result is
+/// impossible: then the restart may land where the first stage would not
+/// let it.
+fn trigger_of(first: &SetResult, moved_m: f64, second: &Stage, finest: &Stage) -> Option<Trigger> {
+    Some(if moved_m > second.max_correspondence_m {
+        Trigger::Moved
+    } else if first.checks.iter().any(crate::verify::PairCheck::violates_free_space) {
+        Trigger::Untrusted
+    } else if first.variance_factor.is_some_and(|f| f > RESTART_VARIANCE_FACTOR) {
+        Trigger::Disagreeing
+    } else if !first.named().is_empty() {
+        Trigger::Named
+    } else if first.checks.iter().any(|c| c.converged == Some(false) && c.moved_m.is_some_and(|m| m > finest.voxel_m)) {
+        Trigger::Creeping
+    } else if first.stages.iter().any(|s| !s.settled) {
+        Trigger::Abandoned
+    } else if moved_m > finest.max_correspondence_m {
+        Trigger::Unsupported
+    } else {
+        return None;
+    })
 }
 
 /// The scans that `a` and `b` (two registrations' `world_from_scan`)
@@ -1819,6 +1851,59 @@ mod tests {
         assert!(unsupported(moves, 5.0, 4.718e-2, 4.670e-2).is_empty());
     }
 
+    /// A result of `n` scans at the identity, nothing verified, nothing
+    /// restarted.
+    fn bare(n: usize) -> SetResult {
+        SetResult {
+            world_from_scan: vec![Isometry3::identity(); n],
+            covariance: vec![Matrix6::identity(); n],
+            joint_covariance: None,
+            sampling: Vec::new(),
+            departure: Vec::new(),
+            departure_chi2: Vec::new(),
+            departure_m: Vec::new(),
+            departed: Vec::new(),
+            held: Vec::new(),
+            unobservable: vec![Vec::new(); n],
+            links: Vec::new(),
+            matches: 0,
+            settled: true,
+            variance_factor: None,
+            lean_variance_factor: None,
+            stages: Vec::new(),
+            checks: Vec::new(),
+            check_seconds: 0.0,
+            noise: None,
+            noise_seconds: 0.0,
+            restart: None,
+        }
+    }
+
+    /// What sets the restart off, in order, with the NEES bench's seed 41
+    /// trial (the street's wedges, simultaneous mode: the largest move
+    /// 1.76 m, the second stage's reach 1.80 m, the finest's 0.18 m): a
+    /// queue abandoned at its cap; with every queue settled, the move
+    /// beyond the finest stage's reach (the caller then asks the scans'
+    /// agreement); within it, nothing. A move beyond the second stage's
+    /// reach, or links that disagree, come first.
+    #[test]
+    fn a_queue_abandoned_at_its_cap_or_a_long_move_sets_the_restart_off() {
+        let stage = |voxel_m: f64, max_correspondence_m: f64| Stage { voxel_m, max_correspondence_m };
+        let (second, finest) = (stage(0.449, 1.798), stage(0.045, 0.180));
+        let run =
+            |settled: bool| StageRun { voxel_m: 0.9, max_correspondence_m: 3.6, matches: 174, seconds: 0.4, settled };
+        let abandoned = SetResult { stages: vec![run(false), run(true)], ..bare(4) };
+        assert_eq!(trigger_of(&abandoned, 1.759, &second, &finest), Some(Trigger::Abandoned));
+        assert_eq!(trigger_of(&abandoned, 1.9, &second, &finest), Some(Trigger::Moved));
+        let disagreeing = SetResult { variance_factor: Some(RESTART_VARIANCE_FACTOR * 1.01), ..abandoned.clone() };
+        assert_eq!(trigger_of(&disagreeing, 1.759, &second, &finest), Some(Trigger::Disagreeing));
+        let settled = SetResult { stages: vec![run(true), run(true)], variance_factor: Some(0.3), ..bare(4) };
+        assert_eq!(trigger_of(&settled, 1.759, &second, &finest), Some(Trigger::Unsupported));
+        assert_eq!(trigger_of(&settled, 0.181, &second, &finest), Some(Trigger::Unsupported));
+        assert_eq!(trigger_of(&settled, 0.179, &second, &finest), None);
+        assert_eq!(trigger_of(&abandoned, 0.01, &second, &finest), Some(Trigger::Abandoned));
+    }
+
     /// Undecided scans are named unless every further restart landed
     /// where the registration kept places them.
     #[test]
@@ -1841,29 +1926,7 @@ mod tests {
             further: Vec::new(),
             degeneracy_ratio: None,
         };
-        let result = |corroborated: bool| SetResult {
-            world_from_scan: vec![Isometry3::identity(); 4],
-            covariance: vec![Matrix6::identity(); 4],
-            joint_covariance: None,
-            sampling: Vec::new(),
-            departure: Vec::new(),
-            departure_chi2: Vec::new(),
-            departure_m: Vec::new(),
-            departed: Vec::new(),
-            held: Vec::new(),
-            unobservable: vec![Vec::new(); 4],
-            links: Vec::new(),
-            matches: 0,
-            settled: true,
-            variance_factor: None,
-            lean_variance_factor: None,
-            stages: Vec::new(),
-            checks: Vec::new(),
-            check_seconds: 0.0,
-            noise: None,
-            noise_seconds: 0.0,
-            restart: Some(restart(corroborated)),
-        };
+        let result = |corroborated: bool| SetResult { restart: Some(restart(corroborated)), ..bare(4) };
         assert_eq!(result(false).untrusted(), [2, 3]);
         assert!(result(true).untrusted().is_empty());
         // A move the scans' agreement gives no evidence for is named

@@ -200,7 +200,10 @@ pub struct CheckReport {
     /// The match's departure from the final relative pose in χ² of the
     /// two poses' relative covariance (first order, its pseudo-inverse),
     /// and `relative_dof` its degrees of freedom (the covariance's rank);
-    /// null where the match failed.
+    /// null where the match failed, and where the departure lies along a
+    /// direction the relative covariance does not span (beyond 1e-9 of
+    /// it: a χ² without bound, JSON having no infinity; `relative_dof`
+    /// is still given).
     pub relative_chi2: Option<f64>,
     /// See `relative_chi2`.
     pub relative_dof: Option<usize>,
@@ -304,11 +307,17 @@ pub struct RestartReport {
     /// free space), "disagreeing" (the schedule's links disagree more
     /// than their covariances allow: `variance_factor` above 1), "named"
     /// (the verification names scans of the schedule's result:
-    /// `schedule_untrusted`) or "creeping" (a pair of `checks` stopped at
+    /// `schedule_untrusted`), "creeping" (a pair of `checks` stopped at
     /// its iteration cap still moving beyond the finest voxel —
     /// `converged` false — and the scans agree with the schedule's result
     /// no better than with their starts: `schedule_disagreement_m2` at
-    /// least `starts_disagreement_m2`).
+    /// least `starts_disagreement_m2`), "abandoned" (a simultaneous
+    /// queue of the schedule was abandoned at its cap: a stage of
+    /// `stages` not `settled`) or "unsupported" (the schedule moved `scan`
+    /// beyond the finest stage's reach of its start, and the scans agree
+    /// with its result no better than with their starts — the test of
+    /// `unsupported`, made before any restart ran); the last two session
+    /// 59, additive.
     pub trigger: String,
     /// The scans the verification names at the schedule's poses (indices
     /// into `scans`): by their pairs (`checks`), or in the modes without a

@@ -1597,6 +1597,80 @@ fn a_restart_that_repeats_the_schedules_long_move_is_checked_by_a_shorter_one() 
 }
 
 /// Issue 38, no silent failure: one trial of
+/// `fusion/benches/covariance_nees.py` (seed 41, the street's four 150°
+/// wedges, the first centred at 126.50°, each point of an overlap dealt to
+/// one wedge; starts 0.1 m / 2° off). In simultaneous mode the schedule's
+/// first stage was abandoned at its cap and left wedges 1–3 1.43 m along
+/// the street together — within the second stage's reach of their starts,
+/// the verification naming nothing, the variance factor below 1: no
+/// restart, exit 0. A queue abandoned at its cap now sets off the restart
+/// (`restart.trigger` "abandoned"): without that stage the wedges land,
+/// the scans agreeing 1.83× better there than at the schedule's result.
+#[test]
+fn a_schedule_whose_queue_was_abandoned_at_its_cap_is_checked_by_a_restart() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let truths: [[[f64; 4]; 3]; 3] = [
+        [
+            [0.8090627804950588, 0.5877191156379142, 0.0019126764997020543, -0.43053648055711125],
+            [-0.587689733894345, 0.8089795436401612, 0.01314818036652522, 0.49066805663896784],
+            [0.006180120775401752, -0.011761763708927305, 0.999911729614998, 0.00856421209114977],
+        ],
+        [
+            [0.9897181798214825, -0.1430220431602255, 0.0016185490805966638, -0.44653968653090914],
+            [0.14295570763594856, 0.9895000720296213, 0.02129021154614192, -0.000167068934762149],
+            [-0.004646523986476515, -0.020839928590301683, 0.9997720276098918, -0.014299527582064542],
+        ],
+        [
+            [0.9301827586658685, 0.36705039179978133, 0.005834840219017219, 0.18484480226478983],
+            [-0.36705996808176483, 0.9301970691401755, 0.000626414272674382, 0.10428390444295166],
+            [-0.005197625666416929, -0.002724416020778595, 0.9999827809741413, 0.1794167332803781],
+        ],
+    ];
+    let starts: [[[f64; 4]; 3]; 3] = [
+        [
+            [0.82022320805641, 0.5720181327232828, 0.005398592540653404, -0.3891525762396344],
+            [-0.5719648102062701, 0.8199170662289413, 0.024336400560301678, 0.45432579165863796],
+            [0.00949446424801166, -0.023049085498012264, 0.9996892491201197, 0.014081991562116234],
+        ],
+        [
+            [0.9877694669144064, -0.1559141962472959, 0.0014978785628762534, -0.393410226358321],
+            [0.15584730218709722, 0.9875506644404639, 0.02133784347589814, 0.027788100466107725],
+            [-0.0048061036852148345, -0.020843429942262796, 0.9997712002231355, 0.02632882218207442],
+        ],
+        [
+            [0.932604282643814, 0.36083671704290593, 0.006790848850826345, 0.22761717402482481],
+            [-0.36083672087662155, 0.9326281438371662, -0.0012673554548682847, 0.0872396885341159],
+            [-0.006790645140486021, -0.0012684465064588027, 0.9999761388063398, 0.14999661527296448],
+        ],
+    ];
+    let (mut inputs, truths) = bench_wedges(dir.path(), STREET, 126.503_358_111_421_6, true, &truths, &starts);
+    inputs.extend(["--mode".into(), "simultaneous".into()]);
+    let (r, v) = run(&inputs, &dir.path().join("out"));
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let v = v.expect("JSON");
+    // (Measured 0.018° / 0.7 mm; the trap was 0.13° / 1.43 m.)
+    assert_parts_land("wedges", &v, &truths, 0.1, 0.01);
+    // The schedule's first stage was abandoned, and nothing else set the
+    // restart off: no scan beyond the second stage's reach.
+    let stages = v["stages"].as_array().expect("stages");
+    assert_eq!(stages[0]["settled"], false, "{}", v["stages"]);
+    let restart = &v["restart"];
+    assert_eq!(restart["trigger"], "abandoned", "{restart}");
+    let f = |x: &Value| x.as_f64().expect("a number");
+    assert!(f(&restart["moved_m"]) < f(&stages[1]["max_correspondence_m"]), "{restart}");
+    assert_eq!(restart["schedule_untrusted"].as_array().map(Vec::len), Some(0), "{restart}");
+    // Kept by the disagreement (measured 1.83×: 0.0170 against 0.0093).
+    let (before, after) = (f(&restart["schedule_disagreement_m2"]), f(&restart["restart_disagreement_m2"]));
+    assert!(before > fusion::scanset::RESTART_RATIO * after && restart["kept"] == true, "{restart}");
+    let text = run_text(&inputs, &dir.path().join("text"));
+    assert!(
+        text.stdout.contains("a simultaneous queue of the schedule was abandoned at its iteration cap"),
+        "{}",
+        text.stdout
+    );
+}
+
+/// Issue 38, no silent failure: one trial of
 /// `fusion/benches/covariance_nees.py` (seed 23, the street's four 150°
 /// wedges, the first centred at 55.09°, each point of an overlap dealt to
 /// one wedge; starts 0.1 m / 2° off) where simultaneous matching settles

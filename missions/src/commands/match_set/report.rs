@@ -107,6 +107,8 @@ pub(super) fn report(
                 fusion::scanset::Trigger::Disagreeing => "disagreeing",
                 fusion::scanset::Trigger::Named => "named",
                 fusion::scanset::Trigger::Creeping => "creeping",
+                fusion::scanset::Trigger::Abandoned => "abandoned",
+                fusion::scanset::Trigger::Unsupported => "unsupported",
             }
             .into(),
             schedule_untrusted: x.untrusted.0.clone(),

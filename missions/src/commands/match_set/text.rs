@@ -410,6 +410,12 @@ fn write_restart(out: &mut dyn Write, scans: &[InputScan], r: &RestartReport) ->
         ("creeping", ..) => "a pair matched again from the schedule's poses still moves at its iteration cap, and the \
                              scans agree there no better than at their starts"
             .into(),
+        ("abandoned", ..) => "a simultaneous queue of the schedule was abandoned at its iteration cap".into(),
+        ("unsupported", ..) => {
+            "the schedule moved scans beyond the finest stage's reach of their starts, and the scans \
+                                agree there no better than at their starts"
+                .into()
+        }
         (_, Some(m), _) => format!(
             "the schedule moved {} {m:.3} m from its start",
             r.scan.map_or("a scan", |i| scans[i].name.as_str())
