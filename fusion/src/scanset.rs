@@ -1126,7 +1126,9 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     // Points in another scanner's free space: the schedule's poses are
     // physically impossible, not merely in doubt.
     let impossible = first.checks.iter().any(crate::verify::PairCheck::violates_free_space);
-    let Some(trigger) = trigger_of(&first, moved_m, &config.stages[1], &finest) else { return Ok(first) };
+    let Some(trigger) = trigger_of(&first, moved_m, impossible, &named, &config.stages[1], &finest) else {
+        return Ok(first);
+    };
     let prepared = crate::multiview::prepare(scans, &link.multiview)?;
     let tau = finest.max_correspondence_m;
     let before = crate::agreement::disagreement(&prepared, &first.world_from_scan, tau);
@@ -1455,22 +1457,31 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
 
 /// What the schedule's result `first` sets off, the first that applies
 /// of [`Trigger`]'s (`moved_m`: its largest move of a scan from its
-/// start; `second` and `finest`: the schedule's second and finest
-/// stages); `None` for a result that sets off nothing. (Creeping and
+/// start; `impossible`: it puts points in another scanner's free space;
+/// `named`: the scans its verification names; `second` and `finest`: the
+/// schedule's second and finest stages); `None` for a result that sets
+/// off nothing. (Creeping and
 /// unsupported moves restart only where the scans agree with the result
 /// no better than with their starts, which the caller measures.) Within
 /// the second stage's reach of its start the restart would begin where
 /// the schedule's first stage had no say — unless the result is
 /// impossible: then the restart may land where the first stage would not
 /// let it.
-fn trigger_of(first: &SetResult, moved_m: f64, second: &Stage, finest: &Stage) -> Option<Trigger> {
+fn trigger_of(
+    first: &SetResult,
+    moved_m: f64,
+    impossible: bool,
+    named: &[usize],
+    second: &Stage,
+    finest: &Stage,
+) -> Option<Trigger> {
     Some(if moved_m > second.max_correspondence_m {
         Trigger::Moved
-    } else if first.checks.iter().any(crate::verify::PairCheck::violates_free_space) {
+    } else if impossible {
         Trigger::Untrusted
     } else if first.variance_factor.is_some_and(|f| f > RESTART_VARIANCE_FACTOR) {
         Trigger::Disagreeing
-    } else if !first.named().is_empty() {
+    } else if !named.is_empty() {
         Trigger::Named
     } else if first.checks.iter().any(|c| c.converged == Some(false) && c.moved_m.is_some_and(|m| m > finest.voxel_m)) {
         Trigger::Creeping
@@ -1885,7 +1896,8 @@ mod tests {
     /// queue abandoned at its cap; with every queue settled, the move
     /// beyond the finest stage's reach (the caller then asks the scans'
     /// agreement); within it, nothing. A move beyond the second stage's
-    /// reach, or links that disagree, come first.
+    /// reach, points in free space, links that disagree and named scans
+    /// come first.
     #[test]
     fn a_queue_abandoned_at_its_cap_or_a_long_move_sets_the_restart_off() {
         let stage = |voxel_m: f64, max_correspondence_m: f64| Stage { voxel_m, max_correspondence_m };
@@ -1893,15 +1905,18 @@ mod tests {
         let run =
             |settled: bool| StageRun { voxel_m: 0.9, max_correspondence_m: 3.6, matches: 174, seconds: 0.4, settled };
         let abandoned = SetResult { stages: vec![run(false), run(true)], ..bare(4) };
-        assert_eq!(trigger_of(&abandoned, 1.759, &second, &finest), Some(Trigger::Abandoned));
-        assert_eq!(trigger_of(&abandoned, 1.9, &second, &finest), Some(Trigger::Moved));
+        assert_eq!(trigger_of(&abandoned, 1.759, false, &[], &second, &finest), Some(Trigger::Abandoned));
+        assert_eq!(trigger_of(&abandoned, 1.9, false, &[], &second, &finest), Some(Trigger::Moved));
         let disagreeing = SetResult { variance_factor: Some(RESTART_VARIANCE_FACTOR * 1.01), ..abandoned.clone() };
-        assert_eq!(trigger_of(&disagreeing, 1.759, &second, &finest), Some(Trigger::Disagreeing));
+        assert_eq!(trigger_of(&disagreeing, 1.759, false, &[], &second, &finest), Some(Trigger::Disagreeing));
         let settled = SetResult { stages: vec![run(true), run(true)], variance_factor: Some(0.3), ..bare(4) };
-        assert_eq!(trigger_of(&settled, 1.759, &second, &finest), Some(Trigger::Unsupported));
-        assert_eq!(trigger_of(&settled, 0.181, &second, &finest), Some(Trigger::Unsupported));
-        assert_eq!(trigger_of(&settled, 0.179, &second, &finest), None);
-        assert_eq!(trigger_of(&abandoned, 0.01, &second, &finest), Some(Trigger::Abandoned));
+        assert_eq!(trigger_of(&settled, 1.759, false, &[], &second, &finest), Some(Trigger::Unsupported));
+        assert_eq!(trigger_of(&settled, 0.181, false, &[], &second, &finest), Some(Trigger::Unsupported));
+        assert_eq!(trigger_of(&settled, 0.179, false, &[], &second, &finest), None);
+        assert_eq!(trigger_of(&abandoned, 0.01, false, &[], &second, &finest), Some(Trigger::Abandoned));
+        // Points in free space, then named scans, come before the queue.
+        assert_eq!(trigger_of(&abandoned, 1.759, true, &[2], &second, &finest), Some(Trigger::Untrusted));
+        assert_eq!(trigger_of(&abandoned, 1.759, false, &[2], &second, &finest), Some(Trigger::Named));
     }
 
     /// Undecided scans are named unless every further restart landed
