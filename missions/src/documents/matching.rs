@@ -337,11 +337,15 @@ pub struct RestartReport {
     /// scans' disagreement prefers neither by 1.5× and the verification
     /// names nothing of either: the data cannot tell which is right, so
     /// they are in `untrusted` (exit 1) — unless `corroborated` —, and the
-    /// registration the scans agree with better is the result. Empty
-    /// otherwise.
+    /// registration the scans agree with better is the result. Also
+    /// (session 60) the scans a `repeated` schedule's result and a shorter
+    /// schedule's of `further` place apart, where the scans agree with
+    /// that one better, however slightly, and it is kept. Empty otherwise.
     pub undecided: Vec<UndecidedReport>,
     /// True when the `undecided` scans are not in `untrusted` after all:
-    /// every further restart (at least one ran) landed where the
+    /// every further restart (at least one ran; after a `repeated`
+    /// schedule, every other from the first that left the schedule's
+    /// place) landed where the
     /// registration kept places them (none of them 5 % of its radius
     /// apart) — the one the scans agree with better is also the one every
     /// shorter schedule reaches from the starts.
@@ -350,8 +354,10 @@ pub struct RestartReport {
     /// beyond the second stage's reach (`trigger` "moved") and the
     /// restart, not kept, landed where the schedule did (no scan 5 % of
     /// its radius apart). The second stage may drag as the first did, so
-    /// the `further` restarts run until one lands there too or is kept
-    /// (docs/match.md).
+    /// every `further` restart runs until one is kept; one that lands
+    /// there too is no corroboration (its own coarse stage may drag as
+    /// far), and one that lands apart with a better agreement leaves the
+    /// scans `undecided` (docs/match.md; session 60).
     pub repeated: bool,
     /// The scans the result moved from their starts beyond the finest
     /// stage's reach (its `max_correspondence_m`), where the scans agree

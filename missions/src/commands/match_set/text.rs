@@ -84,6 +84,16 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
         )?;
     }
     for r in report.restart.iter().filter(|r| !r.undecided.is_empty()) {
+        // (A repeated schedule's scans are left undecided by a shorter
+        // schedule, not by the restart.)
+        let (which, reached) = if r.repeated {
+            (
+                "the schedule's (the restart repeated it) and a shorter schedule's",
+                "every other shorter schedule from the first that left the schedule's place".to_string(),
+            )
+        } else {
+            ("the schedule's and the restart's", format!("every further restart from the starts ({})", r.further.len()))
+        };
         if r.corroborated {
             let apart: Vec<String> = r
                 .undecided
@@ -92,19 +102,17 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
                 .collect();
             writeln!(
                 out,
-                "  the schedule's and the restart's registrations place {} apart, and the scans agree with neither \
-                 clearly better (1.5×); every further restart from the starts ({}) landed where the one kept does: \
-                 that one is trusted",
+                "  {which} registrations place {} apart, and the scans agree with neither clearly better (1.5×); \
+                 {reached} landed where the one kept does: that one is trusted",
                 apart.join(", "),
-                r.further.len()
             )?;
             continue;
         }
         for u in &r.undecided {
             writeln!(
                 out,
-                "  not trusted: {}: the schedule's and the restart's registrations place it {:.3} m, {:.2}° apart, \
-                 and the scans agree with neither clearly better (1.5×): the data do not tell which is right",
+                "  not trusted: {}: {which} registrations place it {:.3} m, {:.2}° apart, and the scans agree with \
+                 neither clearly better (1.5×): the data do not tell which is right",
                 scans[u.scan].name, u.apart_m, u.apart_deg
             )?;
         }
