@@ -83,39 +83,8 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
             report.scans[i].degenerate_directions.len()
         )?;
     }
-    for r in report.restart.iter().filter(|r| !r.undecided.is_empty()) {
-        // (A repeated schedule's scans are left undecided by a shorter
-        // schedule, not by the restart.)
-        let (which, reached) = if r.repeated {
-            (
-                "the schedule's (the restart repeated it) and a shorter schedule's",
-                "every other shorter schedule from the first that left the schedule's place".to_string(),
-            )
-        } else {
-            ("the schedule's and the restart's", format!("every further restart from the starts ({})", r.further.len()))
-        };
-        if r.corroborated {
-            let apart: Vec<String> = r
-                .undecided
-                .iter()
-                .map(|u| format!("{} ({:.3} m, {:.2}°)", scans[u.scan].name, u.apart_m, u.apart_deg))
-                .collect();
-            writeln!(
-                out,
-                "  {which} registrations place {} apart, and the scans agree with neither clearly better (1.5×); \
-                 {reached} landed where the one kept does: that one is trusted",
-                apart.join(", "),
-            )?;
-            continue;
-        }
-        for u in &r.undecided {
-            writeln!(
-                out,
-                "  not trusted: {}: {which} registrations place it {:.3} m, {:.2}° apart, and the scans agree with \
-                 neither clearly better (1.5×): the data do not tell which is right",
-                scans[u.scan].name, u.apart_m, u.apart_deg
-            )?;
-        }
+    if let Some(r) = &report.restart {
+        write_undecided(out, scans, r)?;
     }
     if let Some(r) = report.restart.as_ref().filter(|r| !r.unsupported.is_empty()) {
         let reach = report.stages.last().map_or(0.0, |s| s.max_correspondence_m);
@@ -392,6 +361,48 @@ fn stages(stages: &[StageReport]) -> String {
     each.join("; ")
 }
 
+/// The scans two registrations place apart with nothing in the data to
+/// choose between them (`restart.undecided`): trusted where every later
+/// shorter schedule corroborates the one kept, else each named.
+fn write_undecided(out: &mut dyn Write, scans: &[InputScan], r: &RestartReport) -> std::io::Result<()> {
+    if r.undecided.is_empty() {
+        return Ok(());
+    }
+    // (A repeated schedule's scans are left undecided by a shorter
+    // schedule, not by the restart.)
+    let (which, reached) = if r.repeated {
+        (
+            "the schedule's (the restart repeated it) and a shorter schedule's",
+            "every other shorter schedule from the first that left the schedule's place".to_string(),
+        )
+    } else {
+        ("the schedule's and the restart's", format!("every further restart from the starts ({})", r.further.len()))
+    };
+    if r.corroborated {
+        let apart: Vec<String> = r
+            .undecided
+            .iter()
+            .map(|u| format!("{} ({:.3} m, {:.2}°)", scans[u.scan].name, u.apart_m, u.apart_deg))
+            .collect();
+        writeln!(
+            out,
+            "  {which} registrations place {} apart, and the scans agree with neither clearly better (1.5×); \
+             {reached} landed where the one kept does: that one is trusted",
+            apart.join(", "),
+        )?;
+        return Ok(());
+    }
+    for u in &r.undecided {
+        writeln!(
+            out,
+            "  not trusted: {}: {which} registrations place it {:.3} m, {:.2}° apart, and the scans agree with \
+             neither clearly better (1.5×): the data do not tell which is right",
+            scans[u.scan].name, u.apart_m, u.apart_deg
+        )?;
+    }
+    Ok(())
+}
+
 /// The restart's lines: why it ran, what it did, and each further
 /// restart's.
 fn write_restart(out: &mut dyn Write, scans: &[InputScan], r: &RestartReport) -> std::io::Result<()> {
@@ -512,7 +523,7 @@ fn write_restart(out: &mut dyn Write, scans: &[InputScan], r: &RestartReport) ->
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::documents::matching::FurtherReport;
+    use crate::documents::matching::{FurtherReport, UndecidedReport};
 
     fn check(target: usize, source: usize, moved_m: f64, consistent: bool) -> CheckReport {
         CheckReport {
@@ -669,16 +680,14 @@ mod tests {
 
     /// The restart with a pipe's threshold says so, and the further
     /// restarts after it count the stages they leave out from one.
-    #[test]
-    fn a_restart_with_the_pipes_threshold_says_why_and_the_further_count_on() {
-        let stage = |voxel_m: f64, settled: bool| StageReport {
-            voxel_m,
-            max_correspondence_m: 4.0 * voxel_m,
-            matches: 16,
-            seconds: 0.5,
-            settled,
-        };
-        let further = |n: usize| FurtherReport {
+    /// A stage of `voxel_m` cells, 16 runs in 0.5 s.
+    fn stage(voxel_m: f64, settled: bool) -> StageReport {
+        StageReport { voxel_m, max_correspondence_m: 4.0 * voxel_m, matches: 16, seconds: 0.5, settled }
+    }
+
+    /// A further restart with the last `n` of two stages, not kept, b named.
+    fn further(n: usize) -> FurtherReport {
+        FurtherReport {
             stages: [0.02, 0.01][2 - n..].iter().map(|&v| stage(v, false)).collect(),
             disagreement_m2: Some(3.2e-5),
             error: None,
@@ -687,8 +696,13 @@ mod tests {
             degeneracy_ratio: None,
             moved_m: Some(0.3),
             nearer_starts: false,
-        };
-        let restart = |ratio: Option<f64>, further: Vec<FurtherReport>| RestartReport {
+        }
+    }
+
+    /// A restart set off by b's move, not kept, with `further` and the
+    /// blind-direction threshold `ratio`.
+    fn restart(ratio: Option<f64>, further: Vec<FurtherReport>) -> RestartReport {
+        RestartReport {
             scan: Some(1),
             moved_m: Some(0.77),
             schedule_error: None,
@@ -707,7 +721,53 @@ mod tests {
             unsupported: Vec::new(),
             further,
             degeneracy_ratio: ratio,
+        }
+    }
+
+    #[test]
+    fn undecided_scans_say_which_registrations_place_them_apart_and_whether_they_are_trusted() {
+        let scans: Vec<InputScan> = ["a", "b"].iter().map(|n| InputScan::empty(n, n)).collect();
+        let said = |repeated: bool, corroborated: bool| {
+            let undecided = vec![UndecidedReport { scan: 1, apart_m: 1.854, apart_deg: 2.44 }];
+            let r = RestartReport { undecided, repeated, corroborated, ..restart(None, vec![further(2), further(1)]) };
+            let mut out = Vec::new();
+            write_undecided(&mut out, &scans, &r).expect("written");
+            String::from_utf8(out).expect("UTF-8")
         };
+        assert_eq!(
+            said(false, false),
+            "  not trusted: b: the schedule's and the restart's registrations place it 1.854 m, 2.44° apart, and the \
+             scans agree with neither clearly better (1.5×): the data do not tell which is right\n"
+        );
+        assert_eq!(
+            said(false, true),
+            "  the schedule's and the restart's registrations place b (1.854 m, 2.44°) apart, and the scans agree with \
+             neither clearly better (1.5×); every further restart from the starts (2) landed where the one kept does: \
+             that one is trusted\n"
+        );
+        // A repeated schedule's: a shorter schedule left them undecided.
+        assert_eq!(
+            said(true, false),
+            "  not trusted: b: the schedule's (the restart repeated it) and a shorter schedule's registrations place it \
+             1.854 m, 2.44° apart, and the scans agree with neither clearly better (1.5×): the data do not tell which \
+             is right\n"
+        );
+        assert!(
+            said(true, true).contains(
+                "; every other shorter schedule from the first that left the schedule's place landed where the one \
+                 kept does: that one is trusted\n"
+            ),
+            "{}",
+            said(true, true)
+        );
+        // Nothing undecided, nothing said.
+        let mut out = Vec::new();
+        write_undecided(&mut out, &scans, &restart(None, Vec::new())).expect("written");
+        assert!(out.is_empty());
+    }
+
+    #[test]
+    fn a_restart_with_the_pipes_threshold_says_why_and_the_further_count_on() {
         let said = |r: &RestartReport| {
             let scans: Vec<InputScan> = ["a", "b"].iter().map(|n| InputScan::empty(n, n)).collect();
             let mut out = Vec::new();
