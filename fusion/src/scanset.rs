@@ -545,7 +545,9 @@ pub struct Restart {
     /// [`kept`](Self::kept) is false and nothing is undecided, and they go
     /// on only while it is not to be trusted. A trusted result runs none
     /// (the 3DTK set — its scans disagree 0.9993× as much as at its
-    /// odometry's poses —, the simulated corridor 0.80×: no cost). On the
+    /// odometry's poses —: no cost; the simulated corridor, 0.80×, runs
+    /// them because its restart repeats the schedule,
+    /// [`repeated`](Self::repeated)). On the
     /// bench's 30 street and room wedge trials (below) whose restart ran,
     /// the schedule's right results agreed 0.44–0.82× as much as at the
     /// starts, its wrong ones 0.85–1.66×. Measured
