@@ -1223,7 +1223,7 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
         && before <= RESTART_RATIO * a
         && a <= RESTART_RATIO * before
     {
-        let far = apart(scans, &first.world_from_scan, &r.world_from_scan);
+        let far = apart(&shapes, &first.world_from_scan, &r.world_from_scan);
         if !far.is_empty() {
             (second, named_after) = second.take().map(verify).transpose()?.unzip();
             restart_verified = true;
@@ -1291,7 +1291,7 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
         && !kept
         && pipe_first.is_none()
         && undecided.is_empty()
-        && second.as_ref().is_some_and(|r| apart(scans, &first.world_from_scan, &r.world_from_scan).is_empty());
+        && second.as_ref().is_some_and(|r| apart(&shapes, &first.world_from_scan, &r.world_from_scan).is_empty());
     // A repeated schedule is not corroborated by a shorter one landing
     // there too — that one's own coarse stage may drag as far (the NEES
     // bench's seed 71, the street's wedges in graph mode, trial 0: the
@@ -1326,13 +1326,13 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
                 // undecided scans: that counts for (or against) them.
                 if !undecided.is_empty() {
                     let current = alone.as_ref().or(second.as_ref().filter(|_| kept)).unwrap_or(&first);
-                    if apart(scans, &current.world_from_scan, &f.world_from_scan).is_empty() {
+                    if apart(&shapes, &current.world_from_scan, &f.world_from_scan).is_empty() {
                         reached_again += 1;
                     } else {
                         strayed = true;
                     }
                 }
-                let away = checking && !apart(scans, &first.world_from_scan, &f.world_from_scan).is_empty();
+                let away = checking && !apart(&shapes, &first.world_from_scan, &f.world_from_scan).is_empty();
                 // Named, the result so far gives way to a better agreement
                 // the verification names nothing of (as the restart's);
                 // itself a rescue, to one [`RESCUE_RATIO`] better (the
@@ -1378,12 +1378,6 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
                     nearer_starts: by_nearer,
                 };
                 best = best.min(a);
-                if checking && !report.kept {
-                    landed.push(Some((f.world_from_scan.clone(), away)));
-                    if away && a < before && candidate.as_ref().is_none_or(|c| a < c.1) {
-                        candidate = Some((further.len(), a, f.clone(), report.untrusted.clone()));
-                    }
-                }
                 if report.kept {
                     checking = false;
                     (current_a, current_moved) = (a, f_moved);
@@ -1392,6 +1386,11 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
                     rescued = by_rescue;
                     doubted = by_rescue || in_doubt(&current_named, a);
                     (kept, undecided, alone) = (false, Vec::new(), Some(f));
+                } else if checking {
+                    landed.push(Some((f.world_from_scan.clone(), away)));
+                    if away && a < before && candidate.as_ref().is_none_or(|c| a < c.1) {
+                        candidate = Some((further.len(), a, f, report.untrusted.clone()));
+                    }
                 }
                 report
             }
@@ -1433,11 +1432,11 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
             let from = landed.iter().position(|l| l.as_ref().is_some_and(|l| l.1)).unwrap_or(k);
             for (_, l) in landed.iter().enumerate().skip(from).filter(|(j, _)| *j != k) {
                 match l {
-                    Some((poses, _)) if apart(scans, &f.world_from_scan, poses).is_empty() => reached_again += 1,
+                    Some((poses, _)) if apart(&shapes, &f.world_from_scan, poses).is_empty() => reached_again += 1,
                     _ => strayed = true,
                 }
             }
-            undecided = apart(scans, &first.world_from_scan, &f.world_from_scan);
+            undecided = apart(&shapes, &first.world_from_scan, &f.world_from_scan);
             further[k].kept = true;
             current_a = a;
             only_held = false;
@@ -1571,15 +1570,12 @@ fn trigger_of(
 /// [`MAX_RELATIVE_MOTION`](crate::verify::MAX_RELATIVE_MOTION) of the
 /// radius (a turn alone beyond 0.05 rad, within the verification's
 /// [`MAX_TURN_RAD`](crate::verify::MAX_TURN_RAD)); each with that motion
-/// (metres) and turn (radians).
-fn apart<S: AsRef<[Point3<f32>]> + Sync>(
-    scans: &[S],
-    a: &[Isometry3<f64>],
-    b: &[Isometry3<f64>],
-) -> Vec<(usize, f64, f64)> {
-    (1..scans.len())
+/// (metres) and turn (radians). `shapes`: each scan's centroid and RMS
+/// radius, as [`moves_from_starts`] takes them.
+fn apart(shapes: &[(Point3<f64>, f64)], a: &[Isometry3<f64>], b: &[Isometry3<f64>]) -> Vec<(usize, f64, f64)> {
+    (1..shapes.len())
         .filter_map(|i| {
-            let (c, radius) = crate::icp::degeneracy::centroid_and_lever_arm(scans[i].as_ref());
+            let (c, radius) = shapes[i];
             let delta = a[i].inverse() * b[i];
             let angle = delta.rotation.angle();
             let moved = crate::se3::motion(&delta, &c, radius);
@@ -1900,14 +1896,16 @@ mod tests {
                 Point3::new(10.0 + 2.0 * a.cos(), 2.0 * a.sin(), 0.0)
             })
             .collect();
-        let scans = vec![ring.clone(), ring.clone(), ring.clone(), ring];
+        let scans = [ring.clone(), ring.clone(), ring.clone(), ring];
         let a = vec![Isometry3::identity(); 4];
         let shift = |m: f64| Isometry3::translation(m, 0.0, 0.0);
         // A turn about the scan's origin, 10 m from its points: 1° moves
         // the centroid 0.175 m.
         let turn = |deg: f64| Isometry3::rotation(nalgebra::Vector3::z() * deg.to_radians());
         let b = vec![shift(5.0), shift(0.09), shift(0.11), turn(1.0)];
-        let far = apart(&scans, &a, &b);
+        let shapes: Vec<(Point3<f64>, f64)> =
+            scans.iter().map(|s| crate::icp::degeneracy::centroid_and_lever_arm(s)).collect();
+        let far = apart(&shapes, &a, &b);
         let named: Vec<usize> = far.iter().map(|f| f.0).collect();
         assert_eq!(named, [2, 3]);
         assert!((far[0].1 - 0.11).abs() < 1e-6, "{far:?}");
@@ -1917,7 +1915,7 @@ mod tests {
         // A turn about the centroid itself: apart beyond 0.05 rad (2.9°).
         let about =
             |deg: f64| Isometry3::translation(10.0, 0.0, 0.0) * turn(deg) * Isometry3::translation(-10.0, 0.0, 0.0);
-        let c = apart(&scans, &a, &[Isometry3::identity(), about(2.8), about(-3.0), about(2.0)]);
+        let c = apart(&shapes, &a, &[Isometry3::identity(), about(2.8), about(-3.0), about(2.0)]);
         assert_eq!(c.iter().map(|f| f.0).collect::<Vec<_>>(), [2]);
     }
 
