@@ -311,13 +311,15 @@ pub struct RestartReport {
     /// its iteration cap still moving beyond the finest voxel —
     /// `converged` false — and the scans agree with the schedule's result
     /// no better than with their starts: `schedule_disagreement_m2` at
-    /// least `starts_disagreement_m2`), "abandoned" (a simultaneous
+    /// least `starts_disagreement_m2`, or not clearly better where it
+    /// moved a scan beyond the finest stage's reach, as for
+    /// `unsupported`), "abandoned" (a simultaneous
     /// queue of the schedule was abandoned at its cap: a stage of
     /// `stages` not `settled`) or "unsupported" (the schedule moved `scan`
     /// beyond the finest stage's reach of its start, and the scans agree
-    /// with its result no better than with their starts — the test of
-    /// `unsupported`, made before any restart ran); the last two session
-    /// 59, additive.
+    /// with its result not clearly better than with their starts — the
+    /// test of `unsupported`, made before any restart ran); the last two
+    /// session 59, additive.
     pub trigger: String,
     /// The scans the verification names at the schedule's poses (indices
     /// into `scans`): by their pairs (`checks`), or in the modes without a
@@ -361,9 +363,12 @@ pub struct RestartReport {
     pub repeated: bool,
     /// The scans the result moved from their starts beyond the finest
     /// stage's reach (its `max_correspondence_m`), where the scans agree
-    /// with the result no better than with their starts (the kept
-    /// registration's disagreement at least `starts_disagreement_m2`): a
-    /// move a coarser stage decided that nothing in the data supports.
+    /// with the result not clearly better than with their starts (the
+    /// kept registration's disagreement at least 0.99 times
+    /// `starts_disagreement_m2`; before session 61 at least that itself —
+    /// the building example's scan009, slid 1.22 m along its façade at
+    /// 0.9963×, passed): a move a coarser stage decided that nothing in
+    /// the data supports.
     /// They are in `untrusted` (exit 1). Empty otherwise.
     pub unsupported: Vec<UnsupportedReport>,
     /// Further restarts from the starts, each without one more of the
@@ -431,8 +436,10 @@ pub struct FurtherReport {
     /// the restart's `moved_m`); null when it failed.
     pub moved_m: Option<f64>,
     /// Kept as nearer the starts: the scans agreed with the result before
-    /// it no better than with their starts (`starts_disagreement_m2`) —
-    /// its moves no evidence of the data's —, they agree with this one
+    /// it no better than with their starts (`starts_disagreement_m2`), or
+    /// not clearly better (0.99 times) where it moved scans beyond the
+    /// finest stage's reach — its moves no evidence of the data's —, they
+    /// agree with this one
     /// within 1.5 times the best registration before it, the verification
     /// names none of its scans and ties each to another by an agreeing
     /// pair, and it moves them less (`moved_m`).

@@ -86,19 +86,8 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
     if let Some(r) = &report.restart {
         write_undecided(out, scans, r)?;
     }
-    if let Some(r) = report.restart.as_ref().filter(|r| !r.unsupported.is_empty()) {
-        let reach = report.stages.last().map_or(0.0, |s| s.max_correspondence_m);
-        let moved: Vec<String> =
-            r.unsupported.iter().map(|u| format!("{} ({:.3} m)", scans[u.scan].name, u.moved_m)).collect();
-        writeln!(
-            out,
-            "  not trusted: {}: the result moved them from their starts beyond the finest stage's reach ({reach:.3} \
-             m), and the scans agree with it no better than with their starts ({:.4e} against {:.4e} m² a point): \
-             nothing in the data supports such moves",
-            moved.join(", "),
-            kept_disagreement(r).unwrap_or(f64::NAN),
-            r.starts_disagreement_m2.unwrap_or(f64::NAN)
-        )?;
+    if let Some(r) = &report.restart {
+        write_unsupported(out, scans, r, report.stages.last().map_or(0.0, |s| s.max_correspondence_m))?;
     }
     let tolerance = report.stages.last().map_or(0.0, |s| s.voxel_m);
     // Whether the pipe's threshold ran already: the set's own (given, or
@@ -364,6 +353,28 @@ fn stages(stages: &[StageReport]) -> String {
 /// The scans two registrations place apart with nothing in the data to
 /// choose between them (`restart.undecided`): trusted where every later
 /// shorter schedule corroborates the one kept, else each named.
+/// The line naming the scans the result moved beyond the finest stage's
+/// `reach` (metres) of their starts where the scans agree with it not
+/// clearly better than with their starts ([`RestartReport::unsupported`]);
+/// nothing where there are none.
+fn write_unsupported(out: &mut dyn Write, scans: &[InputScan], r: &RestartReport, reach: f64) -> std::io::Result<()> {
+    if r.unsupported.is_empty() {
+        return Ok(());
+    }
+    let moved: Vec<String> =
+        r.unsupported.iter().map(|u| format!("{} ({:.3} m)", scans[u.scan].name, u.moved_m)).collect();
+    let (kept, starts) = (kept_disagreement(r).unwrap_or(f64::NAN), r.starts_disagreement_m2.unwrap_or(f64::NAN));
+    writeln!(
+        out,
+        "  not trusted: {}: the result moved them from their starts beyond the finest stage's reach ({reach:.3} m), \
+         and the scans agree with it not clearly better than with their starts ({kept:.4e} against {starts:.4e} m² a \
+         point, {:.4}×; moves that far need below {}×): nothing in the data supports such moves",
+        moved.join(", "),
+        kept / starts,
+        fusion::scanset::SUPPORT_RATIO
+    )
+}
+
 fn write_undecided(out: &mut dyn Write, scans: &[InputScan], r: &RestartReport) -> std::io::Result<()> {
     if r.undecided.is_empty() {
         return Ok(());
@@ -523,7 +534,7 @@ fn write_restart(out: &mut dyn Write, scans: &[InputScan], r: &RestartReport) ->
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::documents::matching::{FurtherReport, UndecidedReport};
+    use crate::documents::matching::{FurtherReport, UndecidedReport, UnsupportedReport};
 
     fn check(target: usize, source: usize, moved_m: f64, consistent: bool) -> CheckReport {
         CheckReport {
@@ -722,6 +733,33 @@ mod tests {
             further,
             degeneracy_ratio: ratio,
         }
+    }
+
+    /// The long moves a result the scans agree with not clearly better
+    /// than with their starts are named with the two agreements, their
+    /// ratio and the ratio needed (the building's scan009 at 0.9963×).
+    #[test]
+    fn unsupported_moves_say_how_far_and_how_little_better_the_scans_agree() {
+        let scans: Vec<InputScan> = ["a", "b"].iter().map(|n| InputScan::empty(n, n)).collect();
+        let r = RestartReport {
+            kept: true,
+            restart_disagreement_m2: Some(4.6521e-2),
+            starts_disagreement_m2: Some(4.6695e-2),
+            unsupported: vec![UnsupportedReport { scan: 1, moved_m: 1.2287 }],
+            ..restart(None, Vec::new())
+        };
+        let mut out = Vec::new();
+        write_unsupported(&mut out, &scans, &r, 0.428).expect("written");
+        assert_eq!(
+            String::from_utf8(out).expect("UTF-8"),
+            "  not trusted: b (1.229 m): the result moved them from their starts beyond the finest stage's reach \
+             (0.428 m), and the scans agree with it not clearly better than with their starts (4.6521e-2 against \
+             4.6695e-2 m² a point, 0.9963×; moves that far need below 0.99×): nothing in the data supports such \
+             moves\n"
+        );
+        let mut out = Vec::new();
+        write_unsupported(&mut out, &scans, &restart(None, Vec::new()), 0.428).expect("written");
+        assert!(out.is_empty());
     }
 
     #[test]
