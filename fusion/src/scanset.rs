@@ -526,8 +526,9 @@ pub struct Restart {
     /// worse than the starts, exit 0; in incremental mode one scan 0.56 m
     /// (1.002×); with the corner test off, in incremental mode, scan009
     /// 1.22 m at 0.9963× ([`SUPPORT_RATIO`]). Right results agreed better
-    /// than their starts wherever a restart ran (0.44–0.82× on the street's and the room's wedges from
-    /// rough starts; 0.96–0.9971× on the simulated hall and the 3DTK set,
+    /// than their starts wherever a restart ran (0.44–0.82× on the
+    /// street's and the room's wedges from rough starts; 0.96–0.9971× on
+    /// the simulated hall and the 3DTK set,
     /// 0.80× on the corridor); the 3DTK set's graph mode, 0.9999×, moves
     /// no scan beyond its reach (0.08 m of 0.20). Empty otherwise.
     pub unsupported: Vec<(usize, f64)>,
@@ -650,8 +651,9 @@ pub enum Trigger {
     /// still moving beyond the finest voxel, and the scans agree with the
     /// schedule's result no better than with their starts (not clearly
     /// better, where it moved a scan beyond the finest stage's reach:
-    /// [`SUPPORT_RATIO`]); nothing above set it off. The street's wedges (the NEES bench's, starts 0.1 m /
-    /// 2° off) at the corner test's default: the schedule slid a wedge
+    /// [`SUPPORT_RATIO`]); nothing above set it off. The street's wedges
+    /// (the NEES bench's, starts 0.1 m / 2° off) at the corner test's
+    /// default: the schedule slid a wedge
     /// 1.2 m along the street, its link to a partner was rejected at the
     /// cap — the links left were a tree, σ̂₀² 1 — and the verification's
     /// match of that pair crept 0.83 m and 3.7°, within every tier of a
@@ -746,11 +748,11 @@ fn keeps_pipe(named: Option<&[usize]>, a: Option<f64>, best: f64) -> bool {
 }
 
 /// Whether a further restart may take the place of the result so far as
-/// nearer the starts: the result so far is `unsupported` — the scans
-/// agree with it no better than with their starts, or it moved scans
-/// beyond the finest stage's reach and they agree with it not clearly
-/// better ([`unsupported`]): its moves are
-/// no evidence of the data's —, they agree with this one (`a`) within
+/// nearer the starts: the result so far is `doubtful` — the scans agree
+/// with it no better than with their starts, or it moved scans beyond
+/// the finest stage's reach and they agree with it not clearly better
+/// ([`unsupported`]): its moves are no evidence of the data's —, they
+/// agree with this one (`a`) within
 /// [`RESTART_RATIO`] of the best so far, and it moves no scan as far from
 /// its start (`moved` against `current_moved`, metres). Whether the
 /// verification names nothing of it and ties every scan by an agreeing
@@ -766,8 +768,8 @@ fn keeps_pipe(named: Option<&[usize]>, a: Option<f64>, best: f64) -> bool {
 /// within 4 mm of the truth (the CPS's), the scans agreeing no better
 /// there (4.69e-2 m² a point against 4.67e-2 at the starts), exit 0 with
 /// σ 43–121 mm (BENCHMARKS.md, "Agreeing no better than the starts").
-fn keeps_nearer_starts(unsupported: bool, a: f64, best: f64, moved: f64, current_moved: f64) -> bool {
-    unsupported && a <= RESTART_RATIO * best && moved < current_moved
+fn keeps_nearer_starts(doubtful: bool, a: f64, best: f64, moved: f64, current_moved: f64) -> bool {
+    doubtful && a <= RESTART_RATIO * best && moved < current_moved
 }
 
 /// How far `poses` move each scan but the first from its start
@@ -1293,24 +1295,23 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     // result costs nothing more.
     let (mut further, mut spent, mut alone) = (Vec::new(), (0, 0.0), None);
     let mut best = after.map_or(before, |a| a.min(before));
-    // (A kept restart has its disagreement and its verification;
-    // `unsupported`: the result is `doubtful`, above.)
-    let in_doubt = |named: &[usize], unsupported: bool| !named.is_empty() || unsupported;
+    // (A kept restart has its disagreement and its verification.)
+    let in_doubt = |named: &[usize], doubtful: bool| !named.is_empty() || doubtful;
     // The scans the verification names of the result so far, and whether
     // only by their moves along what only their starts hold.
     let mut current_named = if kept { named_after.clone().unwrap_or_default() } else { named.clone() };
     let mut only_held =
         if kept { second.as_ref().is_some_and(SetResult::named_only_held) } else { first.named_only_held() };
-    // The result so far: the scans' disagreement there and its largest
-    // move from the starts.
-    let (mut current_a, mut current_moved, mut current_unsupported) = match (&second, after) {
+    // The result so far: the scans' disagreement there, its largest move
+    // from the starts, and whether it is doubtful.
+    let (mut current_a, mut current_moved, mut current_doubtful) = match (&second, after) {
         (Some(r), Some(a)) if kept => (a, largest_move(&r.world_from_scan), doubtful(&r.world_from_scan, a)),
         _ => (before, moved_m, doubtful(&first.world_from_scan, before)),
     };
     // (The pipe's restart kept: held by the starts along what its matches
     // find blind, the scans' agreement no evidence there.)
     let mut doubted = !(kept && pipe_first.is_some())
-        && (in_doubt(&current_named, current_unsupported) || !undecided.is_empty() || rescued);
+        && (in_doubt(&current_named, current_doubtful) || !undecided.is_empty() || rescued);
     // The restart only repeated the schedule's long move ([`Restart::repeated`]):
     // the further restarts run until one lands there too or is kept.
     let repeated = trigger == Trigger::Moved
@@ -1379,7 +1380,7 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
                     || (rescued && RESCUE_RATIO * a < best)
                     || (only_held && a <= RESTART_RATIO * best);
                 let f_moved = largest_move(&f.world_from_scan);
-                let nearer = keeps_nearer_starts(current_unsupported, a, best, f_moved, current_moved);
+                let nearer = keeps_nearer_starts(current_doubtful, a, best, f_moved, current_moved);
                 let (f, named) = if impossible || rescue || nearer || best > RESTART_RATIO * a {
                     let (f, named) = verify(f)?;
                     (f, Some(named))
@@ -1407,11 +1408,11 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
                 if report.kept {
                     checking = false;
                     (current_a, current_moved) = (a, f_moved);
-                    current_unsupported = doubtful(&f.world_from_scan, a);
+                    current_doubtful = doubtful(&f.world_from_scan, a);
                     current_named = report.untrusted.clone().unwrap_or_default();
                     only_held = f_only_held;
                     rescued = by_rescue;
-                    doubted = by_rescue || in_doubt(&current_named, current_unsupported);
+                    doubted = by_rescue || in_doubt(&current_named, current_doubtful);
                     (kept, undecided, alone) = (false, Vec::new(), Some(f));
                 } else if checking {
                     landed.push(Some((f.world_from_scan.clone(), away)));
@@ -1895,10 +1896,10 @@ mod tests {
     }
 
     /// A further restart takes the result's place as nearer the starts
-    /// only where the result's moves are unsupported, the scans agree
-    /// with it within 1.5× of the best and it moves the scans less (the
-    /// building's scans: 4.720e-2 against the best 4.691e-2 and the
-    /// starts' 4.670e-2, 0.13 m against 0.72 m).
+    /// only where the result is doubtful (its moves unsupported), the
+    /// scans agree with it within 1.5× of the best and it moves the scans
+    /// less (the building's scans: 4.720e-2 against the best 4.691e-2 and
+    /// the starts' 4.670e-2, 0.13 m against 0.72 m).
     #[test]
     fn a_result_no_better_than_the_starts_gives_way_to_one_nearer_them() {
         let best = 4.691e-2;
