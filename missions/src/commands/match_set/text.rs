@@ -350,9 +350,6 @@ fn stages(stages: &[StageReport]) -> String {
     each.join("; ")
 }
 
-/// The scans two registrations place apart with nothing in the data to
-/// choose between them (`restart.undecided`): trusted where every later
-/// shorter schedule corroborates the one kept, else each named.
 /// The line naming the scans the result moved beyond the finest stage's
 /// `reach` (metres) of their starts where the scans agree with it not
 /// clearly better than with their starts ([`RestartReport::unsupported`]);
@@ -375,6 +372,9 @@ fn write_unsupported(out: &mut dyn Write, scans: &[InputScan], r: &RestartReport
     )
 }
 
+/// The scans two registrations place apart with nothing in the data to
+/// choose between them (`restart.undecided`): trusted where every later
+/// shorter schedule corroborates the one kept, else each named.
 fn write_undecided(out: &mut dyn Write, scans: &[InputScan], r: &RestartReport) -> std::io::Result<()> {
     if r.undecided.is_empty() {
         return Ok(());
