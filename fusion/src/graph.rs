@@ -490,6 +490,21 @@ impl JointCovariance {
         self.block(a, a) + self.block(b, b) - self.block(a, b) - self.block(b, a)
     }
 
+    /// The stacked `xi` of poses `from`.. (one ξ per pose, the first
+    /// `from` left out) in these poses' joint σ: ξᵀ·C⁻¹·ξ; `None` where
+    /// their covariance is singular.
+    pub fn chi2(&self, xi: &[Vector6<f64>], from: usize) -> Option<f64> {
+        let n = self.len().min(xi.len()).saturating_sub(from);
+        if n == 0 {
+            return Some(0.0);
+        }
+        let sub = Mat::<f64>::from_fn(6 * n, 6 * n, |r, c| self.matrix[(6 * from + r, 6 * from + c)]);
+        let rhs = Mat::<f64>::from_fn(6 * n, 1, |r, _| xi[from + r / 6][r % 6]);
+        let solved = sub.llt(Side::Lower).ok()?.solve(&rhs);
+        let chi2 = (0..6 * n).map(|r| rhs[(r, 0)] * solved[(r, 0)]).sum::<f64>();
+        chi2.is_finite().then_some(chi2)
+    }
+
     /// Every pose's own covariance (the diagonal blocks).
     pub fn diagonal(&self) -> Vec<Matrix6<f64>> {
         (0..self.len()).map(|i| self.block(i, i)).collect()

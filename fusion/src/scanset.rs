@@ -110,6 +110,7 @@ pub struct SetResult {
     /// frame): the link graph's, or for the other modes that of the
     /// verification's matches adjusted together from the final poses (the
     /// link graph's model) plus the poses' departure from that adjustment
+    /// as far as it exceeds the adjustment's noise
     /// ([`crate::links::adjust_matches`]) — before the verification, or
     /// without a pair to verify, the last match's with its partners'
     /// (their mean for a metascan); zero for the first scan.
@@ -130,7 +131,8 @@ pub struct SetResult {
     /// adjustment of the verification's matches (ξ = (ω, v), world frame,
     /// pose ≈ exp(ξ)·adjusted; zero for the first scan): how far the
     /// strategy stopped from where all its pairs agree, and part of
-    /// [`covariance`](Self::covariance) (ξξᵀ). Empty in graph mode, whose
+    /// [`covariance`](Self::covariance) (w·ξξᵀ,
+    /// [`departure_weight`](Self::departure_weight)). Empty in graph mode, whose
     /// poses are the adjustment, and without a pair verified.
     pub departure: Vec<Vector6<f64>>,
     /// Each departure in the σ of the adjustment it departs from, ξᵀ·C⁺·ξ
@@ -139,6 +141,12 @@ pub struct SetResult {
     /// is not trusted ([`untrusted`](Self::untrusted)). Empty where
     /// [`departure`](Self::departure) is.
     pub departure_chi2: Vec<f64>,
+    /// The share of the departures' ξξᵀ in
+    /// [`covariance`](Self::covariance)
+    /// ([`crate::links::departure_weight`]: as far as they exceed the
+    /// adjustment's noise). `None` where [`departure`](Self::departure) is
+    /// empty.
+    pub departure_weight: Option<f64>,
     /// How far each departure moves the scan's points, metres: its
     /// centroid's displacement plus the turn times their RMS radius (as
     /// [`crate::verify::PairCheck::moved_m`] measures a pair). Empty where
@@ -945,7 +953,22 @@ fn verified<S: AsRef<[Point3<f32>]> + Sync>(
                 pulls.push(c.pull);
             }
         }
-        let a = crate::links::adjust_matches(&r.world_from_scan, &edges, &noise, &pulls, &shared, &config.link)?;
+        // A pairwise pose is placed on one partner's match, the others on
+        // several partners' ([`crate::links::Departures`]).
+        let departures = if config.mode == Mode::Pairwise {
+            crate::links::Departures::Whole
+        } else {
+            crate::links::Departures::BeyondNoise
+        };
+        let a = crate::links::adjust_matches(
+            &r.world_from_scan,
+            &edges,
+            &noise,
+            &pulls,
+            &shared,
+            &config.link,
+            departures,
+        )?;
         r.variance_factor = Some(a.variance_factor);
         r.lean_variance_factor = a.lean_variance_factor;
         r.covariance = a.covariance;
@@ -953,6 +976,7 @@ fn verified<S: AsRef<[Point3<f32>]> + Sync>(
         r.sampling = a.sampling;
         r.departure = a.departure;
         r.departure_chi2 = a.departure_chi2;
+        r.departure_weight = Some(a.departure_weight);
         r.departure_m = lever
             .par_iter()
             .zip(&r.world_from_scan)
@@ -1753,6 +1777,7 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
         sampling: Vec::new(),
         departure: Vec::new(),
         departure_chi2: Vec::new(),
+        departure_weight: None,
         departure_m: Vec::new(),
         departed: Vec::new(),
         held: Vec::new(),
@@ -1837,6 +1862,7 @@ fn from_graph(g: LinkGraph, matches: usize, settled: bool, stages: Vec<StageRun>
         sampling: g.sampling,
         departure: Vec::new(),
         departure_chi2: Vec::new(),
+        departure_weight: None,
         departure_m: Vec::new(),
         departed: Vec::new(),
         held: Vec::new(),
@@ -1972,6 +1998,7 @@ mod tests {
             sampling: Vec::new(),
             departure: Vec::new(),
             departure_chi2: Vec::new(),
+            departure_weight: None,
             departure_m: Vec::new(),
             departed: Vec::new(),
             held: Vec::new(),

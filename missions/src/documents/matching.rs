@@ -41,6 +41,14 @@ pub struct MatchReport {
     /// redundancy (nothing to judge: the pull alone) or without a lean (no
     /// pair beyond an edge), or where `variance_factor` is.
     pub lean_variance_factor: Option<f64>,
+    /// The modes without a link graph: the share w of the departures'
+    /// ξξᵀ (`scans[].departure`, stacked) in the covariances — the
+    /// stacked departures' χ² in the adjustment's joint σ less 6 per scan
+    /// but the first, over that χ² (0 where it is below): a departure
+    /// within the adjustment's own noise adds nothing to it; a compromise
+    /// nearly all of itself. Each covariance less w·ξξᵀ is the
+    /// adjustment's. Null in graph mode or when no pair was verified.
+    pub departure_weight: Option<f64>,
     /// With `--joint-covariance`: the poses' joint covariance, 6N×6N for
     /// the N `scans` in their order, row by row — block (i, j) is
     /// cov(ξᵢ, ξⱼ) in the order and frame of `scans[].covariance`, which
@@ -587,17 +595,20 @@ pub struct ScanReport {
     /// variance its own squared residual) and each link's pull by its pairs past the other scan's edge; in
     /// the other modes it is that of the verification's matches
     /// (`checks`, both ways) adjusted together in the same model, plus the
-    /// pose's departure from that adjustment (docs/match.md).
+    /// pose's departure from that adjustment as far as the departures
+    /// exceed its noise (`departure_weight`; docs/match.md).
     pub covariance: [[f64; 6]; 6],
     /// In the modes without a link graph: how far this pose is from where
     /// the verification's matches (`checks`) agree — their adjustment —,
     /// ξ in the order and frame of the covariance (pose ≈ exp(ξ)·adjusted;
-    /// zeros for the first scan); part of the covariance (ξξᵀ). Graph mode
+    /// zeros for the first scan); part of the covariance (w·ξξᵀ, w the
+    /// report's `departure_weight`). Graph mode
     /// would put the scan about there. Null in graph mode (its poses are
     /// the adjustment) or when no pair was verified.
     pub departure: Option<[f64; 6]>,
     /// The departure in the σ of the adjustment it departs from:
-    /// ξᵀ·C⁺·ξ, C the adjustment's covariance (this covariance less ξξᵀ).
+    /// ξᵀ·C⁺·ξ, C the adjustment's covariance (this covariance less
+    /// w·ξξᵀ) less the scans' sampling.
     /// Above 1,500 — with `departure_m` above the finest voxel — the
     /// strategy stopped in a compromise of its matches apart from where
     /// its pairs agree: the scan is in `untrusted`, exit 1

@@ -247,8 +247,10 @@ fn the_room_scans_land_on_the_reference_from_their_odometry_guess() {
 }
 
 /// `--joint-covariance`: the 3DTK set's poses' 18×18 joint covariance in
-/// graph mode and in a mode without a link graph (there with the stacked
-/// departures) — symmetric, positive semi-definite, each scan's own
+/// graph mode and in two modes without a link graph (there with the
+/// stacked departures, whole in pairwise mode and as far as they exceed
+/// the adjustment's noise in incremental mode, `departure_weight`) —
+/// symmetric, positive semi-definite, each scan's own
 /// covariance its diagonal block, the first scan's rows zero, and what two
 /// poses share off it: each checked pair's relative covariance
 /// Cᵢ + Cⱼ − Cᵢⱼ − Cⱼᵢ positive semi-definite and not Cᵢ + Cⱼ. (Its
@@ -258,11 +260,20 @@ fn the_room_scans_land_on_the_reference_from_their_odometry_guess() {
 fn the_joint_covariance_holds_each_poses_own_and_what_two_share() {
     use nalgebra::{DMatrix, Matrix6};
     let dir = tempfile::tempdir().expect("temp dir");
-    for mode in ["graph", "pairwise"] {
+    for mode in ["graph", "pairwise", "incremental"] {
         let (run, v) =
             run(&[data("3dtk_dat"), "--mode".into(), mode.into(), "--joint-covariance".into()], &dir.path().join(mode));
         assert_eq!(run.code, 0, "{mode}: {}", run.stderr);
         let v = v.expect("JSON");
+        // The share of the departures' ξξᵀ carried: none in graph mode
+        // (its poses are the adjustment), whole in pairwise mode, in
+        // incremental mode as far as they exceed the adjustment's noise.
+        let weight = v["departure_weight"].as_f64();
+        match mode {
+            "graph" => assert!(v["departure_weight"].is_null(), "{}", v["departure_weight"]),
+            "pairwise" => assert_eq!(weight, Some(1.0)),
+            _ => assert!(weight.is_some_and(|w| (0.0..1.0).contains(&w)), "{mode}: {weight:?}"),
+        }
         let rows: Vec<Vec<f64>> = serde_json::from_value(v["joint_covariance"].clone()).expect("rows of numbers");
         assert_eq!(rows.len(), 18, "{mode}");
         assert!(rows.iter().all(|r| r.len() == 18), "{mode}");
@@ -277,6 +288,14 @@ fn the_joint_covariance_holds_each_poses_own_and_what_two_share() {
         for (i, s) in v["scans"].as_array().expect("scans").iter().enumerate() {
             let own: Vec<Vec<f64>> = serde_json::from_value(s["covariance"].clone()).expect("6×6");
             assert_eq!(block(i, i), Matrix6::from_fn(|r, c| own[r][c]), "{mode}: scan {i}");
+            // Less w·ξξᵀ, the adjustment's: positive semi-definite.
+            if let Some(w) = weight {
+                let d: Vec<f64> = serde_json::from_value(s["departure"].clone()).expect("a departure");
+                let d = nalgebra::Vector6::from_column_slice(&d);
+                let adjustment = block(i, i) - w * d * d.transpose();
+                let least = adjustment.symmetric_eigen().eigenvalues.min();
+                assert!(least >= -1e-12 * largest, "{mode}: scan {i}'s adjustment, eigenvalue {least:e}");
+            }
         }
         let (one, two) = (block(1, 1), block(2, 2));
         let relative = one + two - block(1, 2) - block(2, 1);
