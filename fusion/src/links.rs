@@ -1758,6 +1758,11 @@ mod tests {
         assert_eq!(f, 1.0);
     }
 
+    /// ξᵀ·C⁻¹·ξ.
+    fn nees(xi: &Vector6<f64>, c: &Matrix6<f64>) -> f64 {
+        (xi.transpose() * c.try_inverse().expect("invertible") * xi)[(0, 0)]
+    }
+
     /// A strategy whose error shares half the adjustment's, cov(ε, εₐ) =
     /// Σₐ/2 — between the chain's, which shares all of it (the adjustment
     /// the better estimate: ξξᵀ whole is right), and an independent
@@ -1777,8 +1782,6 @@ mod tests {
         let truth = four_scans();
         let draws = 2000;
         let (mut whole, mut beyond, mut own) = (0.0, 0.0, 0.0);
-        let nees =
-            |xi: &Vector6<f64>, c: &Matrix6<f64>| (xi.transpose() * c.try_inverse().expect("invertible") * xi)[(0, 0)];
         for _ in 0..draws {
             let (edges, again) = (measured(&mut rng, &truth, &ALL_PAIRS), measured(&mut rng, &truth, &ALL_PAIRS));
             // Each adjustment at exp(−ξ)·truth, ξ truth's departure from it:
@@ -1830,8 +1833,6 @@ mod tests {
         // covariance's Cᵢ + Cⱼ − Cᵢⱼ − Cⱼᵢ: the adjustment's own poses and
         // the chain's; and, as if the poses shared nothing, Cᵢ + Cⱼ.
         let (mut own_relative, mut chained_relative, mut unshared) = (0.0, 0.0, 0.0);
-        let nees =
-            |xi: &Vector6<f64>, c: &Matrix6<f64>| (xi.transpose() * c.try_inverse().expect("invertible") * xi)[(0, 0)];
         for _ in 0..draws {
             let edges = measured(&mut rng, &truth, &ALL_PAIRS);
             // (0, 1), (1, 2), (2, 3): the chain's links.
