@@ -110,8 +110,9 @@ pub struct SetResult {
     /// frame): the link graph's, or for the other modes that of the
     /// verification's matches adjusted together from the final poses (the
     /// link graph's model) plus the poses' departure from that adjustment
-    /// as far as it exceeds the adjustment's noise
-    /// ([`crate::links::adjust_matches`]) — before the verification, or
+    /// — whole in pairwise mode, in the others as far as it exceeds the
+    /// adjustment's noise ([`crate::links::adjust_matches`],
+    /// [`crate::links::Departures`]) — before the verification, or
     /// without a pair to verify, the last match's with its partners'
     /// (their mean for a metascan); zero for the first scan.
     pub covariance: Vec<Matrix6<f64>>,
@@ -143,7 +144,8 @@ pub struct SetResult {
     pub departure_chi2: Vec<f64>,
     /// The share of the departures' ξξᵀ in
     /// [`covariance`](Self::covariance)
-    /// ([`crate::links::departure_weight`]: as far as they exceed the
+    /// (1 in pairwise mode; in the others
+    /// [`crate::links::departure_weight`], as far as they exceed the
     /// adjustment's noise). `None` where [`departure`](Self::departure) is
     /// empty.
     pub departure_weight: Option<f64>,

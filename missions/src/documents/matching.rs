@@ -42,12 +42,14 @@ pub struct MatchReport {
     /// pair beyond an edge), or where `variance_factor` is.
     pub lean_variance_factor: Option<f64>,
     /// The modes without a link graph: the share w of the departures'
-    /// ξξᵀ (`scans[].departure`, stacked) in the covariances — the
-    /// stacked departures' χ² in the adjustment's joint σ less 6 per scan
-    /// but the first, over that χ² (0 where it is below): a departure
-    /// within the adjustment's own noise adds nothing to it; a compromise
-    /// nearly all of itself. Each covariance less w·ξξᵀ is the
-    /// adjustment's. Null in graph mode or when no pair was verified.
+    /// ξξᵀ (`scans[].departure`, stacked) in the covariances. 1 in
+    /// pairwise mode (each scan placed on one partner's match); in
+    /// incremental and simultaneous mode the stacked departures' χ² in
+    /// the adjustment's joint σ less 6 per scan but the first, over that
+    /// χ² (0 where it is below): a departure within the adjustment's own
+    /// noise adds nothing to it; a compromise nearly all of itself. Each
+    /// covariance less w·ξξᵀ is the adjustment's. Null in graph mode or
+    /// when no pair was verified.
     pub departure_weight: Option<f64>,
     /// With `--joint-covariance`: the poses' joint covariance, 6N×6N for
     /// the N `scans` in their order, row by row — block (i, j) is
