@@ -113,7 +113,9 @@ pub struct NoiseReport {
     /// The degrees of freedom it rests on (6 per halving, less its blind
     /// directions).
     pub dof: usize,
-    /// Halvings matched (two per scan that has enough points).
+    /// Halvings matched: of each scan that has enough points as many as
+    /// bring the halves to 192 degrees of freedom — two for sixteen scans
+    /// or more, up to eight for four or fewer (`fusion::noise::halvings`).
     pub halvings: usize,
     /// Halvings left out as mismatches (χ²/dof beyond 25× the median).
     pub left_out: usize,
