@@ -114,8 +114,8 @@ pub struct NoiseReport {
     /// directions).
     pub dof: usize,
     /// Halvings matched: of each scan that has enough points as many as
-    /// bring the halves to 192 degrees of freedom — two for sixteen scans
-    /// or more, up to eight for four or fewer (`fusion::noise::halvings`).
+    /// bring the halves to 96 degrees of freedom — two for eight scans
+    /// or more, four for five or fewer (`fusion::noise::halvings`).
     pub halvings: usize,
     /// Halvings left out as mismatches (χ²/dof beyond 25× the median).
     pub left_out: usize,

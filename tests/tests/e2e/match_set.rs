@@ -189,10 +189,10 @@ fn the_3dtk_set_lands_on_the_references_from_its_odometry() {
         let carried = h * (h / q).clamp(1.0, 2.0);
         assert!((noise[key].as_f64().expect(key) - carried).abs() < 1e-12 * carried, "{key}: {noise}");
     }
-    // Three scans: eight halvings each, as many as bring the halves toward
-    // 192 degrees of freedom (`fusion::noise::halvings`).
+    // Three scans: four halvings each, as many as bring the halves toward
+    // 96 degrees of freedom (`fusion::noise::halvings`).
     assert_eq!(noise["halvings"], noise["halves"]["matched"], "{noise}");
-    assert_eq!((noise["halvings"].as_u64(), noise["quarters"]["matched"].as_u64()), (Some(24), Some(24)), "{noise}");
+    assert_eq!((noise["halvings"].as_u64(), noise["quarters"]["matched"].as_u64()), (Some(12), Some(12)), "{noise}");
     let text = cps_survey([OsString::from("match"), data("3dtk_dat"), "--out".into(), dir.path().join("text").into()]);
     assert_eq!(text.code, 0, "{}", text.stderr);
     assert!(text.stdout.contains("covariances calibrated on the scans' halves and quarters: ×"), "{}", text.stdout);
