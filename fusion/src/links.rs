@@ -97,6 +97,13 @@ pub struct LinkConfig {
     /// every one of its links (the covariances in the [module
     /// docs](crate::links)). `None` (the default): not modelled.
     pub asymmetry: Option<f64>,
+    /// The degrees of freedom of the calibration behind
+    /// [`range_scale`](Self::range_scale)
+    /// ([`crate::noise::Calibration::dof`]): where the links disagree more
+    /// than their calibrated noise says (σ̂₀² above 1), the factor on
+    /// their noise is the two estimates pooled by their degrees of
+    /// freedom ([`pooled_factor`]). 0 (the default): σ̂₀² alone.
+    pub calibration_dof: usize,
 }
 
 impl LinkConfig {
@@ -161,6 +168,7 @@ impl Default for LinkConfig {
             both_ways: true,
             range_scale: 1.0,
             asymmetry: None,
+            calibration_dof: 0,
         }
     }
 }
@@ -237,6 +245,12 @@ pub struct LinkGraph {
     /// The used links' redundancy: 6 per link less 6 per scan they place
     /// (the start's steps take no part).
     pub redundancy: usize,
+    /// The factor the covariances take on the links' noise: σ̂₀² (or the
+    /// lean's, [`Pull`]), above 1 and within the links' global test
+    /// pooled with the calibration's ([`pooled_factor`]), never below
+    /// 0.05 (the least share of the noise taken as independent); 1
+    /// without redundancy.
+    pub noise_factor: f64,
 }
 
 /// Matches every overlapping pair of `scans` from `poses` (their current
@@ -584,6 +598,11 @@ pub struct Adjusted {
     /// σ̂₀² of the measurements each corrected by its edge's lean, as
     /// [`LinkGraph::lean_variance_factor`].
     pub lean_variance_factor: Option<f64>,
+    /// The measurements' redundancy ([`LinkGraph::redundancy`]).
+    pub redundancy: usize,
+    /// The factor the covariances take on their noise
+    /// ([`LinkGraph::noise_factor`]).
+    pub noise_factor: f64,
     /// How far each pose is from the measurements' adjustment: ξ with
     /// pose ≈ exp(ξ)·adjusted (world frame; zero for scan 0, the frame).
     pub departure: Vec<Vector6<f64>>,
@@ -653,10 +672,17 @@ pub fn adjust_matches(
     let steps = all.len();
     all.extend_from_slice(edges);
     let g = crate::graph::optimize(poses, &priors, &all, 20)?;
-    let variance_factor = judged(&g.world_from_scan, edges).variance_factor;
+    let Judged { variance_factor, redundancy, .. } = judged(&g.world_from_scan, edges);
     let lean_variance_factor = lean_factor(&g.world_from_scan, &priors, &all, steps, pulls)?;
-    let agreement = Agreement { variance_factor, lean_variance_factor, shared, asymmetry: config.asymmetry };
-    let (mut joint, sampling) =
+    let agreement = Agreement {
+        variance_factor,
+        lean_variance_factor,
+        redundancy,
+        calibration_dof: config.calibration_dof,
+        shared,
+        asymmetry: config.asymmetry,
+    };
+    let (mut joint, sampling, noise_factor) =
         adjusted_covariance(&g.world_from_scan, &priors, &all, steps, noise, pulls, &agreement)?;
     joint.hold(0);
     // The departures are judged without the scans' sampling: a wrong pose's
@@ -693,6 +719,8 @@ pub fn adjust_matches(
     Ok(Adjusted {
         variance_factor,
         lean_variance_factor,
+        redundancy,
+        noise_factor,
         departure,
         covariance: joint.diagonal(),
         joint_covariance: joint,
@@ -940,14 +968,21 @@ fn solve(
             })
             .unzip();
         let lean_variance_factor = lean_factor(&g.world_from_scan, &priors, &edges, steps.len(), &pulls)?;
-        let (mut joint, sampling) = adjusted_covariance(
+        let (mut joint, sampling, noise_factor) = adjusted_covariance(
             &g.world_from_scan,
             &priors,
             &edges,
             steps.len(),
             &noise,
             &pulls,
-            &Agreement { variance_factor, lean_variance_factor, shared, asymmetry: config.asymmetry },
+            &Agreement {
+                variance_factor,
+                lean_variance_factor,
+                redundancy,
+                calibration_dof: config.calibration_dof,
+                shared,
+                asymmetry: config.asymmetry,
+            },
         )?;
         // Scan 0 is the frame: the others' covariances are relative to it.
         joint.hold(0);
@@ -963,6 +998,7 @@ fn solve(
             variance_factor,
             lean_variance_factor,
             redundancy,
+            noise_factor,
         });
     }
 }
@@ -999,7 +1035,7 @@ fn adjusted_covariance(
     noise: &[Matrix6<f64>],
     pulls: &[Pull],
     agreement: &Agreement,
-) -> Result<(JointCovariance, Vec<Matrix6<f64>>)> {
+) -> Result<(JointCovariance, Vec<Matrix6<f64>>, f64)> {
     let (variance_factor, shared) = (agreement.variance_factor, agreement.shared);
     let (variance_factor, bias): (f64, Vec<Vector6<f64>>) = match agreement.lean_variance_factor {
         Some(lean) if lean < variance_factor => {
@@ -1007,7 +1043,7 @@ fn adjusted_covariance(
         }
         _ => (variance_factor, pulls.iter().map(|p| p.bias).collect()),
     };
-    let f = noise_factor(variance_factor);
+    let f = noise_factor(pooled_factor(variance_factor, agreement.redundancy, agreement.calibration_dof));
     let mut covariances = vec![None; steps];
     covariances.extend(noise.iter().zip(&bias).map(|(c, d)| Some(c * f + d * d.transpose())));
     let covariance = crate::graph::sandwich_joint(poses, priors, edges, &covariances)?;
@@ -1024,7 +1060,7 @@ fn adjusted_covariance(
     }
     // Its share of each pose's covariance: the scan's own and the first's.
     let sampling = (0..n).map(|k| if k == 0 { Matrix6::zeros() } else { sampled[k] + sampled[0] }).collect();
-    Ok((with_own(covariance, &own), sampling))
+    Ok((with_own(covariance, &own), sampling, f))
 }
 
 /// How far a link's error runs along its edge's lean
@@ -1087,6 +1123,10 @@ struct Agreement<'a> {
     variance_factor: f64,
     /// σ̂₀² of the links corrected by their lean ([`lean_factor`]).
     lean_variance_factor: Option<f64>,
+    /// The degrees of freedom both rest on (the links' redundancy).
+    redundancy: usize,
+    /// [`LinkConfig::calibration_dof`].
+    calibration_dof: usize,
     /// Each scan's links' footprint overlap ([`shared_shares`]); empty: 1
     /// for every scan.
     shared: &'a [f64],
@@ -1117,6 +1157,41 @@ pub(crate) fn link_noise(
 /// scans' own, [`shared_own`]), and exactly 1 without redundancy.
 fn noise_factor(variance_factor: f64) -> f64 {
     if variance_factor == 1.0 { 1.0 } else { variance_factor.max(MIN_INDEPENDENT_SHARE) }
+}
+
+/// The links' global test ([`pooled_factor`]): χ² = ν·σ̂₀² against the
+/// upper 1 − α/2 point of χ²_ν, α = 0.05 as the network adjustment's
+/// (`cps::batch`).
+pub const GLOBAL_TEST_LEVEL: f64 = 0.975;
+
+/// The factor on the links' noise where they disagree more than it says
+/// (`variance_factor` σ̂₀² above 1, on `redundancy` ν degrees of
+/// freedom). The calibration measured the same scale as 1 on ν₀ =
+/// `calibration_dof` degrees of freedom (its shares matched where the
+/// truth is known). Where the links pass their global test — χ² = ν·σ̂₀²
+/// within the upper [`GLOBAL_TEST_LEVEL`] point of χ²_ν, as a network
+/// adjustment's a priori σ₀ stands when its global test passes — the two
+/// estimates are of one scale and are pooled by their degrees of freedom,
+/// (ν₀ + ν·σ̂₀²) / (ν₀ + ν); beyond it the links disagree by more than
+/// the calibrated noise can, and σ̂₀² is taken whole (the 3DTK set's
+/// triangle, 2.1° apart: 306). A linear adjustment's residuals say
+/// nothing of its estimate's error beyond the links' scale, and one
+/// ring of four scans has ν = 6: its σ̂₀² scatters by a factor of 8
+/// (χ²₆/6 from 0.27 to 2.1 at 90 %), and taken whole above 1 — below 1
+/// the rest of the noise is the scans' own, shared by their links, and
+/// the scale stays — it widened every direction by its chance (real rooms'
+/// wedges 1.2× pessimistic, their tilt and height 1.75×; BENCHMARKS.md,
+/// session 64). Many links outweigh the calibration (the simulated
+/// hall's ν 738). At or below 1, or without a calibration, σ̂₀² as it is.
+pub fn pooled_factor(variance_factor: f64, redundancy: usize, calibration_dof: usize) -> f64 {
+    if variance_factor <= 1.0 || calibration_dof == 0 || redundancy == 0 {
+        return variance_factor;
+    }
+    let (nu0, nu) = (calibration_dof as f64, redundancy as f64);
+    if nu * variance_factor > cps::stats::chi2_quantile(GLOBAL_TEST_LEVEL, nu) {
+        return variance_factor;
+    }
+    (nu0 + nu * variance_factor) / (nu0 + nu)
 }
 
 /// Each scan's own share of the noise of a graph whose links agree
@@ -1756,6 +1831,73 @@ mod tests {
         let tree = [(0, 1), (1, 2), (1, 3)];
         let f = factor(&measured(&mut rng, &truth, &tree));
         assert_eq!(f, 1.0);
+    }
+
+    /// A ring of four scans — one cycle, ν = 6 — whose links are exactly
+    /// as noisy as their calibrated covariance says. σ̂₀² then scatters as
+    /// χ²₆/6, and taken whole above 1 it widens every pose by its chance:
+    /// over 2,000 draws (873 above 1) the adjustment's errors against its
+    /// covariance had mean NEES 4.2 on the draws above 1 (6 when honest),
+    /// 4.8 on all. Pooled with a calibration of 96 degrees of freedom
+    /// where the ring passes its global test (σ̂₀² 2 → 1.06; beyond 2.41,
+    /// 2.5 % of the draws, whole): 5.5 and 5.4 — the draws below 1, read
+    /// as the scans' shared noise, which these links do not have, stay a
+    /// little pessimistic. Many links outweigh the calibration.
+    #[test]
+    fn a_rings_variance_factor_is_pooled_with_the_calibrations() {
+        use rand::SeedableRng;
+        // χ²₆'s 97.5 % point is 14.45: σ̂₀² up to 2.41 on a ring passes.
+        assert!((pooled_factor(2.0, 6, 96) - 108.0 / 102.0).abs() < 1e-12);
+        assert_eq!(pooled_factor(2.5, 6, 96), 2.5, "beyond the global test: as it is");
+        assert_eq!(pooled_factor(306.0, 6, 72), 306.0, "the 3DTK set's triangle");
+        assert_eq!(pooled_factor(0.5, 6, 96), 0.5, "at or below 1 as it is");
+        assert_eq!(pooled_factor(2.0, 6, 0), 2.0, "without a calibration as it is");
+        assert!((pooled_factor(1.05, 900, 96) - 1041.0 / 996.0).abs() < 1e-12, "many links outweigh it");
+        assert_eq!(pooled_factor(1.0, 0, 96), 1.0, "no redundancy");
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(64);
+        let truth = four_scans();
+        let ring = [(0, 1), (1, 2), (2, 3), (0, 3)];
+        assert_eq!(link_redundancy(4, ring.iter().copied()), 6);
+        let draws = 2000u32;
+        let (mut whole, mut pooled, mut above) = (0.0, 0.0, 0u32);
+        // The draws whose σ̂₀² is above 1: whole, pooled.
+        let (mut whole_above, mut pooled_above) = (0.0, 0.0);
+        for _ in 0..draws {
+            let edges = measured(&mut rng, &truth, &ring);
+            let noise: Vec<Matrix6<f64>> =
+                edges.iter().map(|e| e.information.try_inverse().expect("positive definite")).collect();
+            let pulls = vec![Pull::default(); edges.len()];
+            let at = |calibration_dof| {
+                let config = LinkConfig { calibration_dof, ..LinkConfig::default() };
+                adjust_matches(&truth, &edges, &noise, &pulls, &[], &config, Departures::Whole).expect("adjusted")
+            };
+            let (w, p) = (at(0), at(96));
+            above += u32::from(w.variance_factor > 1.0);
+            // The adjustment's own error against its covariance (less the
+            // departure's ξξᵀ, which `Whole` adds).
+            for s in 1..4 {
+                let d = w.departure[s];
+                let (a, b) = (
+                    nees(&-d, &(w.covariance[s] - d * d.transpose())),
+                    nees(&-d, &(p.covariance[s] - d * d.transpose())),
+                );
+                (whole, pooled) = (whole + a, pooled + b);
+                if w.variance_factor > 1.0 {
+                    (whole_above, pooled_above) = (whole_above + a, pooled_above + b);
+                }
+            }
+        }
+        let n = f64::from(3 * draws);
+        let (whole, pooled) = (whole / n, pooled / n);
+        let m = f64::from(3 * above);
+        let (whole_above, pooled_above) = (whole_above / m, pooled_above / m);
+        // Residuals and the estimate's error are independent in a linear
+        // adjustment: σ̂₀² above 1 says nothing of this draw's error beyond
+        // the links' scale, which the calibration knows better.
+        assert!(above > draws / 4 && above < 3 * draws / 4, "σ̂₀² above 1 in {above} draws");
+        assert!(whole_above < 4.6, "σ̂₀² above 1 taken whole: mean NEES {whole_above}");
+        assert!((5.2..6.5).contains(&pooled_above), "σ̂₀² above 1 pooled: mean NEES {pooled_above}");
+        assert!(whole < 5.2 && pooled > whole + 0.4, "every draw: pooled {pooled}, whole {whole}");
     }
 
     /// ξᵀ·C⁻¹·ξ.

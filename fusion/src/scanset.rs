@@ -182,7 +182,9 @@ pub struct SetResult {
     /// The set's variance factor σ̂₀²: the link graph's, or in the other
     /// modes that of the verification's matches adjusted together from the
     /// final poses ([`crate::links::adjust_matches`]); it scales the
-    /// covariances (below 1 as the scans' shared noise). `None` before
+    /// covariances (below 1 as the scans' shared noise; above 1 within the
+    /// links' global test pooled with the calibration's,
+    /// [`noise_factor`](Self::noise_factor)). `None` before
     /// the verification (other modes) or without a pair to verify.
     pub variance_factor: Option<f64>,
     /// σ̂₀² of the same links each corrected by its edge's lean
@@ -190,6 +192,14 @@ pub struct SetResult {
     /// `variance_factor` the covariances take it ([`crate::links::Pull`]).
     /// `None` without redundancy or a lean, or where `variance_factor` is.
     pub lean_variance_factor: Option<f64>,
+    /// The redundancy `variance_factor` rests on
+    /// ([`crate::links::LinkGraph::redundancy`]); `None` where it is.
+    pub redundancy: Option<usize>,
+    /// The factor the covariances take on the links' noise
+    /// ([`crate::links::LinkGraph::noise_factor`]: σ̂₀² or the lean's,
+    /// above 1 pooled with the calibration's); `None` where
+    /// `variance_factor` is.
+    pub noise_factor: Option<f64>,
     /// Each stage of the schedule: its matches and time.
     pub stages: Vec<StageRun>,
     /// Every pair overlapping at the final poses, matched once more from
@@ -880,6 +890,7 @@ pub fn register_set<S: AsRef<[Point3<f32>]> + Sync>(
     calibrated.link.multiview.icp.noise_scale *= noise.map_or(1.0, |n| n.variance_scale);
     calibrated.link.range_scale *= noise.map_or(1.0, |n| n.range_scale);
     calibrated.link.asymmetry = noise.map(|n| n.asymmetry).filter(|a| *a > 0.0).or(config.link.asymmetry);
+    calibrated.link.calibration_dof = noise.map_or(config.link.calibration_dof, |n| n.dof);
     let config = &calibrated;
     let r = registered(scans, starts, config, progress)?;
     Ok(SetResult { noise, noise_seconds, ..r })
@@ -973,6 +984,8 @@ fn verified<S: AsRef<[Point3<f32>]> + Sync>(
         )?;
         r.variance_factor = Some(a.variance_factor);
         r.lean_variance_factor = a.lean_variance_factor;
+        r.redundancy = Some(a.redundancy);
+        r.noise_factor = Some(a.noise_factor);
         r.covariance = a.covariance;
         r.joint_covariance = Some(a.joint_covariance);
         r.sampling = a.sampling;
@@ -1793,6 +1806,8 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
         settled,
         variance_factor: None,
         lean_variance_factor: None,
+        redundancy: None,
+        noise_factor: None,
         stages: runs,
         checks: Vec::new(),
         check_seconds: 0.0,
@@ -1885,6 +1900,8 @@ fn from_graph(g: LinkGraph, matches: usize, settled: bool, stages: Vec<StageRun>
         settled,
         variance_factor: Some(g.variance_factor),
         lean_variance_factor: g.lean_variance_factor,
+        redundancy: Some(g.redundancy),
+        noise_factor: Some(g.noise_factor),
         stages,
         checks: Vec::new(),
         check_seconds: 0.0,
@@ -2010,6 +2027,8 @@ mod tests {
             settled: true,
             variance_factor: None,
             lean_variance_factor: None,
+            redundancy: None,
+            noise_factor: None,
             stages: Vec::new(),
             checks: Vec::new(),
             check_seconds: 0.0,

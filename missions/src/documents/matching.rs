@@ -24,8 +24,9 @@ pub struct MatchReport {
     /// link graph's in graph mode; in the other modes that of the
     /// verification's matches (`checks`) adjusted together from the final
     /// poses. The redundancy is the links' own: 6 per link less 6 per scan
-    /// they place. It scales the matches' noise in every covariance (not
-    /// the start's steps, which hold what no match sees); below 1 the rest
+    /// they place. It scales the matches' noise in every covariance
+    /// (`noise_factor`; not the start's steps, which hold what no match
+    /// sees); below 1 the rest
     /// of it is taken as each scan's own, shared by its links. In the other
     /// modes null when no pair was verified (a single scan).
     pub variance_factor: Option<f64>,
@@ -41,6 +42,22 @@ pub struct MatchReport {
     /// redundancy (nothing to judge: the pull alone) or without a lean (no
     /// pair beyond an edge), or where `variance_factor` is.
     pub lean_variance_factor: Option<f64>,
+    /// The degrees of freedom `variance_factor` rests on: the links'
+    /// redundancy, 6 per link less 6 per scan they place (one ring of
+    /// four scans: 6). Null where `variance_factor` is.
+    pub redundancy: Option<usize>,
+    /// The factor the covariances take on the matches' noise: the
+    /// variance factor they use (`variance_factor`, or
+    /// `lean_variance_factor` where the lean explains the misfit) — above
+    /// 1, where the links pass their global test (redundancy × factor
+    /// within the 97.5 % point of χ² with the redundancy's degrees of
+    /// freedom), pooled with the calibration's, which said 1 on
+    /// `noise.dof` degrees of freedom: (dof + redundancy × factor) /
+    /// (dof + redundancy), so one ring's chance misfit does not widen
+    /// every direction (docs/match.md); beyond the test as it is —, never
+    /// below 0.05, and 1 without redundancy. Null where `variance_factor`
+    /// is.
+    pub noise_factor: Option<f64>,
     /// The modes without a link graph: the share w of the departures'
     /// ξξᵀ (`scans[].departure`, stacked) in the covariances. 1 in
     /// pairwise mode (each scan placed on one partner's match); in

@@ -73,6 +73,8 @@ pub(super) fn report(
         matches: r.matches,
         variance_factor: r.variance_factor,
         lean_variance_factor: r.lean_variance_factor,
+        redundancy: r.redundancy,
+        noise_factor: r.noise_factor,
         departure_weight: r.departure_weight,
         joint_covariance: joint
             .then(|| r.joint_covariance.as_ref().map(fusion::graph::JointCovariance::rows))
