@@ -674,14 +674,7 @@ pub fn adjust_matches(
     let g = crate::graph::optimize(poses, &priors, &all, 20)?;
     let Judged { variance_factor, redundancy, .. } = judged(&g.world_from_scan, edges);
     let lean_variance_factor = lean_factor(&g.world_from_scan, &priors, &all, steps, pulls)?;
-    let agreement = Agreement {
-        variance_factor,
-        lean_variance_factor,
-        redundancy,
-        calibration_dof: config.calibration_dof,
-        shared,
-        asymmetry: config.asymmetry,
-    };
+    let agreement = Agreement::of(variance_factor, lean_variance_factor, redundancy, shared, config);
     let (mut joint, sampling, noise_factor) =
         adjusted_covariance(&g.world_from_scan, &priors, &all, steps, noise, pulls, &agreement)?;
     joint.hold(0);
@@ -975,14 +968,7 @@ fn solve(
             steps.len(),
             &noise,
             &pulls,
-            &Agreement {
-                variance_factor,
-                lean_variance_factor,
-                redundancy,
-                calibration_dof: config.calibration_dof,
-                shared,
-                asymmetry: config.asymmetry,
-            },
+            &Agreement::of(variance_factor, lean_variance_factor, redundancy, shared, config),
         )?;
         // Scan 0 is the frame: the others' covariances are relative to it.
         joint.hold(0);
@@ -1132,6 +1118,27 @@ struct Agreement<'a> {
     shared: &'a [f64],
     /// [`LinkConfig::asymmetry`].
     asymmetry: Option<f64>,
+}
+
+impl<'a> Agreement<'a> {
+    /// The links' σ̂₀² (and the lean's) on their `redundancy`, with
+    /// `config`'s calibration and each scan's `shared` footprint overlap.
+    fn of(
+        variance_factor: f64,
+        lean_variance_factor: Option<f64>,
+        redundancy: usize,
+        shared: &'a [f64],
+        config: &LinkConfig,
+    ) -> Self {
+        Self {
+            variance_factor,
+            lean_variance_factor,
+            redundancy,
+            calibration_dof: config.calibration_dof,
+            shared,
+            asymmetry: config.asymmetry,
+        }
+    }
 }
 
 /// The least share of the links' noise taken as independent ([`shared_own`]).
