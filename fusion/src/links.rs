@@ -33,7 +33,9 @@
 //!   of the links (when there is redundancy and it exceeds 1) scales
 //!   their covariance — not the start's steps', which hold only what no
 //!   link sees. The redundancy is the links' own: 6 per link less 6 per
-//!   scan they place.
+//!   scan they place. Where the links pass their global test, σ̂₀² is
+//!   pooled with the calibration's ([`pooled_factor`]): one ring's chance
+//!   misfit does not widen every direction.
 //! - **Covariances.** The adjustment weighs each link by its information;
 //!   each scan's covariance is that adjustment's with each link's own
 //!   covariance ([`crate::graph::sandwich_covariance`]): its match's with
