@@ -197,8 +197,8 @@ pub struct SetResult {
     pub redundancy: Option<usize>,
     /// The factor the covariances take on the links' noise
     /// ([`crate::links::LinkGraph::noise_factor`]: σ̂₀² or the lean's,
-    /// above 1 pooled with the calibration's); `None` where
-    /// `variance_factor` is.
+    /// above 1 and within the links' global test pooled with the
+    /// calibration's); `None` where `variance_factor` is.
     pub noise_factor: Option<f64>,
     /// Each stage of the schedule: its matches and time.
     pub stages: Vec<StageRun>,
