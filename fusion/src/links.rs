@@ -251,7 +251,9 @@ pub struct LinkGraph {
     /// lean's, [`Pull`]), above 1 and within the links' global test
     /// pooled with the calibration's ([`pooled_factor`]), never below
     /// 0.05 (the least share of the noise taken as independent); 1
-    /// without redundancy.
+    /// without redundancy. Below 1 the pairs' share, and as far as their
+    /// scans' links do not share footprints the rest is the pairs' too
+    /// (`links::pair_share`).
     pub noise_factor: f64,
 }
 
