@@ -521,6 +521,11 @@ impl JointCovariance {
         }
     }
 
+    /// `self` less `other`, block by block (the same number of poses).
+    pub fn less(&self, other: &Self) -> Self {
+        Self { matrix: &self.matrix - &other.matrix }
+    }
+
     /// The ξ of every pose turned by `ad` (ξ' = ad·ξ): each block
     /// ad·C·adᵀ.
     pub fn turned(&self, ad: &Matrix6<f64>) -> Self {

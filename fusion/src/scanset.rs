@@ -128,6 +128,10 @@ pub struct SetResult {
     /// where the covariances are not an adjustment's): left out where a
     /// pose is judged (its moves along what only its start holds).
     pub sampling: Vec<Matrix6<f64>>,
+    /// The share of [`joint_covariance`](Self::joint_covariance) that is
+    /// the pairs' rest ([`crate::links::Adjusted::pairs_rest`]; `None`
+    /// where there is none): left out where a pose or a pair is judged.
+    pub pairs_rest: Option<crate::graph::JointCovariance>,
     /// In the modes without a link graph, each pose's departure from the
     /// adjustment of the verification's matches (ξ = (ω, v), world frame,
     /// pose ≈ exp(ξ)·adjusted; zero for the first scan): how far the
@@ -989,6 +993,7 @@ fn verified<S: AsRef<[Point3<f32>]> + Sync>(
         r.covariance = a.covariance;
         r.joint_covariance = Some(a.joint_covariance);
         r.sampling = a.sampling;
+        r.pairs_rest = a.pairs_rest;
         r.departure = a.departure;
         r.departure_chi2 = a.departure_chi2;
         r.departure_weight = Some(a.departure_weight);
@@ -1007,9 +1012,10 @@ fn verified<S: AsRef<[Point3<f32>]> + Sync>(
         steps = Some(crate::links::steps_covariance(&r.world_from_scan, &config.link));
     }
     // A pair named by its residual's gain alone, within the σ of its
-    // poses' relative pose, agrees after all.
+    // poses' relative pose (without the pairs' rest), agrees after all.
     if let Some(joint) = &r.joint_covariance {
-        crate::verify::weigh_residual_gains(&mut r.checks, &r.world_from_scan, joint);
+        let narrow = r.pairs_rest.as_ref().map(|rest| joint.less(rest));
+        crate::verify::weigh_residual_gains(&mut r.checks, &r.world_from_scan, narrow.as_ref().unwrap_or(joint));
     }
     // Each scan's move along what only its start holds: in graph mode
     // what its links report blind, in the others what its matches hold
@@ -1025,8 +1031,12 @@ fn verified<S: AsRef<[Point3<f32>]> + Sync>(
                 if i == 0 {
                     return Held::default();
                 }
-                // Judged without the scans' sampling, as the departures are.
-                let c = &(c - r.sampling.get(i).copied().unwrap_or_else(Matrix6::zeros));
+                // Judged without the scans' sampling and the pairs' rest,
+                // as the departures are.
+                let rest = r.pairs_rest.as_ref().filter(|rest| i < rest.len()).map(|rest| rest.block(i, i));
+                let c = &(c
+                    - r.sampling.get(i).copied().unwrap_or_else(Matrix6::zeros)
+                    - rest.unwrap_or_else(Matrix6::zeros));
                 let (centroid, radius) = &lever[i];
                 match &steps {
                     Some(steps) => held_by_start(pose, start, c, &steps[i], centroid, *radius, tolerance),
@@ -1664,6 +1674,7 @@ fn into_world(mut r: SetResult, world_from_first: &Isometry3<f64>, graph: bool) 
     r.covariance.iter_mut().for_each(|c| *c = ad * *c * ad.transpose());
     r.joint_covariance = r.joint_covariance.map(|j| j.turned(&ad));
     r.sampling.iter_mut().for_each(|c| *c = ad * *c * ad.transpose());
+    r.pairs_rest = r.pairs_rest.map(|j| j.turned(&ad));
     r.departure.iter_mut().for_each(|d| *d = ad * *d);
     r.unobservable.iter_mut().flatten().for_each(|d| *d = (ad * *d).normalize());
     r.held.iter_mut().flat_map(|h| &mut h.along).for_each(|d| *d = (ad * *d).normalize());
@@ -1790,6 +1801,7 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
         covariance,
         joint_covariance: None,
         sampling: Vec::new(),
+        pairs_rest: None,
         departure: Vec::new(),
         departure_chi2: Vec::new(),
         departure_weight: None,
@@ -1877,6 +1889,7 @@ fn from_graph(g: LinkGraph, matches: usize, settled: bool, stages: Vec<StageRun>
         covariance: g.covariance,
         joint_covariance: Some(g.joint_covariance),
         sampling: g.sampling,
+        pairs_rest: g.pairs_rest,
         departure: Vec::new(),
         departure_chi2: Vec::new(),
         departure_weight: None,
@@ -2015,6 +2028,7 @@ mod tests {
             covariance: vec![Matrix6::identity(); n],
             joint_covariance: None,
             sampling: Vec::new(),
+            pairs_rest: None,
             departure: Vec::new(),
             departure_chi2: Vec::new(),
             departure_weight: None,
