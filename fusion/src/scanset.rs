@@ -193,7 +193,8 @@ pub struct SetResult {
     pub variance_factor: Option<f64>,
     /// σ̂₀² of the same links each corrected by its edge's lean
     /// ([`crate::links::LinkGraph::lean_variance_factor`]); below
-    /// `variance_factor` the covariances take it ([`crate::links::Pull`]).
+    /// `variance_factor`, where the links fail their global test without
+    /// it, the covariances take it ([`crate::links::Pull`]).
     /// `None` without redundancy or a lean, or where `variance_factor` is.
     pub lean_variance_factor: Option<f64>,
     /// The redundancy `variance_factor` rests on

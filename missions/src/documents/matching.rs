@@ -34,8 +34,11 @@ pub struct MatchReport {
     /// measurement moved by 1.25× the step its match would take without
     /// the pairs beyond the other scan's sampled edge and the covered
     /// pairs within three spacings of them, and the links adjusted again.
-    /// Where it is below `variance_factor` the lean explains the links'
-    /// misfit: the covariances take it as each link's bias, and this
+    /// Where it is below `variance_factor` and the links as measured fail
+    /// their global test (redundancy × `variance_factor` beyond the 97.5 %
+    /// point of χ² with the redundancy's degrees of freedom: their noise
+    /// does not explain their misfit) the lean explains it: the
+    /// covariances take it as each link's bias, and this
     /// factor (not below the smaller of 1 and `variance_factor`) in place
     /// of `variance_factor`; otherwise each link's pull by the pairs
     /// beyond the edge alone, and `variance_factor`. Null without
