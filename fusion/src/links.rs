@@ -1620,6 +1620,30 @@ mod tests {
         .expect("adjusted")
     }
 
+    /// Four scans a quarter turn apart in a ring, its links measured
+    /// ([`measured`], seed `seed`), and the generator after them.
+    fn turning_ring(seed: u64) -> (Vec<Isometry3<f64>>, Vec<Edge>, rand_chacha::ChaCha8Rng) {
+        use rand::SeedableRng;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let truth: Vec<Isometry3<f64>> = (0..4)
+            .map(|k| crate::se3::exp(&Vector6::new(0.0, 0.0, 1.57 * k as f64, 0.2 * k as f64, 0.1, 0.0)))
+            .collect();
+        let clean = measured(&mut rng, &truth, &[(0, 1), (1, 2), (2, 3), (3, 0)]);
+        (truth, clean, rng)
+    }
+
+    /// `edges` each missing by [`LEAN_SHORTFALL`]× its lean.
+    fn missed_by(edges: &[Edge], leans: &[Vector6<f64>]) -> Vec<Edge> {
+        edges
+            .iter()
+            .zip(leans)
+            .map(|(e, l)| Edge {
+                target_from_source: crate::se3::exp(&(-LEAN_SHORTFALL * l)) * e.target_from_source,
+                ..*e
+            })
+            .collect()
+    }
+
     /// A ring of four scans whose links each miss by their edge's lean
     /// (1.25× it, 12–20 mm, 3–10 σ, across the ring) besides their noise:
     /// corrected by it, the links agree as they do without it (σ̂₀² of the
@@ -1632,28 +1656,16 @@ mod tests {
     #[test]
     fn a_ring_that_misses_by_its_leans_takes_them_as_its_links_bias() {
         use nalgebra::Vector3;
-        use rand::{Rng, SeedableRng};
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(43);
-        let truth: Vec<Isometry3<f64>> = (0..4)
-            .map(|k| crate::se3::exp(&Vector6::new(0.0, 0.0, 1.57 * k as f64, 0.2 * k as f64, 0.1, 0.0)))
-            .collect();
-        let ring = [(0, 1), (1, 2), (2, 3), (3, 0)];
-        let clean = measured(&mut rng, &truth, &ring);
-        let leans: Vec<Vector6<f64>> = (0..ring.len())
+        use rand::Rng;
+        let (truth, clean, mut rng) = turning_ring(43);
+        let leans: Vec<Vector6<f64>> = (0..clean.len())
             .map(|_| {
                 let v = Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), 0.0).normalize();
                 let length = rng.random_range(12e-3..20e-3) / LEAN_SHORTFALL;
                 Vector6::new(0.0, 0.0, 2e-3 * rng.random_range(-1.0..1.0), v.x * length, v.y * length, 0.0)
             })
             .collect();
-        let edges: Vec<Edge> = clean
-            .iter()
-            .zip(&leans)
-            .map(|(e, l)| Edge {
-                target_from_source: crate::se3::exp(&(-LEAN_SHORTFALL * l)) * e.target_from_source,
-                ..*e
-            })
-            .collect();
+        let edges = missed_by(&clean, &leans);
         let noise: Vec<Matrix6<f64>> =
             edges.iter().map(|e| e.information.try_inverse().expect("positive definite")).collect();
         let at = |edges: &[Edge], pulls: &[Pull]| {
@@ -1663,7 +1675,7 @@ mod tests {
         let pulls: Vec<Pull> = leans.iter().map(|l| Pull { bias: 0.5 * l, lean: *l, ..Pull::default() }).collect();
         let leaning = at(&edges, &pulls);
         let lean = leaning.lean_variance_factor.expect("a ring has redundancy");
-        let without = at(&clean, &vec![Pull::default(); ring.len()]);
+        let without = at(&clean, &vec![Pull::default(); clean.len()]);
         assert_eq!(without.lean_variance_factor, None, "no lean, nothing to correct");
         assert!(leaning.variance_factor > 5.0, "σ̂₀² {}", leaning.variance_factor);
         assert!((lean / without.variance_factor - 1.0).abs() < 0.05, "{lean} against {}", without.variance_factor);
@@ -1694,31 +1706,19 @@ mod tests {
     #[test]
     fn a_ring_within_its_noise_takes_no_lean() {
         use nalgebra::Vector3;
-        use rand::{Rng, SeedableRng};
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(44);
-        let truth: Vec<Isometry3<f64>> = (0..4)
-            .map(|k| crate::se3::exp(&Vector6::new(0.0, 0.0, 1.57 * k as f64, 0.2 * k as f64, 0.1, 0.0)))
-            .collect();
-        let ring = [(0, 1), (1, 2), (2, 3), (3, 0)];
-        let clean = measured(&mut rng, &truth, &ring);
-        let directions: Vec<Vector3<f64>> = (0..ring.len())
+        use rand::Rng;
+        let (truth, clean, mut rng) = turning_ring(44);
+        let directions: Vec<Vector3<f64>> = (0..clean.len())
             .map(|_| Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), 0.0).normalize())
             .collect();
-        let lengths: Vec<f64> = (0..ring.len()).map(|_| rng.random_range(1.5e-3..3e-3) / LEAN_SHORTFALL).collect();
+        let lengths: Vec<f64> = (0..clean.len()).map(|_| rng.random_range(1.5e-3..3e-3) / LEAN_SHORTFALL).collect();
         let at = |scale: f64| {
             let leans: Vec<Vector6<f64>> = directions
                 .iter()
                 .zip(&lengths)
                 .map(|(v, &l)| Vector6::new(0.0, 0.0, 0.0, v.x, v.y, 0.0) * (l * scale))
                 .collect();
-            let edges: Vec<Edge> = clean
-                .iter()
-                .zip(&leans)
-                .map(|(e, l)| Edge {
-                    target_from_source: crate::se3::exp(&(-LEAN_SHORTFALL * l)) * e.target_from_source,
-                    ..*e
-                })
-                .collect();
+            let edges = missed_by(&clean, &leans);
             let noise: Vec<Matrix6<f64>> =
                 edges.iter().map(|e| e.information.try_inverse().expect("positive definite")).collect();
             let pulls: Vec<Pull> = leans.iter().map(|l| Pull { bias: 0.5 * l, lean: *l, ..Pull::default() }).collect();
