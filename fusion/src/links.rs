@@ -696,21 +696,16 @@ pub fn adjust_matches(
     let Judged { variance_factor, redundancy, .. } = judged(&g.world_from_scan, edges);
     let lean_variance_factor = lean_factor(&g.world_from_scan, &priors, &all, steps, pulls)?;
     let agreement = Agreement::of(variance_factor, lean_variance_factor, redundancy, shared, config);
-    let Spread { mut joint, sampling, mut pairs_rest, noise_factor } =
+    let Spread { mut joint, sampling, pairs_rest, noise_factor } =
         adjusted_covariance(&g.world_from_scan, &priors, &all, steps, noise, pulls, &agreement)?;
-    joint.hold(0);
-    if let Some(rest) = &mut pairs_rest {
-        rest.hold(0);
-    }
     // The departures are judged without the scans' sampling (a wrong pose's
     // two ways disagree by far more than a right one's, and a covariance
     // grown by that would hide it) nor the pairs' rest.
     let adjusted: Vec<Matrix6<f64>> = joint
         .diagonal()
         .iter()
-        .zip(&sampling)
         .enumerate()
-        .map(|(i, (c, s))| c - s - pairs_rest.as_ref().map_or_else(Matrix6::zeros, |r| r.block(i, i)))
+        .map(|(i, c)| judged_covariance(c, &sampling, pairs_rest.as_ref(), i))
         .collect();
     // Scan 0's prior leaves it within 1e-20 m of its pose: the departures
     // are the others'.
@@ -992,7 +987,7 @@ fn solve(
             })
             .unzip();
         let lean_variance_factor = lean_factor(&g.world_from_scan, &priors, &edges, steps.len(), &pulls)?;
-        let Spread { mut joint, sampling, mut pairs_rest, noise_factor } = adjusted_covariance(
+        let Spread { joint, sampling, pairs_rest, noise_factor } = adjusted_covariance(
             &g.world_from_scan,
             &priors,
             &edges,
@@ -1001,11 +996,6 @@ fn solve(
             &pulls,
             &Agreement::of(variance_factor, lean_variance_factor, redundancy, shared, config),
         )?;
-        // Scan 0 is the frame: the others' covariances are relative to it.
-        joint.hold(0);
-        if let Some(rest) = &mut pairs_rest {
-            rest.hold(0);
-        }
         // Scan 0's prior leaves it within 1e-20 m of its pose: put it there.
         let shift = poses[0] * g.world_from_scan[0].inverse();
         return Ok(LinkGraph {
@@ -1095,10 +1085,28 @@ fn adjusted_covariance(
     }
     // Its share of each pose's covariance: the scan's own and the first's.
     let sampling = (0..n).map(|k| if k == 0 { Matrix6::zeros() } else { sampled[k] + sampled[0] }).collect();
-    Ok(Spread { joint: with_own(covariance, &own), sampling, pairs_rest, noise_factor: f })
+    // Scan 0 is the frame: the others' covariances are relative to it.
+    let held = |mut c: JointCovariance| {
+        c.hold(0);
+        c
+    };
+    Ok(Spread { joint: held(with_own(covariance, &own)), sampling, pairs_rest: pairs_rest.map(held), noise_factor: f })
 }
 
-/// What [`adjusted_covariance`] returns.
+/// Pose `i`'s `covariance` as a judgement of the pose takes it: less its
+/// share of the scans' own sampling and of the pairs' rest (where given).
+pub(crate) fn judged_covariance(
+    covariance: &Matrix6<f64>,
+    sampling: &[Matrix6<f64>],
+    pairs_rest: Option<&JointCovariance>,
+    i: usize,
+) -> Matrix6<f64> {
+    let rest = pairs_rest.filter(|rest| i < rest.len()).map_or_else(Matrix6::zeros, |rest| rest.block(i, i));
+    covariance - sampling.get(i).copied().unwrap_or_else(Matrix6::zeros) - rest
+}
+
+/// What [`adjusted_covariance`] returns, relative to scan 0 (its rows
+/// and columns zero).
 struct Spread {
     /// The poses' joint covariance.
     joint: JointCovariance,

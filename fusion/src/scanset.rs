@@ -1034,10 +1034,7 @@ fn verified<S: AsRef<[Point3<f32>]> + Sync>(
                 }
                 // Judged without the scans' sampling and the pairs' rest,
                 // as the departures are.
-                let rest = r.pairs_rest.as_ref().filter(|rest| i < rest.len()).map(|rest| rest.block(i, i));
-                let c = &(c
-                    - r.sampling.get(i).copied().unwrap_or_else(Matrix6::zeros)
-                    - rest.unwrap_or_else(Matrix6::zeros));
+                let c = &crate::links::judged_covariance(c, &r.sampling, r.pairs_rest.as_ref(), i);
                 let (centroid, radius) = &lever[i];
                 match &steps {
                     Some(steps) => held_by_start(pose, start, c, &steps[i], centroid, *radius, tolerance),
