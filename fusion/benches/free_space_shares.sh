@@ -3,12 +3,17 @@
 # registrations: every checked pair's violations / (violations +
 # agreements), per case, with match's exit code and untrusted scans.
 #
-#   cargo build --release -p missions && bash fusion/benches/free_space_shares.sh
+#   cargo build --release -p missions && PYTHON=target/ci-venv/bin/python bash fusion/benches/free_space_shares.sh
 #
-# Right: the 3DTK set, the PCL room pair, small_gicp's pair (PLY: no
-# viewpoint, so untested), the simulated hall's and corridor's scans.
-# Wrong: a scan of another place among a set, and scan000 + scan002 of the
-# 3DTK set alone (they slide onto each other).
+# Right: the 3DTK set, the PCL room pair, the simulated hall's and
+# corridor's scans. Wrong: a scan of another place among a set, and
+# scan000 + scan002 of the 3DTK set alone (they slide onto each other).
+# Then the same real scans as plain PLY (no viewpoint: each scanner's
+# position estimated from its scan's spacing, fusion::viewpoint), started
+# where their own registration put them, with small_gicp's pair, a scan
+# merged from two stations, and the 3DTK scan000 among small_gicp's frames
+# (numpy and plyfile for the conversion, as fusion/benches/global_success.py:
+# PYTHON=target/ci-venv/bin/python, the venv .ci/run makes).
 set -euo pipefail
 root=$(cd "$(dirname "$0")/../.." && pwd)
 bin=${CPS_SURVEY:-$root/target/release/cps-survey}
@@ -62,3 +67,51 @@ shares room2-among-3dtk "$dtk/scan000.3d" "$dtk/scan001.3d" "$dtk/scan002.3d" "$
 shares street-among-3dtk "$dtk/scan000.3d" "$dtk/scan001.3d" "$data/small_gicp_pair/source.ply"
 mkdir -p "$work/s02" && cp "$dtk"/scan00[02].* "$work/s02/"
 shares 3dtk-000-002-alone "$work/s02"
+
+# The same scans as plain PLY: the viewpoints estimated.
+ply=$work/ply
+mkdir -p "$ply"
+"$bin" match "$dtk" --out "$work/ref3" --json >"$work/ref3.json" 2>/dev/null || true
+"$bin" match "$room/room_scan1.pcd" "$room/room_scan2.pcd" --out "$work/refr" --json >"$work/refr.json" 2>/dev/null || true
+"${PYTHON:-python3}" - "$root/fusion/benches" "$data" "$ply" "$work/ref3.json" "$work/refr.json" <<'PY'
+import json, os, sys
+import numpy as np
+sys.path.insert(0, sys.argv[1])
+from global_success import read_pcd, write_ply
+data, out, ref3, refr = sys.argv[2:]
+def dtk(name):  # 3DTK's left-handed cm → ours (z, −x, y) / 100, as scanner::io
+    a = np.loadtxt(os.path.join(data, "3dtk_dat", name + ".3d"), usecols=(0, 1, 2))
+    return np.stack([a[:, 2], -a[:, 0], a[:, 1]], 1) / 100.0
+def init(path, names, ref):
+    poses = [s["world_from_scan"] for s in json.load(open(ref))["scans"]]
+    json.dump([{"file": n + ".ply", "world_from_scan": p} for n, p in zip(names, poses)], open(path, "w"))
+scans = {n: dtk(n) for n in ["scan000", "scan001", "scan002"]}
+for n, xyz in scans.items():
+    write_ply(os.path.join(out, n + ".ply"), xyz)
+for n in ["room_scan1", "room_scan2"]:
+    write_ply(os.path.join(out, n + ".ply"), read_pcd(os.path.join(data, "pcl_room_scans", n + ".pcd")))
+init(os.path.join(out, "init3.json"), list(scans), ref3)
+init(os.path.join(out, "initr.json"), ["room_scan1", "room_scan2"], refr)
+poses = [np.array(s["world_from_scan"]) for s in json.load(open(ref3))["scans"]]
+t = np.linalg.inv(poses[0]) @ poses[1]
+write_ply(os.path.join(out, "merged01.ply"), np.vstack([scans["scan000"], scans["scan001"] @ t[:3, :3].T + t[:3, 3]]))
+json.dump([{"file": "merged01.ply", "world_from_scan": poses[0].tolist()},
+           {"file": "scan002.ply", "world_from_scan": poses[2].tolist()}], open(os.path.join(out, "initm.json"), "w"))
+PY
+cp "$data/small_gicp_pair/target.ply" "$data/small_gicp_pair/source.ply" "$ply/"
+viewpoints() { # a run's estimated viewpoints: the share of the spacing they explain
+    python3 - "$work/$1.json" <<'PY'
+import json, sys
+r = json.load(open(sys.argv[1]))
+e = [(s["name"], s["viewpoint"]) for s in r["scans"] if s["viewpoint"]]
+print(" " * 22, "  ".join(f"{n} {v['explained']:.2f}" + ("" if v["used"] else " unused") for n, v in e))
+PY
+}
+shares ply-3dtk-set "$ply"/scan00[012].ply --init-poses "$ply/init3.json"; viewpoints ply-3dtk-set
+shares ply-room-pair "$ply/room_scan1.ply" "$ply/room_scan2.ply" --init-poses "$ply/initr.json"; viewpoints ply-room-pair
+shares ply-street-pair "$ply/target.ply" "$ply/source.ply"; viewpoints ply-street-pair
+shares ply-merged-and-002 "$ply/merged01.ply" "$ply/scan002.ply" --init-poses "$ply/initm.json"; viewpoints ply-merged-and-002
+shares ply-hall-among-rooms "$ply/room_scan1.ply" "$ply/room_scan2.ply" "$ply/scan000.ply"
+shares ply-room1-among-3dtk "$ply"/scan00[012].ply "$ply/room_scan1.ply"
+shares ply-street-among-3dtk "$ply"/scan00[012].ply "$ply/target.ply"
+shares ply-hall-among-street "$ply/target.ply" "$ply/source.ply" "$ply/scan000.ply"

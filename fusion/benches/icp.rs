@@ -1,5 +1,8 @@
 //! ICP on the 3DTK pair (scan001 → scan000, 0.5–32.5 m): the preprocessing
-//! steps and one registration at voxel 0.1 m, max correspondence 1 m.
+//! steps and one registration at voxel 0.1 m, max correspondence 1 m; and
+//! the scanner's position estimated from scan000's spacing
+//! (`fusion::viewpoint`, what `match` does for each scan that does not say
+//! where its scanner stood).
 //!
 //! `RAYON_NUM_THREADS=1 cargo bench -p fusion --bench icp`
 
@@ -98,5 +101,12 @@ fn kd_trees(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, kd_trees, icp);
+fn viewpoint(c: &mut Criterion) {
+    let points = scan(0);
+    let mut g = c.benchmark_group("viewpoint 3dtk scan000");
+    g.bench_function("estimate", |b| b.iter(|| fusion::viewpoint::estimate(black_box(&points))));
+    g.finish();
+}
+
+criterion_group!(benches, kd_trees, icp, viewpoint);
 criterion_main!(benches);

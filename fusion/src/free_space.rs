@@ -3,7 +3,8 @@
 //! scan's points placed there are placed wrongly (Huber & Hebert 2003,
 //! "free-space violations"). It needs the scanner's position in its scan's
 //! frame, which only some inputs state (a 3DTK scan, an E57 `data3D`, a
-//! PCD's `VIEWPOINT`, a ROS 2 cloud in its sensor frame).
+//! PCD's `VIEWPOINT`, a ROS 2 cloud in its sensor frame); for the others
+//! `match` estimates it from the scan's spacing ([`crate::viewpoint`]).
 //!
 //! Issue 38: a hall scan given among two room scans was placed 3.3 m from
 //! the room, exit 0 — every measure the verification had (the motion when

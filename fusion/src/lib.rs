@@ -20,7 +20,10 @@
 //! - [`se3`]: the shared pose convention (ξ = (ω, v), left perturbation)
 //!   and a Gaussian pose prior ([`se3::Prior`]);
 //! - [`pipe`]: tube fitting into scanned pipes and the deviation map
-//!   ([`pipe::fit_pipe`], [`pipe::anomalies`]).
+//!   ([`pipe::fit_pipe`], [`pipe::anomalies`]);
+//! - [`viewpoint`]: a scanner's position estimated from its scan's point
+//!   spacing, for the free-space test of scans that do not state it
+//!   ([`viewpoint::estimate`]).
 #![warn(missing_docs)]
 
 mod agreement;
@@ -41,5 +44,6 @@ pub mod scale;
 pub mod scanset;
 pub mod se3;
 pub mod verify;
+pub mod viewpoint;
 
 pub use error::{FusionError, Result};

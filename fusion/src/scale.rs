@@ -187,7 +187,7 @@ fn median(values: Vec<f64>) -> f64 {
 }
 
 /// The `q` quantile of `values` (not empty).
-fn quantile(mut values: Vec<f64>, q: f64) -> f64 {
+pub(crate) fn quantile(mut values: Vec<f64>, q: f64) -> f64 {
     values.sort_by(f64::total_cmp);
     values[((values.len() - 1) as f64 * q).round() as usize]
 }

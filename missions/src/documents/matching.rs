@@ -665,6 +665,31 @@ pub struct ScanReport {
     /// steps alone give — the matches hold them no better than the start
     /// (docs/match.md). Empty for the first scan and where none.
     pub held_directions: Vec<[f64; 6]>,
+    /// Where the scan's scanner stood, as the verification's free-space
+    /// test took it; null when neither the input, `--scanner-at-origin`
+    /// nor an estimate says (`--no-viewpoint-estimate`, or fewer than 16
+    /// points apart).
+    pub viewpoint: Option<ViewpointReport>,
+}
+
+/// Where a scan's scanner stood ([`ScanReport::viewpoint`]).
+#[derive(Debug, Serialize, schemars::JsonSchema)]
+pub struct ViewpointReport {
+    /// In the scan's frame, metres.
+    pub position: [f64; 3],
+    /// `stated` (a 3DTK scan, an E57 `data3D` with a pose, a PCD's
+    /// VIEWPOINT, a ROS 2 cloud), `origin` (`--scanner-at-origin`) or
+    /// `estimated` (from the scan's point spacing, which grows with the
+    /// range: docs/match.md, "Where the scanners stood").
+    pub source: String,
+    /// For an estimate: the share of the log point spacing's spread the
+    /// range from `position` explains, 1 − (MAD of the fit's residuals /
+    /// MAD of log spacing)²; null otherwise.
+    pub explained: Option<f64>,
+    /// Whether the free-space test used it: an estimate explaining less
+    /// than 0.7 (a scan thinned on a grid, merged from stations far
+    /// apart) is reported, not used.
+    pub used: bool,
 }
 
 impl Document for MatchReport {

@@ -103,9 +103,17 @@ pub struct MatchArgs {
     /// Every scan's frame has its scanner at the origin (PLY, XYZ and LAS
     /// say nothing of where the scanner stood; 3DTK, E57 scans with a
     /// pose, PCD and ROS 2 clouds do): the verification then tests every
-    /// scan's free space.
+    /// scan's free space from there, not from the position its spacing
+    /// gives.
     #[arg(long)]
     pub scanner_at_origin: bool,
+    /// Do not estimate where the scanners stood for the scans that do not
+    /// say (without --scanner-at-origin): by default each such scan's
+    /// viewpoint is estimated from its point spacing, which grows with
+    /// the range, and used by the free-space test where the range
+    /// explains the spacing (docs/match.md, "Where the scanners stood").
+    #[arg(long)]
+    pub no_viewpoint_estimate: bool,
     /// At the finest stage, leave out pairs whose point lies beyond what
     /// the other scan sampled around its partner (where a wedge or sector
     /// of a scan ends): scans cut by their field of view register several

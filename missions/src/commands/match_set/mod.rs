@@ -23,7 +23,7 @@ use args::{GLOBAL_CELL_OF_RADIUS, bag_options, mode, output_crs};
 pub use args::{InitArg, MatchArgs, ModeArg};
 use outputs::{check_out, write_outputs};
 
-use crate::documents::matching::{GlobalMatchReport, GlobalReport, PipeReport, SettingsReport};
+use crate::documents::matching::{GlobalMatchReport, GlobalReport, PipeReport, SettingsReport, ViewpointReport};
 use report::report;
 use text::{unlinked, write_text};
 
@@ -119,15 +119,18 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
         bail!("{}: one scan: expected at least two to match", scans[0].file);
     }
     let points: Vec<&[nalgebra::Point3<f32>]> = scans.iter().map(|s| s.points.as_slice()).collect();
-    config.viewpoints =
+    let viewpoints = viewpoints(args, &scans);
+    let stated: Vec<Option<nalgebra::Point3<f64>>> =
         scans.iter().map(|s| s.viewpoint.or(args.scanner_at_origin.then(nalgebra::Point3::origin))).collect();
+    config.viewpoints =
+        viewpoints.iter().map(|v| v.as_ref().filter(|v| v.used).map(|v| nalgebra::Point3::from(v.position))).collect();
     config.only_covered = args.only_covered;
     // A pipe — every scan's points on a tube, all round it — holds its
     // axis and its roll by its small features alone, which the matches'
     // pull along the scans' sampling outweighs: without a threshold of the
     // user's own, the pipe's (docs/match.md, Blind directions: "A pipe is
     // found").
-    let pipe = if args.degeneracy_ratio.is_none() { pipe_of(&points, &config.viewpoints) } else { None };
+    let pipe = if args.degeneracy_ratio.is_none() { pipe_of(&points, &stated) } else { None };
     if pipe.is_some() {
         let icp = &mut config.link.multiview.icp;
         icp.degeneracy_ratio = Some(fusion::links::PIPE_DEGENERACY_RATIO);
@@ -175,6 +178,9 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
     let result = result.map_err(|e| named(e, &scans))?;
     let seconds = started.elapsed().as_secs_f64();
     let mut report = report(args.mode, &crs, &scans, &result, seconds, settings, args.joint_covariance);
+    for (s, v) in report.scans.iter_mut().zip(viewpoints) {
+        s.viewpoint = v;
+    }
     if args.init == Some(InitArg::Global) {
         // A start found from the scans' shape says nothing along what no
         // match sees: a scan blind there has no pose the data confirm.
@@ -298,6 +304,40 @@ fn scale_settings(
         pipe: None,
         global: None,
     })
+}
+
+/// Where each scan's scanner stood, for the free-space test: as its input
+/// states, at its frame's origin with `--scanner-at-origin`, else
+/// estimated from its point spacing (unless `--no-viewpoint-estimate`)
+/// and used where the range explains the spacing.
+fn viewpoints(args: &MatchArgs, scans: &[InputScan]) -> Vec<Option<ViewpointReport>> {
+    use rayon::prelude::*;
+    scans
+        .par_iter()
+        .map(|s| {
+            let known = |p: nalgebra::Point3<f64>, source: &str| ViewpointReport {
+                position: p.coords.into(),
+                source: source.into(),
+                explained: None,
+                used: true,
+            };
+            if let Some(p) = s.viewpoint {
+                return Some(known(p, "stated"));
+            }
+            if args.scanner_at_origin {
+                return Some(known(nalgebra::Point3::origin(), "origin"));
+            }
+            if args.no_viewpoint_estimate {
+                return None;
+            }
+            fusion::viewpoint::estimate(&s.points).map(|e| ViewpointReport {
+                position: e.viewpoint.coords.into(),
+                source: "estimated".into(),
+                explained: Some(e.explained),
+                used: e.taken(),
+            })
+        })
+        .collect()
 }
 
 /// The pipe the scans are, when every one's points lie on a tube all round

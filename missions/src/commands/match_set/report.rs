@@ -44,6 +44,8 @@ pub(super) fn report(
                     held_chi2: held.map(|h| h.chi2),
                     held_m: held.map(|h| h.moved_m),
                     held_directions: held.map_or_else(Vec::new, |h| directions(&h.along)),
+                    // The caller's: where the scanners stood is not the registration's.
+                    viewpoint: None,
                 }
             })
             .collect(),

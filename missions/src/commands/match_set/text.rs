@@ -36,6 +36,7 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
         report.seconds
     )?;
     writeln!(out, "stages: {}", stages(&report.stages))?;
+    write_viewpoints(out, scans, report)?;
     if let Some(p) = &report.settings.pipe {
         writeln!(
             out,
@@ -114,7 +115,9 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
             .map_or(Ok(false), |s| why_held(out, &scans[i].name, &report.mode, s, tolerance, pipe_ran))?;
         let unsupported = report.restart.iter().flat_map(|r| &r.unsupported).any(|u| u.scan == i);
         let explained = undecided || departed || held || unsupported;
-        why_untrusted(out, scans, &report.checks, &report.untrusted, i, explained, tolerance)?;
+        let estimated: Vec<bool> =
+            report.scans.iter().map(|s| s.viewpoint.as_ref().is_some_and(|v| v.source == "estimated")).collect();
+        why_untrusted(out, scans, &report.checks, &report.untrusted, &estimated, i, explained, tolerance)?;
     }
     for l in report.links.iter().filter(|l| !l.accepted || l.cycle.is_some()) {
         let targets: Vec<&str> = l.targets.iter().map(|&t| scans[t].name.as_str()).collect();
@@ -145,6 +148,39 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
                 l.reason.as_deref().unwrap_or("")
             )?;
         }
+    }
+    Ok(())
+}
+
+/// The scanners' positions estimated from the scans' spacing (for the
+/// free-space test), and those the spacing did not tell.
+fn write_viewpoints(out: &mut dyn Write, scans: &[InputScan], report: &MatchReport) -> std::io::Result<()> {
+    let estimated = |used: bool| -> Vec<String> {
+        scans
+            .iter()
+            .zip(&report.scans)
+            .filter_map(|(s, r)| {
+                let v = r.viewpoint.as_ref().filter(|v| v.source == "estimated" && v.used == used)?;
+                Some(if used { s.name.clone() } else { format!("{} ({:.2})", s.name, v.explained.unwrap_or_default()) })
+            })
+            .collect()
+    };
+    let (used, unused) = (estimated(true), estimated(false));
+    if !used.is_empty() {
+        writeln!(
+            out,
+            "scanners' positions estimated from their scans' spacing, for the free-space test: {}",
+            used.join(", ")
+        )?;
+    }
+    if !unused.is_empty() {
+        writeln!(
+            out,
+            "free space not tested from {}: the range explains too little of the spacing (under {}: thinned on a grid, \
+             or merged from several stations?)",
+            unused.join(", "),
+            fusion::viewpoint::MIN_EXPLAINED
+        )?;
     }
     Ok(())
 }
@@ -246,16 +282,19 @@ fn why_held(
     Ok(true)
 }
 
-/// Why the verification names scan `i` (`untrusted` all it names): the
+/// Why the verification names scan `i` (`untrusted` all it names;
+/// `estimated` the scans whose scanners' positions their spacing gave): the
 /// pairs that moved it, the free space it was placed in, or — when
 /// neither, and it is not `explained` elsewhere (left undecided by the
 /// restart, departed from its pairs' agreement) — the named scans it
 /// agrees with, nothing verified tying it to the first.
+#[allow(clippy::too_many_arguments)]
 fn why_untrusted(
     out: &mut dyn Write,
     scans: &[InputScan],
     checks: &[CheckReport],
     untrusted: &[usize],
+    estimated: &[bool],
     i: usize,
     explained: bool,
     tolerance: f64,
@@ -292,10 +331,11 @@ fn why_untrusted(
             let f = c.free_space.as_ref().filter(|f| f.violated())?;
             let (from, of) = (f.seen_from, if f.seen_from == c.source { c.target } else { c.source });
             Some(format!(
-                "{:.0} % of {}'s points where {}'s scanner saw through",
+                "{:.0} % of {}'s points where {}'s scanner{} saw through",
                 100.0 * f.share,
                 scans[of].name,
-                scans[from].name
+                scans[from].name,
+                if estimated.get(from).copied().unwrap_or(false) { " (estimated from its spacing)" } else { "" }
             ))
         })
         .collect();
@@ -562,7 +602,7 @@ mod tests {
     fn why(checks: &[CheckReport], untrusted: &[usize], i: usize, undecided: bool) -> String {
         let scans: Vec<InputScan> = ["a", "b", "c", "d"].iter().map(|n| InputScan::empty(n, n)).collect();
         let mut out = Vec::new();
-        why_untrusted(&mut out, &scans, checks, untrusted, i, undecided, 0.05).expect("written");
+        why_untrusted(&mut out, &scans, checks, untrusted, &[], i, undecided, 0.05).expect("written");
         String::from_utf8(out).expect("UTF-8")
     }
 
@@ -600,6 +640,7 @@ mod tests {
             held_chi2: None,
             held_m: None,
             held_directions: Vec::new(),
+            viewpoint: None,
         };
         let said = |s: &ScanReport| {
             let mut out = Vec::new();
@@ -636,6 +677,7 @@ mod tests {
             held_chi2: (blind > 0).then_some(chi2),
             held_m: (blind > 0).then_some(moved),
             held_directions: vec![[1.0, 0.0, 0.0, 0.0, 0.0, 0.0]; blind],
+            viewpoint: None,
         };
         let said = |s: &ScanReport| {
             let mut out = Vec::new();
