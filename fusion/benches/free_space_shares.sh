@@ -58,8 +58,10 @@ room=$data/pcl_room_scans
 dtk=$data/3dtk_dat
 shares 3dtk-set "$dtk"
 shares room-pair "$room/room_scan1.pcd" "$room/room_scan2.pcd"
-shares hall-sim "$(sim hall.toml hall)"
-shares corridor-sim "$(sim corridor-icp.toml corridor)"
+hall_scans=$(sim hall.toml hall)
+corridor_scans=$(sim corridor-icp.toml corridor)
+shares hall-sim "$hall_scans"
+shares corridor-sim "$corridor_scans"
 shares hall000-among-rooms "$room/room_scan1.pcd" "$room/room_scan2.pcd" "$dtk/scan000.3d"
 shares hall001-among-rooms "$room/room_scan1.pcd" "$room/room_scan2.pcd" "$dtk/scan001.3d"
 shares room1-among-3dtk "$dtk/scan000.3d" "$dtk/scan001.3d" "$room/room_scan1.pcd"
@@ -73,15 +75,24 @@ ply=$work/ply
 mkdir -p "$ply"
 "$bin" match "$dtk" --out "$work/ref3" --json >"$work/ref3.json" 2>/dev/null || true
 "$bin" match "$room/room_scan1.pcd" "$room/room_scan2.pcd" --out "$work/refr" --json >"$work/refr.json" 2>/dev/null || true
-"${PYTHON:-python3}" - "$root/fusion/benches" "$data" "$ply" "$work/ref3.json" "$work/refr.json" <<'PY'
+"${PYTHON:-python3}" - "$root/fusion/benches" "$data" "$ply" "$work/ref3.json" "$work/refr.json" \
+    "$hall_scans" "$work/hall-sim.json" "$corridor_scans" "$work/corridor-sim.json" <<'PY'
 import json, os, sys
 import numpy as np
 sys.path.insert(0, sys.argv[1])
 from global_success import read_pcd, write_ply
-data, out, ref3, refr = sys.argv[2:]
+data, out, ref3, refr, hall, hall_ref, corridor, corridor_ref = sys.argv[2:]
 def dtk(name):  # 3DTK's left-handed cm → ours (z, −x, y) / 100, as scanner::io
     a = np.loadtxt(os.path.join(data, "3dtk_dat", name + ".3d"), usecols=(0, 1, 2))
     return np.stack([a[:, 2], -a[:, 0], a[:, 1]], 1) / 100.0
+def dtk_dir(d, out, ref):  # a simulated run's scans as PLY, started where match put them
+    r = json.load(open(ref))
+    os.makedirs(out, exist_ok=True)
+    for sc in r["scans"]:
+        a = np.loadtxt(os.path.join(d, sc["name"] + ".3d"), usecols=(0, 1, 2))
+        write_ply(os.path.join(out, sc["name"] + ".ply"), np.stack([a[:, 2], -a[:, 0], a[:, 1]], 1) / 100.0)
+    json.dump([{"file": sc["name"] + ".ply", "world_from_scan": sc["world_from_scan"]} for sc in r["scans"]],
+              open(os.path.join(out, "init.json"), "w"))
 def init(path, names, ref):
     poses = [s["world_from_scan"] for s in json.load(open(ref))["scans"]]
     json.dump([{"file": n + ".ply", "world_from_scan": p} for n, p in zip(names, poses)], open(path, "w"))
@@ -97,6 +108,15 @@ t = np.linalg.inv(poses[0]) @ poses[1]
 write_ply(os.path.join(out, "merged01.ply"), np.vstack([scans["scan000"], scans["scan001"] @ t[:3, :3].T + t[:3, 3]]))
 json.dump([{"file": "merged01.ply", "world_from_scan": poses[0].tolist()},
            {"file": "scan002.ply", "world_from_scan": poses[2].tolist()}], open(os.path.join(out, "initm.json"), "w"))
+for cell in (0.02, 0.05):  # the set thinned on a grid, one point per cell
+    d = os.path.join(out, f"thinned{round(cell * 100)}")
+    os.makedirs(d, exist_ok=True)
+    for n, xyz in scans.items():
+        keep = np.unique(np.floor(xyz / cell).astype(np.int64), axis=0, return_index=True)[1]
+        write_ply(os.path.join(d, n + ".ply"), xyz[np.sort(keep)])
+    init(os.path.join(d, "init3.json"), list(scans), ref3)
+dtk_dir(hall, os.path.join(out, "hall"), hall_ref)
+dtk_dir(corridor, os.path.join(out, "corridor"), corridor_ref)
 PY
 cp "$data/small_gicp_pair/target.ply" "$data/small_gicp_pair/source.ply" "$ply/"
 viewpoints() { # a run's estimated viewpoints: the share of the spacing they explain
@@ -104,12 +124,20 @@ viewpoints() { # a run's estimated viewpoints: the share of the spacing they exp
 import json, sys
 r = json.load(open(sys.argv[1]))
 e = [(s["name"], s["viewpoint"]) for s in r["scans"] if s["viewpoint"]]
-print(" " * 22, "  ".join(f"{n} {v['explained']:.2f}" + ("" if v["used"] else " unused") for n, v in e))
+if len(e) > 6:
+    x = [v["explained"] for _, v in e]
+    print(" " * 22, f"{sum(v['used'] for _, v in e)} of {len(e)} used, explaining {min(x):.2f}–{max(x):.2f}")
+else:
+    print(" " * 22, "  ".join(f"{n} {v['explained']:.2f}" + ("" if v["used"] else " unused") for n, v in e))
 PY
 }
 shares ply-3dtk-set "$ply"/scan00[012].ply --init-poses "$ply/init3.json"; viewpoints ply-3dtk-set
 shares ply-room-pair "$ply/room_scan1.ply" "$ply/room_scan2.ply" --init-poses "$ply/initr.json"; viewpoints ply-room-pair
 shares ply-street-pair "$ply/target.ply" "$ply/source.ply"; viewpoints ply-street-pair
+shares ply-hall-sim "$ply"/hall/*.ply --init-poses "$ply/hall/init.json"; viewpoints ply-hall-sim
+shares ply-corridor-sim "$ply"/corridor/*.ply --init-poses "$ply/corridor/init.json"; viewpoints ply-corridor-sim
+shares ply-3dtk-thinned-2cm "$ply"/thinned2/scan00[012].ply --init-poses "$ply/thinned2/init3.json"; viewpoints ply-3dtk-thinned-2cm
+shares ply-3dtk-thinned-5cm "$ply"/thinned5/scan00[012].ply --init-poses "$ply/thinned5/init3.json"; viewpoints ply-3dtk-thinned-5cm
 shares ply-merged-and-002 "$ply/merged01.ply" "$ply/scan002.ply" --init-poses "$ply/initm.json"; viewpoints ply-merged-and-002
 shares ply-hall-among-rooms "$ply/room_scan1.ply" "$ply/room_scan2.ply" "$ply/scan000.ply"
 shares ply-room1-among-3dtk "$ply"/scan00[012].ply "$ply/room_scan1.ply"

@@ -3076,6 +3076,17 @@ fn a_scan_of_another_place_among_lidar_frames_is_named_by_estimated_viewpoints()
         let share = c["free_space"]["share"].as_f64().expect("share");
         assert_eq!(share > 0.12, c["source"] == 2, "{c}");
     }
+    // The text says the scanners were estimated, and how to judge
+    // without them.
+    let text = run_text(&inputs, &dir.path().join("text"));
+    assert_eq!(text.code, 1, "{}", text.stderr);
+    assert!(
+        text.stdout.contains("scanners' positions estimated from their scans' spacing, for the free-space test")
+            && text.stdout.contains("not trusted: scan000: placed in another scan's free space")
+            && text.stdout.contains("--no-viewpoint-estimate"),
+        "{}",
+        text.stdout
+    );
 
     let (r, v) = run(&street, &dir.path().join("street"));
     let v = v.expect("JSON");

@@ -340,12 +340,24 @@ fn why_untrusted(
         })
         .collect();
     if !seen.is_empty() {
+        // Only from estimated scanners: a scan thinned on a grid can leave
+        // an estimate metres off that still explains its spacing.
+        let only_estimated = disagreeing()
+            .filter_map(|c| c.free_space.as_ref().filter(|f| f.violated()))
+            .all(|f| estimated.get(f.seen_from).copied().unwrap_or(false));
         writeln!(
             out,
             "  not trusted: {}: placed in another scan's free space ({}): a scan of another place, or a fit \
-             that is not where the scans meet",
+             that is not where the scans meet{}",
             scans[i].name,
-            seen.join("; ")
+            seen.join("; "),
+            if only_estimated {
+                " (judged from scanner positions estimated from the scans' spacing: if the scans were thinned on \
+                 a grid, say where the scanners stood — --scanner-at-origin, a PCD's VIEWPOINT — or test without \
+                 them, --no-viewpoint-estimate)"
+            } else {
+                ""
+            }
         )?;
     }
     let on: Vec<&str> = checks
