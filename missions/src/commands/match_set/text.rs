@@ -104,6 +104,8 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
     } else {
         PipeRan::No
     };
+    let estimated: Vec<bool> =
+        report.scans.iter().map(|s| s.viewpoint.as_ref().is_some_and(|v| v.source == "estimated")).collect();
     for &i in &report.untrusted {
         let undecided =
             report.restart.iter().filter(|r| !r.corroborated).flat_map(|r| &r.undecided).any(|u| u.scan == i);
@@ -115,8 +117,6 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
             .map_or(Ok(false), |s| why_held(out, &scans[i].name, &report.mode, s, tolerance, pipe_ran))?;
         let unsupported = report.restart.iter().flat_map(|r| &r.unsupported).any(|u| u.scan == i);
         let explained = undecided || departed || held || unsupported;
-        let estimated: Vec<bool> =
-            report.scans.iter().map(|s| s.viewpoint.as_ref().is_some_and(|v| v.source == "estimated")).collect();
         why_untrusted(out, scans, &report.checks, &report.untrusted, &estimated, i, explained, tolerance)?;
     }
     for l in report.links.iter().filter(|l| !l.accepted || l.cycle.is_some()) {
