@@ -2972,7 +2972,7 @@ fn a_scan_placed_where_another_scanner_saw_through_is_named_with_exit_1() {
     assert!(checks(&v).iter().all(|c| share(c) < 0.12), "{}", v["checks"]);
 }
 
-/// Writes `cloud`'s points alone as a binary PLY (which says nothing of
+/// Writes `points` alone as a binary PLY (which says nothing of
 /// where its scanner stood).
 fn write_plain_ply(path: &Path, points: Vec<nalgebra::Point3<f32>>) -> OsString {
     let plain = scanner::io::PointCloud::from_points(points);
