@@ -143,8 +143,7 @@ pub fn occupied_cells(points: &[Point3<f32>], voxel_m: f64) -> usize {
 /// (spacing, radius) of one scan, or `None` with fewer than two distinct
 /// points.
 fn scan_scale(points: &[Point3<f32>]) -> Option<(f64, f64)> {
-    let finite: Vec<[f32; 3]> =
-        points.iter().filter(|p| p.iter().all(|v| v.is_finite())).map(|p| [p.x, p.y, p.z]).collect();
+    let finite = finite(points);
     if finite.len() < 2 {
         return None;
     }
@@ -163,23 +162,27 @@ fn scan_scale(points: &[Point3<f32>]) -> Option<(f64, f64)> {
     let representatives: Vec<&[f32; 3]> =
         finite.iter().filter(|p| cell <= 0.0 || seen.insert(p.map(|v| (v / cell).floor() as i64))).collect();
     let step = (representatives.len() / SAMPLES).max(1);
-    let gaps: Vec<f64> = representatives
-        .iter()
-        .step_by(step)
-        .filter_map(|p| {
-            // The nearest point at a distance (duplicates say nothing of
-            // the spacing).
-            let k = std::num::NonZero::new(8.min(finite.len()))?;
-            tree.query(p)
-                .nearest_n::<SquaredEuclidean<f32>>(k)
-                .execute()
-                .into_iter()
-                .map(|nn| f64::from(nn.distance))
-                .find(|&d2| d2 > 0.0)
-                .map(f64::sqrt)
-        })
-        .collect();
+    let gaps: Vec<f64> =
+        representatives.iter().step_by(step).filter_map(|p| nearest_apart_squared(&tree, p).map(f64::sqrt)).collect();
     (!gaps.is_empty() && radius > 0.0).then(|| (median(gaps), radius))
+}
+
+/// `points`' finite ones, as kiddo takes them.
+pub(crate) fn finite(points: &[Point3<f32>]) -> Vec<[f32; 3]> {
+    points.iter().filter(|p| p.iter().all(|v| v.is_finite())).map(|p| [p.x, p.y, p.z]).collect()
+}
+
+/// The squared distance from `p` to its nearest point in `tree` at a
+/// distance, among its 8 nearest (duplicates say nothing of the spacing:
+/// a PCL room scan holds each return twice).
+pub(crate) fn nearest_apart_squared(tree: &ImmutableKdTree<f32, 3>, p: &[f32; 3]) -> Option<f64> {
+    let k = std::num::NonZero::new(8.min(tree.size()))?;
+    tree.query(p)
+        .nearest_n::<SquaredEuclidean<f32>>(k)
+        .execute()
+        .into_iter()
+        .map(|nn| f64::from(nn.distance))
+        .find(|&d2| d2 > 0.0)
 }
 
 fn median(values: Vec<f64>) -> f64 {

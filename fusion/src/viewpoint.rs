@@ -20,11 +20,11 @@
 //! 0.8 m: its rotating SICK's returns crowd near the table's axis, not
 //! its centre), explaining 0.86–0.95.
 
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use kiddo::ImmutableKdTree;
 use nalgebra::{Matrix4, Point3, Vector3, Vector4};
 use rand::SeedableRng;
 
-use crate::scale::quantile;
+use crate::scale::{finite, nearest_apart_squared, quantile};
 
 /// The least share of the log spacing's spread (its MAD², about the
 /// median) the viewpoint must explain for the estimate to be taken.
@@ -63,13 +63,11 @@ impl Estimate {
 /// Estimates where `points`' scanner stood. `None` when fewer than 16
 /// points are at a distance from another (nothing to fit).
 pub fn estimate(points: &[Point3<f32>]) -> Option<Estimate> {
-    let finite: Vec<[f32; 3]> =
-        points.iter().filter(|p| p.iter().all(|v| v.is_finite())).map(|p| [p.x, p.y, p.z]).collect();
+    let finite = finite(points);
     if finite.len() < 16 {
         return None;
     }
     let tree = ImmutableKdTree::<f32, 3>::new_from_slice(&finite).ok()?;
-    let k = std::num::NonZero::new(8.min(finite.len()))?;
     // A random sample, not every n-th point: a spinning LiDAR's returns
     // come ring by ring within each firing, and every 4th of small_gicp's
     // frames is one ring, whose spacing alone put its scanner 1.2 m low.
@@ -80,18 +78,12 @@ pub fn estimate(points: &[Point3<f32>]) -> Option<Estimate> {
         rand::seq::index::sample(&mut rng, finite.len(), SAMPLE).into_vec()
     };
     // Each sampled point and the log of its distance to the nearest point
-    // at a distance (a scan may hold each return twice).
+    // at a distance.
     let fitted: Vec<(Vector3<f64>, f64)> = sample
         .into_iter()
         .map(|i| &finite[i])
         .filter_map(|p| {
-            let d2 = tree
-                .query(p)
-                .nearest_n::<SquaredEuclidean<f32>>(k)
-                .execute()
-                .into_iter()
-                .map(|nn| f64::from(nn.distance))
-                .find(|&d2| d2 > 0.0)?;
+            let d2 = nearest_apart_squared(&tree, p)?;
             Some((Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2])), 0.5 * d2.ln()))
         })
         .collect();

@@ -692,6 +692,16 @@ pub struct ViewpointReport {
     pub used: bool,
 }
 
+impl ViewpointReport {
+    /// Whether the position is an estimate from the scan's spacing.
+    pub fn is_estimate(&self) -> bool {
+        self.source == ESTIMATED
+    }
+}
+
+/// [`ViewpointReport::source`] of an estimate.
+pub const ESTIMATED: &str = "estimated";
+
 impl Document for MatchReport {
     const NAME: &'static str = "match";
     const VERSION: u32 = 1;

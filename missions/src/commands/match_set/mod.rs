@@ -120,10 +120,11 @@ pub fn run(args: &MatchArgs, out: &mut dyn Write) -> Result<Outcome> {
     }
     let points: Vec<&[nalgebra::Point3<f32>]> = scans.iter().map(|s| s.points.as_slice()).collect();
     let viewpoints = viewpoints(args, &scans);
+    let position = |v: &ViewpointReport| nalgebra::Point3::from(v.position);
+    config.viewpoints = viewpoints.iter().map(|v| v.as_ref().filter(|v| v.used).map(position)).collect();
+    // Stated or told (`--scanner-at-origin`), not estimated.
     let stated: Vec<Option<nalgebra::Point3<f64>>> =
-        scans.iter().map(|s| s.viewpoint.or(args.scanner_at_origin.then(nalgebra::Point3::origin))).collect();
-    config.viewpoints =
-        viewpoints.iter().map(|v| v.as_ref().filter(|v| v.used).map(|v| nalgebra::Point3::from(v.position))).collect();
+        viewpoints.iter().map(|v| v.as_ref().filter(|v| !v.is_estimate()).map(position)).collect();
     config.only_covered = args.only_covered;
     // A pipe — every scan's points on a tube, all round it — holds its
     // axis and its roll by its small features alone, which the matches'
@@ -332,7 +333,7 @@ fn viewpoints(args: &MatchArgs, scans: &[InputScan]) -> Vec<Option<ViewpointRepo
             }
             fusion::viewpoint::estimate(&s.points).map(|e| ViewpointReport {
                 position: e.viewpoint.coords.into(),
-                source: "estimated".into(),
+                source: crate::documents::matching::ESTIMATED.into(),
                 explained: Some(e.explained),
                 used: e.taken(),
             })

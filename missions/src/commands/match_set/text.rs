@@ -2,7 +2,7 @@
 
 use std::io::Write;
 
-use crate::documents::matching::{CheckReport, MatchReport, RestartReport, ScanReport, StageReport};
+use crate::documents::matching::{CheckReport, MatchReport, RestartReport, ScanReport, StageReport, ViewpointReport};
 use crate::scans::inputs::InputScan;
 
 pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &MatchReport) -> std::io::Result<()> {
@@ -105,7 +105,7 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
         PipeRan::No
     };
     let estimated: Vec<bool> =
-        report.scans.iter().map(|s| s.viewpoint.as_ref().is_some_and(|v| v.source == "estimated")).collect();
+        report.scans.iter().map(|s| s.viewpoint.as_ref().is_some_and(ViewpointReport::is_estimate)).collect();
     for &i in &report.untrusted {
         let undecided =
             report.restart.iter().filter(|r| !r.corroborated).flat_map(|r| &r.undecided).any(|u| u.scan == i);
@@ -160,7 +160,7 @@ fn write_viewpoints(out: &mut dyn Write, scans: &[InputScan], report: &MatchRepo
             .iter()
             .zip(&report.scans)
             .filter_map(|(s, r)| {
-                let v = r.viewpoint.as_ref().filter(|v| v.source == "estimated" && v.used == used)?;
+                let v = r.viewpoint.as_ref().filter(|v| v.is_estimate() && v.used == used)?;
                 Some(if used { s.name.clone() } else { format!("{} ({:.2})", s.name, v.explained.unwrap_or_default()) })
             })
             .collect()
