@@ -683,13 +683,19 @@ pub struct ViewpointReport {
     /// range: docs/match.md, "Where the scanners stood").
     pub source: String,
     /// For an estimate: the share of the log point spacing's spread the
-    /// range from `position` explains, 1 − (MAD of the fit's residuals /
+    /// scanner at `position` explains (by the range, or turning about
+    /// `axis`), 1 − (MAD of the fit's residuals /
     /// MAD of log spacing)²; null otherwise.
     pub explained: Option<f64>,
     /// Whether the free-space test used it: an estimate explaining less
     /// than 0.7 (a scan thinned on a grid, merged from stations far
     /// apart) is reported, not used.
     pub used: bool,
+    /// For an estimate whose spacing showed a scanner turning about an
+    /// axis (a 2D scanner on a rotating or nodding table, a terrestrial
+    /// scanner's head): that axis, a unit vector in the scan's frame (its
+    /// sign arbitrary); null otherwise.
+    pub axis: Option<[f64; 3]>,
 }
 
 impl ViewpointReport {

@@ -3019,16 +3019,20 @@ fn the_free_space_of_scans_that_do_not_say_is_tested_from_estimated_or_told_view
     let v = v.expect("JSON");
     assert_eq!(r.code, 1, "{}", r.stderr);
     hall_named(&v);
-    // Each scanner where it stood, at its frame's origin: the room scans'
-    // within 0.12 m (measured), the hall scan's 0.83 m (its rotating
-    // SICK's returns crowd towards the table's axis).
-    for (s, within) in v["scans"].as_array().expect("scans").iter().zip([0.15, 0.15, 1.0]) {
+    // Each scanner where it stood, at its frame's origin, within 5 cm
+    // (measured 2–3 cm), turning about its axis: the room scanner's head
+    // about the vertical, the hall's SICK nodding about the lateral axis
+    // (by the range alone, whose returns crowd towards that axis, the
+    // hall scanner was 0.83 m off).
+    let axes = [2, 2, 1];
+    for (s, axis) in v["scans"].as_array().expect("scans").iter().zip(axes) {
         let vp = &s["viewpoint"];
         assert_eq!(vp["source"], "estimated", "{s}");
         assert_eq!(vp["used"], true, "{s}");
-        assert!(vp["explained"].as_f64().expect("explained") > 0.85, "{s}");
+        assert!(vp["explained"].as_f64().expect("explained") > 0.95, "{s}");
         let p: Vec<f64> = vp["position"].as_array().expect("position").iter().map(|x| x.as_f64().expect("x")).collect();
-        assert!(p.iter().map(|x| x * x).sum::<f64>().sqrt() < within, "{s}");
+        assert!(p.iter().map(|x| x * x).sum::<f64>().sqrt() < 0.05, "{s}");
+        assert!(vp["axis"][axis].as_f64().expect("axis").abs() > 0.999, "{s}");
     }
 
     let mut plain = inputs.clone();
@@ -3057,8 +3061,10 @@ fn the_free_space_of_scans_that_do_not_say_is_tested_from_estimated_or_told_view
 /// every other check passed it (matched again it moved 0.31 and 0.54 m,
 /// but the corridor's right pairs move as much along their axis). With
 /// the scanners' positions estimated from the spacing, the street
-/// scanners' free space names it; the street pair alone passes (its
-/// free space 1 %). A scan merged from two stations (scan000 and scan001
+/// scanners' free space names it — at 21–22 %, as from the true scanners,
+/// since the hall scanner's estimate turns about its nodding axis (by the
+/// range alone, 0.8 m off, it was 13–14 % against the 12 % line) —; the
+/// street pair alone passes (its free space 1 %). A scan merged from two stations (scan000 and scan001
 /// of the 3DTK set) spaces its points by neither scanner: its estimate
 /// explains too little of the spacing to be used, and the merged scan
 /// registers with scan002, exit 0, tested from scan002's view alone.
@@ -3075,7 +3081,13 @@ fn a_scan_of_another_place_among_lidar_frames_is_named_by_estimated_viewpoints()
     for c in v["checks"].as_array().expect("checks") {
         let share = c["free_space"]["share"].as_f64().expect("share");
         assert_eq!(share > 0.12, c["source"] == 2, "{c}");
+        assert!(c["source"] != 2 || share > 0.18, "{c}");
     }
+    // The LiDAR frames' spacing follows the range (their rings are no
+    // turning scanner's lines); the hall scanner turns.
+    let scans = v["scans"].as_array().expect("scans");
+    assert!(scans[..2].iter().all(|s| s["viewpoint"]["axis"].is_null()), "{}", v["scans"]);
+    assert!(scans[2]["viewpoint"]["axis"].is_array(), "{}", v["scans"]);
     // The text says the scanners were estimated, and how to judge
     // without them.
     let text = run_text(&inputs, &dir.path().join("text"));

@@ -310,7 +310,8 @@ fn scale_settings(
 /// Where each scan's scanner stood, for the free-space test: as its input
 /// states, at its frame's origin with `--scanner-at-origin`, else
 /// estimated from its point spacing (unless `--no-viewpoint-estimate`)
-/// and used where the range explains the spacing.
+/// and used where the range, or a scanner turning about an axis,
+/// explains the spacing.
 fn viewpoints(args: &MatchArgs, scans: &[InputScan]) -> Vec<Option<ViewpointReport>> {
     use rayon::prelude::*;
     scans
@@ -321,6 +322,7 @@ fn viewpoints(args: &MatchArgs, scans: &[InputScan]) -> Vec<Option<ViewpointRepo
                 source: source.into(),
                 explained: None,
                 used: true,
+                axis: None,
             };
             if let Some(p) = s.viewpoint {
                 return Some(known(p, "stated"));
@@ -336,6 +338,7 @@ fn viewpoints(args: &MatchArgs, scans: &[InputScan]) -> Vec<Option<ViewpointRepo
                 source: crate::documents::matching::ESTIMATED.into(),
                 explained: Some(e.explained),
                 used: e.taken(),
+                axis: e.axis.map(Into::into),
             })
         })
         .collect()

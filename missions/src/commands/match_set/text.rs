@@ -176,8 +176,8 @@ fn write_viewpoints(out: &mut dyn Write, scans: &[InputScan], report: &MatchRepo
     if !unused.is_empty() {
         writeln!(
             out,
-            "free space not tested from {}: the range explains too little of the spacing (under {}: thinned on a grid, \
-             or merged from several stations?)",
+            "free space not tested from {}: neither the range nor a scanner turning about an axis explains enough of \
+             the spacing (under {}: thinned on a grid, or merged from several stations?)",
             unused.join(", "),
             fusion::viewpoint::MIN_EXPLAINED
         )?;
