@@ -684,8 +684,8 @@ pub struct ViewpointReport {
     pub source: String,
     /// For an estimate: the share of the log point spacing's spread the
     /// scanner at `position` explains (by the range, or turning about
-    /// `axis`), 1 − (MAD of the fit's residuals /
-    /// MAD of log spacing)²; null otherwise.
+    /// `axis`), 1 − (MAD of the fit's residuals / MAD of log spacing)²;
+    /// null otherwise.
     pub explained: Option<f64>,
     /// Whether the free-space test used it: an estimate explaining less
     /// than 0.7 (a scan thinned on a grid, merged from stations far

@@ -3064,10 +3064,11 @@ fn the_free_space_of_scans_that_do_not_say_is_tested_from_estimated_or_told_view
 /// scanners' free space names it — at 21–22 %, as from the true scanners,
 /// since the hall scanner's estimate turns about its nodding axis (by the
 /// range alone, 0.8 m off, it was 13–14 % against the 12 % line) —; the
-/// street pair alone passes (its free space 1 %). A scan merged from two stations (scan000 and scan001
-/// of the 3DTK set) spaces its points by neither scanner: its estimate
-/// explains too little of the spacing to be used, and the merged scan
-/// registers with scan002, exit 0, tested from scan002's view alone.
+/// street pair alone passes (its free space 1 %). A scan merged from two
+/// stations (scan000 and scan001 of the 3DTK set) spaces its points by
+/// neither scanner: its estimate explains too little of the spacing to be
+/// used, and the merged scan registers with scan002, exit 0, tested from
+/// scan002's view alone.
 #[test]
 fn a_scan_of_another_place_among_lidar_frames_is_named_by_estimated_viewpoints() {
     let dir = tempfile::tempdir().expect("temp dir");
