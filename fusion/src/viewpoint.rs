@@ -53,7 +53,7 @@ use crate::scale::{finite, quantile};
 /// median) the viewpoint must explain for the estimate to be taken.
 pub const MIN_EXPLAINED: f64 = 0.7;
 
-/// At most this many points' spacings are fitted (an even sample).
+/// At most this many points' spacings are fitted (drawn at random).
 const SAMPLE: usize = 20_000;
 
 /// The soft-L1 loss's width in log spacing (a factor of e^0.5 ≈ 1.6:
