@@ -11,7 +11,9 @@
 # Then the same real scans as plain PLY (no viewpoint: each scanner's
 # position estimated from its scan's spacing, fusion::viewpoint), started
 # where their own registration put them, with small_gicp's pair, a scan
-# merged from two stations, and the 3DTK scan000 among small_gicp's frames
+# merged from two stations, the 3DTK set thinned to 2 and 5 cm cells (a
+# thinned room scan among the 2 cm ones), and the 3DTK scan000 among
+# small_gicp's frames
 # (numpy and plyfile for the conversion, as fusion/benches/global_success.py:
 # PYTHON=target/ci-venv/bin/python, the venv .ci/run makes).
 set -euo pipefail
@@ -99,8 +101,9 @@ def init(path, names, ref):
 scans = {n: dtk(n) for n in ["scan000", "scan001", "scan002"]}
 for n, xyz in scans.items():
     write_ply(os.path.join(out, n + ".ply"), xyz)
-for n in ["room_scan1", "room_scan2"]:
-    write_ply(os.path.join(out, n + ".ply"), read_pcd(os.path.join(data, "pcl_room_scans", n + ".pcd")))
+rooms = {n: read_pcd(os.path.join(data, "pcl_room_scans", n + ".pcd")) for n in ["room_scan1", "room_scan2"]}
+for n, xyz in rooms.items():
+    write_ply(os.path.join(out, n + ".ply"), xyz)
 init(os.path.join(out, "init3.json"), list(scans), ref3)
 init(os.path.join(out, "initr.json"), ["room_scan1", "room_scan2"], refr)
 poses = [np.array(s["world_from_scan"]) for s in json.load(open(ref3))["scans"]]
@@ -111,7 +114,7 @@ json.dump([{"file": "merged01.ply", "world_from_scan": poses[0].tolist()},
 for cell in (0.02, 0.05):  # the set thinned on a grid, one point per cell
     d = os.path.join(out, f"thinned{round(cell * 100)}")
     os.makedirs(d, exist_ok=True)
-    for n, xyz in scans.items():
+    for n, xyz in {**scans, **rooms}.items():
         keep = np.unique(np.floor(xyz / cell).astype(np.int64), axis=0, return_index=True)[1]
         write_ply(os.path.join(d, n + ".ply"), xyz[np.sort(keep)])
     init(os.path.join(d, "init3.json"), list(scans), ref3)
@@ -142,4 +145,5 @@ shares ply-merged-and-002 "$ply/merged01.ply" "$ply/scan002.ply" --init-poses "$
 shares ply-hall-among-rooms "$ply/room_scan1.ply" "$ply/room_scan2.ply" "$ply/scan000.ply"
 shares ply-room1-among-3dtk "$ply"/scan00[012].ply "$ply/room_scan1.ply"
 shares ply-street-among-3dtk "$ply"/scan00[012].ply "$ply/target.ply"
+shares ply-room1-among-thinned-2cm "$ply"/thinned2/scan00[012].ply "$ply/thinned2/room_scan1.ply"
 shares ply-hall-among-street "$ply/target.ply" "$ply/source.ply" "$ply/scan000.ply"

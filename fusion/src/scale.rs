@@ -175,7 +175,7 @@ pub(crate) fn finite(points: &[Point3<f32>]) -> Vec<[f32; 3]> {
 /// The squared distance from `p` to its nearest point in `tree` at a
 /// distance, among its 8 nearest (duplicates say nothing of the spacing:
 /// a PCL room scan holds each return twice).
-pub(crate) fn nearest_apart_squared(tree: &ImmutableKdTree<f32, 3>, p: &[f32; 3]) -> Option<f64> {
+fn nearest_apart_squared(tree: &ImmutableKdTree<f32, 3>, p: &[f32; 3]) -> Option<f64> {
     let k = std::num::NonZero::new(8.min(tree.size()))?;
     tree.query(p)
         .nearest_n::<SquaredEuclidean<f32>>(k)

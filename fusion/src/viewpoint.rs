@@ -13,9 +13,11 @@
 //!   nearer of the two is d, the farther is the distance to the nearest
 //!   point the other way (more than 60° from the first) — each stretched
 //!   by 1 / cos of the angle at which the ray meets the surface (its
-//!   normal from the 12 nearest points). Fitted for the viewpoint, the
-//!   axis and the two steps, from the range's viewpoint and the origin
-//!   about each of the frame's axes.
+//!   normal from the 12 nearest points), and each kept above a floor (a
+//!   scan thinned on a voxel grid keeps its points about a cell apart
+//!   wherever its scanner's lay nearer). Fitted for the viewpoint, the
+//!   axis, the two steps and the floor, from the range's viewpoint and
+//!   the origin about each of the frame's axes.
 //!
 //! The turning model is taken where it explains the farther spacing (≥
 //! [`MIN_ACROSS_EXPLAINED`]) and the nearer at least as well as the range
@@ -33,13 +35,14 @@
 //! position, and a PLY does not carry it. With the estimate the test runs.
 //!
 //! The estimate is only taken where the spacing follows the model: a scan
-//! thinned on a voxel grid, or merged from stations far apart, spaces its
-//! points otherwise, and the fit's share of the log spacing's spread it
-//! explains ([`Estimate::explained`]) falls below [`MIN_EXPLAINED`].
-//! Measured (BENCHMARKS.md, "Estimated viewpoints"): real single scans
-//! within 0.01–0.24 m of their scanner, explaining 0.80–1.00; the 3DTK
-//! scans thinned to 2 cm cells 0.5–1.2 m (explaining 0.87–0.95: taken),
-//! to 5 cm not taken.
+//! thinned on a grid coarser than most of its scanner's spacing, or
+//! merged from stations far apart, spaces its points otherwise, and the
+//! fit's share of the log spacing's spread it explains
+//! ([`Estimate::explained`]) falls below [`MIN_EXPLAINED`]. Measured
+//! (BENCHMARKS.md, "Estimated viewpoints"): real single scans within
+//! 0.01–0.24 m of their scanner, explaining 0.80–1.00; the 3DTK scans
+//! thinned to 2 cm cells 0.22–0.32 m (explaining 0.92–0.95; without the
+//! floor, session 68, 0.5–1.2 m), to 5 cm not taken.
 
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nalgebra::{Matrix3, Point3, SMatrix, SVector, Vector3, Vector4};
@@ -288,12 +291,21 @@ struct Turning {
     round: f64,
     /// The axis (unit).
     u: Vector3<f64>,
+    /// The least log spacing (a scan thinned on a grid keeps its points
+    /// about a cell apart wherever the scanner's were nearer).
+    floor: f64,
 }
 
 impl Turning {
     /// The log spacings `s`'s point would have, the nearer and the
     /// farther; ranges kept above a millionth of the scan's radius.
     fn predicted(&self, s: &Spacing, radius: f64) -> (f64, f64) {
+        let (a, b) = self.unfloored(s, radius);
+        (floored(a, self.floor), floored(b, self.floor))
+    }
+
+    /// [`Turning::predicted`] before the floor.
+    fn unfloored(&self, s: &Spacing, radius: f64) -> (f64, f64) {
         let floor = 1e-6 * radius;
         let q = s.p - self.v;
         let r = q.norm().max(floor);
@@ -319,18 +331,22 @@ impl Turning {
         let offset = |distance: &dyn Fn(&Vector3<f64>) -> f64| {
             quantile(spacings.iter().map(|s| s.near - distance(&(s.p - v)).max(floor).ln()).collect(), 0.5)
         };
-        Turning { v, along: offset(&|q| q.norm()), round: offset(&|q| q.cross(&u).norm()), u }
+        // The floor at the nearer spacing's low quantile: where the
+        // scanner's spacing is above it, the fit lowers it out of the way.
+        let floor = quantile(spacings.iter().map(|s| s.near).collect(), FLOOR_START_QUANTILE);
+        Turning { v, along: offset(&|q| q.norm()), round: offset(&|q| q.cross(&u).norm()), u, floor }
     }
 
-    /// Moved by `dx` = (v, along, round, and the axis's turn along two
-    /// directions across it).
-    fn moved(&self, dx: &Vector7) -> Turning {
+    /// Moved by `dx` = (v, along, round, the axis's turn along two
+    /// directions across it, and the floor).
+    fn moved(&self, dx: &Vector8) -> Turning {
         let (t1, t2) = across(&self.u);
         Turning {
             v: self.v + dx.fixed_rows::<3>(0),
             along: self.along + dx[3],
             round: self.round + dx[4],
             u: (self.u + t1 * dx[5] + t2 * dx[6]).normalize(),
+            floor: self.floor + dx[7],
         }
     }
 
@@ -343,7 +359,25 @@ impl Turning {
     }
 }
 
-type Vector7 = SVector<f64, 7>;
+type Vector8 = SVector<f64, 8>;
+
+/// How sharply the floor bends the spacing: log (d^p + floor^p)^(1/p),
+/// e^(0.17) where the two meet.
+const FLOOR_SHARPNESS: f64 = 4.0;
+
+/// The quantile of the nearer spacing the floor starts at.
+const FLOOR_START_QUANTILE: f64 = 0.05;
+
+/// The log spacing `x` kept above the log `floor`, smoothly.
+fn floored(x: f64, floor: f64) -> f64 {
+    let m = x.max(floor);
+    m + ((FLOOR_SHARPNESS * (x - m)).exp() + (FLOOR_SHARPNESS * (floor - m)).exp()).ln() / FLOOR_SHARPNESS
+}
+
+/// ∂[`floored`]/∂x (and 1 − it, ∂/∂floor).
+fn floored_slope(x: f64, floor: f64) -> f64 {
+    1.0 / (1.0 + (FLOOR_SHARPNESS * (floor - x)).exp())
+}
 
 /// Two unit directions across `u` and across each other.
 fn across(u: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
@@ -356,21 +390,27 @@ fn across(u: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
 /// differences (the nearer and farther spacings swap where the two terms
 /// meet); (the scanner, cost).
 fn fit_turning(spacings: &[Spacing], start: Turning, radius: f64) -> (Turning, f64) {
-    let steps = Vector7::from_column_slice(&[1e-6 * radius, 1e-6 * radius, 1e-6 * radius, 1e-6, 1e-6, 1e-6, 1e-6]);
+    let steps = [1e-6 * radius, 1e-6 * radius, 1e-6 * radius, 1e-6, 1e-6, 1e-6, 1e-6];
     minimise(
         start,
         |t| t.cost(spacings, radius),
         |t| {
-            let nudged: Vec<Turning> = (0..7).map(|k| t.moved(&(Vector7::ith(k, 1.0) * steps[k]))).collect();
+            // The geometry's seven by differences, through the floor's
+            // slope; the floor's own by its slope.
+            let nudged: Vec<Turning> = (0..7).map(|k| t.moved(&(Vector8::ith(k, 1.0) * steps[k]))).collect();
             in_order(spacings, |s| {
-                let (lo, hi) = t.predicted(s, radius);
+                let (a, b) = t.unfloored(s, radius);
+                let (lo, hi) = (floored(a, t.floor), floored(b, t.floor));
+                let (slope_a, slope_b) = (floored_slope(a, t.floor), floored_slope(b, t.floor));
                 let (r1, r2) = (s.near - lo, s.across - hi);
-                let (mut j1, mut j2) = (Vector7::zeros(), Vector7::zeros());
+                let (mut j1, mut j2) = (Vector8::zeros(), Vector8::zeros());
                 for (k, n) in nudged.iter().enumerate() {
-                    let (lo_k, hi_k) = n.predicted(s, radius);
-                    j1[k] = -(lo_k - lo) / steps[k];
-                    j2[k] = -(hi_k - hi) / steps[k];
+                    let (a_k, b_k) = n.unfloored(s, radius);
+                    j1[k] = -slope_a * (a_k - a) / steps[k];
+                    j2[k] = -slope_b * (b_k - b) / steps[k];
                 }
+                j1[7] = -(1.0 - slope_a);
+                j2[7] = -(1.0 - slope_b);
                 let (w1, w2) = (weight(r1), weight(r2));
                 Normal(j1 * j1.transpose() * w1 + j2 * j2.transpose() * w2, j1 * (w1 * r1) + j2 * (w2 * r2))
             })
@@ -541,6 +581,35 @@ mod tests {
             assert!(found.dot(&axis).abs() > 1.0_f64.to_radians().cos(), "{found:?} vs {axis:?}");
             assert!(e.taken() && e.explained > 0.9, "{e:?}");
         }
+    }
+
+    #[test]
+    fn the_floors_slope_is_its_derivative() {
+        let h = 1e-6;
+        for (x, floor) in [(-3.0, -3.0), (-2.0, -3.5), (-4.0, -3.0), (1.0, -9.0), (-9.0, 1.0)] {
+            let by_x = (floored(x + h, floor) - floored(x - h, floor)) / (2.0 * h);
+            let by_floor = (floored(x, floor + h) - floored(x, floor - h)) / (2.0 * h);
+            assert!((floored_slope(x, floor) - by_x).abs() < 1e-8, "{x} {floor}");
+            assert!((1.0 - floored_slope(x, floor) - by_floor).abs() < 1e-8, "{x} {floor}");
+        }
+        // Far above the floor, the spacing itself.
+        assert!((floored(-1.0, -9.0) + 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_nodding_scan_thinned_where_its_returns_crowd_is_still_found() {
+        // 3 cm cells: nearer than about 2.5 m from the axis the scanner's
+        // lines lie closer than a cell, and one point a cell is kept.
+        let (at, axis) = (Vector3::new(1.5, -1.0, 0.2), Vector3::new(0.3, 1.0, 0.0).normalize());
+        let cell = 0.03f32;
+        let mut seen = std::collections::HashSet::new();
+        let thinned: Vec<Point3<f32>> = nodded_box(at, axis)
+            .into_iter()
+            .filter(|p| seen.insert([p.x, p.y, p.z].map(|v| (v / cell).floor() as i64)))
+            .collect();
+        let e = estimate(&thinned).expect("an estimate");
+        assert!((e.viewpoint.coords - at).norm() < 0.1, "{e:?}");
+        assert!(e.taken() && e.axis.is_some(), "{e:?}");
     }
 
     #[test]
