@@ -17,7 +17,8 @@
 //!   scan thinned on a voxel grid keeps its points about a cell apart
 //!   wherever its scanner's lay nearer). Fitted for the viewpoint, the
 //!   axis, the two steps and the floor, from the range's viewpoint and
-//!   the origin about each of the frame's axes.
+//!   the origin about each of the frame's axes; fitted again without the
+//!   floor where it holds up fewer than a twentieth of the points.
 //!
 //! The turning model is taken where it explains the farther spacing (≥
 //! [`MIN_ACROSS_EXPLAINED`]) and the nearer at least as well as the range
@@ -166,12 +167,22 @@ pub fn estimate(points: &[Point3<f32>]) -> Option<Estimate> {
         .flat_map(|v| [Vector3::x(), Vector3::y(), Vector3::z()].map(|u| (v, u)))
         .collect();
     let few = &local[..local.len().min(TURNING_STARTS_SAMPLE)];
-    let rough = starts
-        .into_par_iter()
-        .map(|(v, u)| fit_turning(few, Turning::start(few, v, u, radius), radius))
-        .min_by(|a, b| a.1.total_cmp(&b.1))?
-        .0;
-    let turning = fit_turning(&local[..local.len().min(TURNING_SAMPLE)], rough, radius).0;
+    let more = &local[..local.len().min(TURNING_SAMPLE)];
+    let fitted = |with_floor: bool| {
+        let rough = starts
+            .par_iter()
+            .map(|&(v, u)| fit_turning(few, Turning::start(few, v, u, radius, with_floor), radius))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .expect("six starts")
+            .0;
+        fit_turning(more, rough, radius).0
+    };
+    // With the floor where the spacing shows one — where it holds up at
+    // least a twentieth of the points —; else as the scanner left it (a
+    // floor that holds nothing up only adds a way to fit a spinning
+    // LiDAR's rings: a street wedge's, from 2.8 m off).
+    let floored = fitted(true);
+    let turning = if floored.engaged(more, radius) >= MIN_FLOOR_ENGAGED { floored } else { fitted(false) };
     let (near, across): (Vec<f64>, Vec<f64>) = local
         .iter()
         .map(|s| {
@@ -306,6 +317,12 @@ impl Turning {
 
     /// [`Turning::predicted`] before the floor.
     fn unfloored(&self, s: &Spacing, radius: f64) -> (f64, f64) {
+        let (a, b) = self.terms(s, radius);
+        (a.min(b), a.max(b))
+    }
+
+    /// The log spacing along the scan line and from one line to the next.
+    fn terms(&self, s: &Spacing, radius: f64) -> (f64, f64) {
         let floor = 1e-6 * radius;
         let q = s.p - self.v;
         let r = q.norm().max(floor);
@@ -321,19 +338,23 @@ impl Turning {
         let stretch = |t: &Vector3<f64>| (0.5 * (s.normal.dot(t) / facing).powi(2).ln_1p()).min(MAX_STRETCH);
         let a = self.along + r.ln() + stretch(&along);
         let b = self.round + rho.ln() + stretch(&round);
-        (a.min(b), a.max(b))
+        (a, b)
     }
 
     /// The scanner at `v` turning about `u`, the terms' constants the
     /// median of the nearer spacing against each.
-    fn start(spacings: &[Spacing], v: Vector3<f64>, u: Vector3<f64>, radius: f64) -> Turning {
+    fn start(spacings: &[Spacing], v: Vector3<f64>, u: Vector3<f64>, radius: f64, with_floor: bool) -> Turning {
         let floor = 1e-6 * radius;
         let offset = |distance: &dyn Fn(&Vector3<f64>) -> f64| {
             quantile(spacings.iter().map(|s| s.near - distance(&(s.p - v)).max(floor).ln()).collect(), 0.5)
         };
         // The floor at the nearer spacing's low quantile: where the
         // scanner's spacing is above it, the fit lowers it out of the way.
-        let floor = quantile(spacings.iter().map(|s| s.near).collect(), FLOOR_START_QUANTILE);
+        let floor = if with_floor {
+            quantile(spacings.iter().map(|s| s.near).collect(), FLOOR_START_QUANTILE)
+        } else {
+            f64::NEG_INFINITY
+        };
         Turning { v, along: offset(&|q| q.norm()), round: offset(&|q| q.cross(&u).norm()), u, floor }
     }
 
@@ -348,6 +369,12 @@ impl Turning {
             u: (self.u + t1 * dx[5] + t2 * dx[6]).normalize(),
             floor: self.floor + dx[7],
         }
+    }
+
+    /// The share of `spacings` whose nearer spacing the floor holds up.
+    fn engaged(&self, spacings: &[Spacing], radius: f64) -> f64 {
+        let held = spacings.iter().filter(|s| self.unfloored(s, radius).0 < self.floor).count();
+        held as f64 / spacings.len() as f64
     }
 
     /// The soft-L1 cost of its residuals at `spacings`.
@@ -367,6 +394,9 @@ const FLOOR_SHARPNESS: f64 = 4.0;
 
 /// The quantile of the nearer spacing the floor starts at.
 const FLOOR_START_QUANTILE: f64 = 0.05;
+
+/// The least share of the points the floor must hold up to be kept.
+const MIN_FLOOR_ENGAGED: f64 = 0.05;
 
 /// The log spacing `x` kept above the log `floor`, smoothly.
 fn floored(x: f64, floor: f64) -> f64 {
@@ -395,25 +425,36 @@ fn fit_turning(spacings: &[Spacing], start: Turning, radius: f64) -> (Turning, f
         start,
         |t| t.cost(spacings, radius),
         |t| {
-            // The geometry's seven by differences, through the floor's
-            // slope; the floor's own by its slope.
-            let nudged: Vec<Turning> = (0..7).map(|k| t.moved(&(Vector8::ith(k, 1.0) * steps[k]))).collect();
-            in_order(spacings, |s| {
-                let (a, b) = t.unfloored(s, radius);
+            // The viewpoint's and the axis's columns by differences,
+            // through the floor's slope; the two steps' and the floor's
+            // by their slopes (a step moves its own term alone).
+            const BY_DIFFERENCES: [usize; 5] = [0, 1, 2, 5, 6];
+            let nudged = BY_DIFFERENCES.map(|k| t.moved(&(Vector8::ith(k, 1.0) * steps[k])));
+            let mut normal = in_order(spacings, |s| {
+                let (along, round) = t.terms(s, radius);
+                let (a, b) = (along.min(round), along.max(round));
                 let (lo, hi) = (floored(a, t.floor), floored(b, t.floor));
                 let (slope_a, slope_b) = (floored_slope(a, t.floor), floored_slope(b, t.floor));
                 let (r1, r2) = (s.near - lo, s.across - hi);
                 let (mut j1, mut j2) = (Vector8::zeros(), Vector8::zeros());
-                for (k, n) in nudged.iter().enumerate() {
+                for (&k, n) in BY_DIFFERENCES.iter().zip(&nudged) {
                     let (a_k, b_k) = n.unfloored(s, radius);
                     j1[k] = -slope_a * (a_k - a) / steps[k];
                     j2[k] = -slope_b * (b_k - b) / steps[k];
                 }
+                let (k_near, k_far) = if along <= round { (3, 4) } else { (4, 3) };
+                j1[k_near] = -slope_a;
+                j2[k_far] = -slope_b;
                 j1[7] = -(1.0 - slope_a);
                 j2[7] = -(1.0 - slope_b);
                 let (w1, w2) = (weight(r1), weight(r2));
                 Normal(j1 * j1.transpose() * w1 + j2 * j2.transpose() * w2, j1 * (w1 * r1) + j2 * (w2 * r2))
-            })
+            });
+            // No floor: its column is empty, and it stays where it is.
+            if start.floor == f64::NEG_INFINITY {
+                normal.0[(7, 7)] = 1.0;
+            }
+            normal
         },
         |t, step| t.moved(step),
     )

@@ -3163,10 +3163,8 @@ fn a_thinned_sets_scanners_are_found_and_a_thinned_scan_of_another_place_named()
         init_entry("scan002.ply", &scan0_from_scan2.to_homogeneous())
     ]);
     std::fs::write(&init, starts.to_string()).expect("init poses");
-    let set: Vec<OsString> = ["3dtk_dat/scan000.3d", "3dtk_dat/scan001.3d", "3dtk_dat/scan002.3d"]
-        .iter()
-        .map(|rel| thinned(rel))
-        .collect();
+    let set: Vec<OsString> =
+        ["3dtk_dat/scan000.3d", "3dtk_dat/scan001.3d", "3dtk_dat/scan002.3d"].iter().map(|rel| thinned(rel)).collect();
     let mut inputs = set.clone();
     inputs.extend(["--init-poses".into(), init.into_os_string()]);
     let (r, v) = run(&inputs, &dir.path().join("set"));
