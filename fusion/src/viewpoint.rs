@@ -172,17 +172,16 @@ pub fn estimate(points: &[Point3<f32>]) -> Option<Estimate> {
         let rough = starts
             .par_iter()
             .map(|&(v, u)| fit_turning(few, Turning::start(few, v, u, radius, with_floor), radius))
-            .min_by(|a, b| a.1.total_cmp(&b.1))
-            .expect("six starts")
+            .min_by(|a, b| a.1.total_cmp(&b.1))?
             .0;
-        fit_turning(more, rough, radius).0
+        Some(fit_turning(more, rough, radius).0)
     };
     // With the floor where the spacing shows one — where it holds up at
     // least a twentieth of the points —; else as the scanner left it (a
     // floor that holds nothing up only adds a way to fit a spinning
     // LiDAR's rings: a street wedge's, from 2.8 m off).
-    let floored = fitted(true);
-    let turning = if floored.engaged(more, radius) >= MIN_FLOOR_ENGAGED { floored } else { fitted(false) };
+    let floored = fitted(true)?;
+    let turning = if floored.engaged(more, radius) >= MIN_FLOOR_ENGAGED { floored } else { fitted(false)? };
     let (near, across): (Vec<f64>, Vec<f64>) = local
         .iter()
         .map(|s| {
@@ -348,8 +347,7 @@ impl Turning {
         let offset = |distance: &dyn Fn(&Vector3<f64>) -> f64| {
             quantile(spacings.iter().map(|s| s.near - distance(&(s.p - v)).max(floor).ln()).collect(), 0.5)
         };
-        // The floor at the nearer spacing's low quantile: where the
-        // scanner's spacing is above it, the fit lowers it out of the way.
+        // The floor at the nearer spacing's low quantile (or none).
         let floor = if with_floor {
             quantile(spacings.iter().map(|s| s.near).collect(), FLOOR_START_QUANTILE)
         } else {
@@ -416,9 +414,10 @@ fn across(u: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
     (t1, u.cross(&t1))
 }
 
-/// Levenberg–Marquardt on a [`Turning`] scanner from `start`, by forward
-/// differences (the nearer and farther spacings swap where the two terms
-/// meet); (the scanner, cost).
+/// Levenberg–Marquardt on a [`Turning`] scanner from `start` (without a
+/// floor where it starts with none): the viewpoint's and the axis's
+/// columns by forward differences (the nearer and farther spacings swap
+/// where the two terms meet); (the scanner, cost).
 fn fit_turning(spacings: &[Spacing], start: Turning, radius: f64) -> (Turning, f64) {
     let steps = [1e-6 * radius, 1e-6 * radius, 1e-6 * radius, 1e-6, 1e-6, 1e-6, 1e-6];
     minimise(
