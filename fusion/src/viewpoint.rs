@@ -322,13 +322,13 @@ impl Turning {
 
     /// The log spacing along the scan line and from one line to the next.
     fn terms(&self, s: &Spacing, radius: f64) -> (f64, f64) {
-        let floor = 1e-6 * radius;
+        let least = 1e-6 * radius;
         let q = s.p - self.v;
-        let r = q.norm().max(floor);
+        let r = q.norm().max(least);
         let e = q / r;
         let across = self.u.cross(&e);
         let sin = across.norm();
-        let rho = (sin * r).max(floor);
+        let rho = (sin * r).max(least);
         // Round the axis; on the axis any direction across the ray.
         let round =
             if sin > 1e-12 { across / sin } else { e.cross(&Vector3::x()).try_normalize(0.0).unwrap_or(Vector3::y()) };
@@ -343,9 +343,9 @@ impl Turning {
     /// The scanner at `v` turning about `u`, the terms' constants the
     /// median of the nearer spacing against each.
     fn start(spacings: &[Spacing], v: Vector3<f64>, u: Vector3<f64>, radius: f64, with_floor: bool) -> Turning {
-        let floor = 1e-6 * radius;
+        let least = 1e-6 * radius;
         let offset = |distance: &dyn Fn(&Vector3<f64>) -> f64| {
-            quantile(spacings.iter().map(|s| s.near - distance(&(s.p - v)).max(floor).ln()).collect(), 0.5)
+            quantile(spacings.iter().map(|s| s.near - distance(&(s.p - v)).max(least).ln()).collect(), 0.5)
         };
         // The floor at the nearer spacing's low quantile (or none).
         let floor = if with_floor {
