@@ -2953,8 +2953,7 @@ fn a_scan_placed_where_another_scanner_saw_through_is_named_with_exit_1() {
     );
     let poses: Vec<Isometry3<f64>> =
         v["scans"].as_array().expect("scans").iter().map(|s| pose(&s["world_from_scan"])).collect();
-    let reference = scanner::io::from_3dtk_axes(&matrix_file("3dtk_dat/reference_T_scan000_scan001.txt"))
-        * scanner::io::from_3dtk_axes(&matrix_file("3dtk_dat/reference_T_scan001_scan002.txt"));
+    let reference = scan0_from_scan(2);
     // 1.37° / 0.10 m off the references composed (each good to about
     // ±0.3° / 1.5 cm): two scans 3.4 m apart in a sparse hall, where
     // 3DTK's slam6D lands consecutive pairs 0.85–1.08° / 6–9 cm off — not
@@ -2983,9 +2982,30 @@ fn write_plain_ply(path: &Path, points: Vec<nalgebra::Point3<f32>>) -> OsString 
 
 /// The scan at `rel` as a plain PLY in `dir`.
 fn plain_ply(dir: &Path, rel: &str) -> OsString {
-    let cloud = scanner::io::read(Path::new(&data(rel))).expect("scan");
+    plain_ply_of(dir, rel, scanner::io::read(Path::new(&data(rel))).expect("scan").points)
+}
+
+/// `points` as a plain PLY in `dir`, named after the scan at `rel`.
+fn plain_ply_of(dir: &Path, rel: &str, points: Vec<nalgebra::Point3<f32>>) -> OsString {
     let name = Path::new(rel).file_stem().expect("stem").to_string_lossy().into_owned();
-    write_plain_ply(&dir.join(format!("{name}.ply")), cloud.points)
+    write_plain_ply(&dir.join(format!("{name}.ply")), points)
+}
+
+/// Where the 3DTK set's references put scan `k` in scan000's frame
+/// (scan000 ← scan001 ← scan002, composed).
+fn scan0_from_scan(k: usize) -> Isometry3<f64> {
+    (1..=k).fold(Isometry3::identity(), |pose, b| {
+        pose * scanner::io::from_3dtk_axes(&matrix_file(&format!(
+            "3dtk_dat/reference_T_scan{:03}_scan{b:03}.txt",
+            b - 1
+        )))
+    })
+}
+
+/// How far from its frame's origin a scan's reported viewpoint lies (m).
+fn viewpoint_from_origin(scan: &Value) -> f64 {
+    let p = scan["viewpoint"]["position"].as_array().expect("position");
+    p.iter().map(|x| x.as_f64().expect("x").powi(2)).sum::<f64>().sqrt()
 }
 
 /// PLY says nothing of where its scanner stood. For the hall scan among
@@ -3030,8 +3050,7 @@ fn the_free_space_of_scans_that_do_not_say_is_tested_from_estimated_or_told_view
         assert_eq!(vp["source"], "estimated", "{s}");
         assert_eq!(vp["used"], true, "{s}");
         assert!(vp["explained"].as_f64().expect("explained") > 0.95, "{s}");
-        let p: Vec<f64> = vp["position"].as_array().expect("position").iter().map(|x| x.as_f64().expect("x")).collect();
-        assert!(p.iter().map(|x| x * x).sum::<f64>().sqrt() < 0.05, "{s}");
+        assert!(viewpoint_from_origin(s) < 0.05, "{s}");
         assert!(vp["axis"][axis].as_f64().expect("axis").abs() > 0.999, "{s}");
     }
 
@@ -3108,13 +3127,12 @@ fn a_scan_of_another_place_among_lidar_frames_is_named_by_estimated_viewpoints()
     assert!(c["free_space"]["share"].as_f64().expect("share") < 0.05, "{c}");
 
     let read = |rel: &str| scanner::io::read(Path::new(&data(rel))).expect("scan").points;
-    let scan0_from_scan1 = scanner::io::from_3dtk_axes(&matrix_file("3dtk_dat/reference_T_scan000_scan001.txt"));
+    let scan0_from_scan1 = scan0_from_scan(1);
     let mut merged = read("3dtk_dat/scan000.3d");
     merged.extend(read("3dtk_dat/scan001.3d").iter().map(|p| (scan0_from_scan1 * p.cast::<f64>()).cast::<f32>()));
     let merged = write_plain_ply(&dir.path().join("merged.ply"), merged);
     // scan002 started where the references put it.
-    let scan0_from_scan2 =
-        scan0_from_scan1 * scanner::io::from_3dtk_axes(&matrix_file("3dtk_dat/reference_T_scan001_scan002.txt"));
+    let scan0_from_scan2 = scan0_from_scan(2);
     let init = dir.path().join("init.json");
     let starts = serde_json::json!([
         init_entry("merged.ply", &Matrix4::identity()),
@@ -3145,23 +3163,18 @@ fn a_scan_of_another_place_among_lidar_frames_is_named_by_estimated_viewpoints()
 #[test]
 fn a_thinned_sets_scanners_are_found_and_a_thinned_scan_of_another_place_named() {
     let dir = tempfile::tempdir().expect("temp dir");
+    // The first point in each 2 cm cell.
     let thinned = |rel: &str| {
         let cell = 0.02f32;
         let mut seen = std::collections::HashSet::new();
         let mut points = scanner::io::read(Path::new(&data(rel))).expect("scan").points;
         points.retain(|p| seen.insert([p.x, p.y, p.z].map(|v| (v / cell).floor() as i64)));
-        let name = Path::new(rel).file_stem().expect("stem").to_string_lossy().into_owned();
-        write_plain_ply(&dir.path().join(format!("{name}.ply")), points)
+        plain_ply_of(dir.path(), rel, points)
     };
-    let scan0_from_scan1 = scanner::io::from_3dtk_axes(&matrix_file("3dtk_dat/reference_T_scan000_scan001.txt"));
-    let scan0_from_scan2 =
-        scan0_from_scan1 * scanner::io::from_3dtk_axes(&matrix_file("3dtk_dat/reference_T_scan001_scan002.txt"));
     let init = dir.path().join("init.json");
-    let starts = serde_json::json!([
-        init_entry("scan000.ply", &Matrix4::identity()),
-        init_entry("scan001.ply", &scan0_from_scan1.to_homogeneous()),
-        init_entry("scan002.ply", &scan0_from_scan2.to_homogeneous())
-    ]);
+    let starts = Value::Array(
+        (0..3).map(|k| init_entry(&format!("scan{k:03}.ply"), &scan0_from_scan(k).to_homogeneous())).collect(),
+    );
     std::fs::write(&init, starts.to_string()).expect("init poses");
     let set: Vec<OsString> =
         ["3dtk_dat/scan000.3d", "3dtk_dat/scan001.3d", "3dtk_dat/scan002.3d"].iter().map(|rel| thinned(rel)).collect();
@@ -3173,8 +3186,7 @@ fn a_thinned_sets_scanners_are_found_and_a_thinned_scan_of_another_place_named()
     for s in v["scans"].as_array().expect("scans") {
         let vp = &s["viewpoint"];
         assert_eq!(vp["used"], true, "{s}");
-        let p: Vec<f64> = vp["position"].as_array().expect("position").iter().map(|x| x.as_f64().expect("x")).collect();
-        assert!(p.iter().map(|x| x * x).sum::<f64>().sqrt() < 0.4, "{s}");
+        assert!(viewpoint_from_origin(s) < 0.4, "{s}");
     }
     let checks = v["checks"].as_array().expect("checks");
     assert_eq!(checks.len(), 3, "{}", v["checks"]);
