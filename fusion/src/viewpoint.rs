@@ -168,20 +168,21 @@ pub fn estimate(points: &[Point3<f32>]) -> Option<Estimate> {
         .collect();
     let few = &local[..local.len().min(TURNING_STARTS_SAMPLE)];
     let more = &local[..local.len().min(TURNING_SAMPLE)];
-    let fitted = |with_floor: bool| {
-        let rough = starts
+    let rough = |with_floor: bool| {
+        starts
             .par_iter()
             .map(|&(v, u)| fit_turning(few, Turning::start(few, v, u, radius, with_floor), radius))
-            .min_by(|a, b| a.1.total_cmp(&b.1))?
-            .0;
-        Some(fit_turning(more, rough, radius).0)
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|best| best.0)
     };
-    // With the floor where the spacing shows one — where it holds up at
-    // least a twentieth of the points —; else as the scanner left it (a
-    // floor that holds nothing up only adds a way to fit a spinning
-    // LiDAR's rings: a street wedge's, from 2.8 m off).
-    let floored = fitted(true)?;
-    let turning = if floored.engaged(more, radius) >= MIN_FLOOR_ENGAGED { floored } else { fitted(false)? };
+    // With the floor where the spacing shows one — where the starts' best
+    // fit has it hold up at least a twentieth of their points —; else as
+    // the scanner left it (a floor that holds nothing up only adds a way
+    // to fit a spinning LiDAR's rings: a street wedge's, from 2.8 m off).
+    // Decided on the starts' few points, so the refit on more runs once.
+    let floored = rough(true)?;
+    let start = if floored.engaged(few, radius) >= MIN_FLOOR_ENGAGED { floored } else { rough(false)? };
+    let turning = fit_turning(more, start, radius).0;
     let (near, across): (Vec<f64>, Vec<f64>) = local
         .iter()
         .map(|s| {
