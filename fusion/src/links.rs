@@ -94,6 +94,13 @@ pub struct LinkConfig {
     /// ([`crate::noise::Calibration::range_scale`]) — in the modes without
     /// a link graph, on each placing match's. Default 1.
     pub range_scale: f64,
+    /// Factors on top of [`range_scale`](Self::range_scale) for the
+    /// covariance by pair's rotation and its translation apart, about the
+    /// source's centroid ([`crate::noise::by_blocks`]): the calibration's
+    /// [`rotation_scale`](crate::noise::Calibration::rotation_scale) and
+    /// [`translation_scale`](crate::noise::Calibration::translation_scale)
+    /// over its `range_scale`. Default (1, 1).
+    pub range_blocks: (f64, f64),
     /// What the scans' noise alone makes of a match's two ways'
     /// disagreement ([`crate::noise::Calibration::asymmetry`]): beyond it
     /// the links' asymmetry is their scans' sampling, each scan's own in
@@ -170,6 +177,7 @@ impl Default for LinkConfig {
             max_partners: 10,
             both_ways: true,
             range_scale: 1.0,
+            range_blocks: (1.0, 1.0),
             asymmetry: None,
             calibration_dof: 0,
         }
@@ -983,7 +991,7 @@ fn solve(
             .iter()
             .map(|&k| {
                 let r = links[k].result.as_ref().expect("an accepted link has its match");
-                (link_noise(&r.information, r.range_covariance, config.range_scale), Pull::of(r))
+                (link_noise(r, config), Pull::of(r))
             })
             .unzip();
         let lean_variance_factor = lean_factor(&g.world_from_scan, &priors, &edges, steps.len(), &pulls)?;
@@ -1216,17 +1224,29 @@ const MIN_INDEPENDENT_SHARE: f64 = 0.05;
 
 /// A match's noise as the link graph takes it, before the variance
 /// factor: its covariance by pair (`range_covariance`) times the
-/// calibration's `range_scale`, or without it its `information`'s
-/// inverse (nothing along what it cannot see). Its frame is theirs.
-pub(crate) fn link_noise(
-    information: &Matrix6<f64>,
-    range_covariance: Option<Matrix6<f64>>,
-    range_scale: f64,
-) -> Matrix6<f64> {
-    range_covariance.map_or_else(
-        || information.pseudo_inverse(1e-12 * information.amax()).unwrap_or_else(|_| Matrix6::zeros()),
-        |c| c * range_scale,
+/// calibration's `range_scale`, its rotation and translation about the
+/// source's centroid each times its own factor (`range_blocks`); or
+/// without it its `information`'s inverse (nothing along what it cannot
+/// see). Its frame is the match's.
+pub(crate) fn link_noise(r: &crate::icp::IcpResult, config: &LinkConfig) -> Matrix6<f64> {
+    r.range_covariance.map_or_else(
+        || r.information.pseudo_inverse(1e-12 * r.information.amax()).unwrap_or_else(|_| Matrix6::zeros()),
+        |c| range_noise(&c, r, config),
     )
+}
+
+/// A match's covariance by pair `c` as calibrated ([`link_noise`]). A
+/// match with blind directions takes `range_scale` alone: its covariance
+/// is empty along them, and the blocks' factors would turn that empty
+/// direction (the calibration's blocks come from halvings without
+/// blind directions).
+pub(crate) fn range_noise(c: &Matrix6<f64>, r: &crate::icp::IcpResult, config: &LinkConfig) -> Matrix6<f64> {
+    let (rotation, translation) = config.range_blocks;
+    if r.unobservable.is_empty() && (rotation, translation) != (1.0, 1.0) {
+        crate::noise::by_blocks(c, &r.source_centroid, rotation, translation) * config.range_scale
+    } else {
+        c * config.range_scale
+    }
 }
 
 /// The factor on the links' noise for a variance factor σ̂₀²: σ̂₀² itself,

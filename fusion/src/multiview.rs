@@ -435,7 +435,8 @@ impl Matcher<'_> {
 
 /// A match made in its target scan's frame (`target_from_source` =
 /// `j_from_c`), moved into the world by `world_from_j`: the pose and trace
-/// composed, the information and blind directions carried by the adjoint
+/// composed, the source's centroid moved, the information and blind
+/// directions carried by the adjoint
 /// (ξ_world = Ad(world_from_j) ξ_j).
 pub(crate) fn in_world(mut r: IcpResult, world_from_j: &Isometry3<f64>) -> IcpResult {
     let ad = adjoint(world_from_j);
@@ -448,6 +449,7 @@ pub(crate) fn in_world(mut r: IcpResult, world_from_j: &Isometry3<f64>) -> IcpRe
     r.edge_bias = ad * r.edge_bias;
     r.edge_lean = ad * r.edge_lean;
     r.asymmetry = ad * r.asymmetry;
+    r.source_centroid = world_from_j * r.source_centroid;
     r.range_covariance = r.range_covariance.map(|c| ad * c * ad.transpose());
     r
 }

@@ -20,7 +20,7 @@
 //! "Covariances the data calibrate"). What halves of one scan cannot
 //! show is noise common to both (a beam's range bias).
 
-use nalgebra::{Isometry3, Point3};
+use nalgebra::{Isometry3, Matrix6, Point3, Vector6};
 use rayon::prelude::*;
 
 use crate::icp::Method;
@@ -83,6 +83,18 @@ pub struct Calibration {
     /// from the scanner): the factor on it (1 when nothing could be
     /// measured).
     pub range_scale: f64,
+    /// The same for the covariance by pair's rotation and its translation
+    /// apart, each about the source's centroid (frame-free: [`by_blocks`]):
+    /// the halves' mean χ² of each block against its own 3×3 block, over
+    /// 3, carried on to the scans' own density by the quarters' — from
+    /// the halvings that see all six directions; `range_scale` both where
+    /// none does. The covariance by pair can misjudge the two by
+    /// different factors: halves of random quarters of a 3DTK hall scan
+    /// 1.67 and 1.51 where `range_scale` is 1.46, those of the whole
+    /// scans 1.26 and 1.92 where it is 1.61 (BENCHMARKS.md).
+    pub rotation_scale: f64,
+    /// See [`rotation_scale`](Self::rotation_scale).
+    pub translation_scale: f64,
     /// How far each halving's two ways disagree
     /// ([`crate::icp::IcpResult::asymmetry`] Δ): the halves' mean ΔᵀC⁻¹Δ
     /// against their covariance by pair C calibrated (× `range_scale`) —
@@ -107,6 +119,11 @@ pub struct Shares {
     pub variance_scale: f64,
     /// The same against the covariance by pair.
     pub range_scale: f64,
+    /// The mean χ² of the covariance by pair's rotation block and of its
+    /// translation block about the source's centroid, over 3, from the
+    /// shares that see all six directions ([`Calibration::rotation_scale`]);
+    /// `None` when none does.
+    pub blocks: Option<(f64, f64)>,
     /// The mean ΔᵀC⁻¹Δ of the shares' two ways
     /// ([`crate::icp::IcpResult::asymmetry`]) against their covariance by
     /// pair C (not scaled); 0 matched one way.
@@ -161,12 +178,19 @@ pub fn calibrate<S: AsRef<[Point3<f32>]> + Sync>(
     let halves = pooled(&shares(scans, config, both_ways, icp, 1));
     let quarters = pooled(&shares(scans, config, both_ways, icp, 2));
     let range_scale = at_full_density(halves.range_scale, quarters.range_scale);
+    let (rotation_scale, translation_scale) = match (halves.blocks, quarters.blocks) {
+        (Some(h), Some(q)) => (at_full_density(h.0, q.0), at_full_density(h.1, q.1)),
+        (Some(h), None) => h,
+        _ => (range_scale, range_scale),
+    };
     Calibration {
         variance_scale: at_full_density(halves.variance_scale, quarters.variance_scale),
         dof: halves.dof,
         halvings: halves.matched,
         left_out: halves.left_out,
         range_scale,
+        rotation_scale,
+        translation_scale,
         asymmetry: if halves.asymmetry > 0.0 && quarters.asymmetry > 0.0 {
             at_full_density(halves.asymmetry, quarters.asymmetry) / range_scale
         } else {
@@ -239,7 +263,11 @@ fn shares<S: AsRef<[Point3<f32>]> + Sync>(
                 .map(|information| (r.asymmetry.transpose() * information * r.asymmetry)[0])
                 .filter(|c| c.is_finite())
                 .unwrap_or(0.0);
-            (dof > 0 && chi2.is_finite()).then_some(Sample { chi2, by_range, dof, asymmetry })
+            let blocks = r
+                .range_covariance
+                .filter(|_| r.unobservable.is_empty())
+                .and_then(|c| blocks_chi2(&xi, &c, &r.source_centroid));
+            (dof > 0 && chi2.is_finite()).then_some(Sample { chi2, by_range, dof, asymmetry, blocks })
         })
         .collect()
 }
@@ -284,6 +312,48 @@ struct Sample {
     dof: usize,
     /// ΔᵀC⁻¹Δ of its two ways against its covariance by pair (0 one way).
     asymmetry: f64,
+    /// Its rotation's and its translation's χ² about the source's
+    /// centroid, each against its own block of the covariance by pair
+    /// ([`blocks_chi2`]); `None` with blind directions.
+    blocks: Option<(f64, f64)>,
+}
+
+/// ξ = (ω, v) (left, its frame) and its covariance `cov` about the point
+/// `c` rather than the frame's origin: v − c × ω, the motion there. As a
+/// matrix: `A = [I 0; −[c]× I]`.
+fn about(c: &Point3<f64>) -> Matrix6<f64> {
+    let mut a = Matrix6::identity();
+    a.fixed_view_mut::<3, 3>(3, 0).copy_from(&(-c.coords.cross_matrix()));
+    a
+}
+
+/// The χ² of `xi`'s rotation and of its translation about `c`, each
+/// against its own 3×3 block of `cov` about `c` ([`about`]); `None` when
+/// a block is singular or a χ² not finite.
+fn blocks_chi2(xi: &Vector6<f64>, cov: &Matrix6<f64>, c: &Point3<f64>) -> Option<(f64, f64)> {
+    let a = about(c);
+    let (x, cov) = (a * xi, a * cov * a.transpose());
+    let block = |k: usize| {
+        let part = x.fixed_rows::<3>(k).into_owned();
+        let inverse = cov.fixed_view::<3, 3>(k, k).into_owned().try_inverse()?;
+        Some((part.transpose() * inverse * part)[0]).filter(|v| v.is_finite())
+    };
+    Some((block(0)?, block(3)?))
+}
+
+/// `cov` (of ξ = (ω, v), left, its frame) with its rotation scaled by
+/// `rotation` and its translation by `translation`, both about the point
+/// `c` (in the same frame): A⁻¹·D·(A·cov·Aᵀ)·D·A⁻ᵀ with `A = [I 0; −[c]× I]`
+/// (ξ about `c`: v − c × ω) and D = diag(√rotation I, √translation I). About the
+/// source's centroid the split is the same in every frame — where the
+/// frame's origin lies far from the points (a national grid), a turn
+/// about it is mostly translation. Equal factors scale `cov` alone.
+pub fn by_blocks(cov: &Matrix6<f64>, c: &Point3<f64>, rotation: f64, translation: f64) -> Matrix6<f64> {
+    let (a, back) = (about(c), about(&Point3::from(-c.coords)));
+    let (r, t) = (rotation.sqrt(), translation.sqrt());
+    let d = Matrix6::from_diagonal(&Vector6::new(r, r, r, t, t, t));
+    let scaled = back * d * (a * cov * a.transpose()) * d * back.transpose();
+    0.5 * (scaled + scaled.transpose())
 }
 
 /// Σ χ² / Σ dof of the samples, those whose χ²/dof is beyond [`GROSS`]
@@ -302,6 +372,12 @@ fn pooled(samples: &[Sample]) -> Shares {
             0.0
         } else {
             kept.iter().map(|s| s.asymmetry).sum::<f64>() / kept.len() as f64
+        },
+        blocks: {
+            let blocks: Vec<(f64, f64)> = kept.iter().filter_map(|s| s.blocks).collect();
+            let n = 3.0 * blocks.len() as f64;
+            (!blocks.is_empty())
+                .then(|| (blocks.iter().map(|b| b.0).sum::<f64>() / n, blocks.iter().map(|b| b.1).sum::<f64>() / n))
         },
         dof,
         matched: samples.len(),
@@ -410,15 +486,77 @@ mod tests {
     /// A gross halving (a mismatch) is left out of the pool, noise is not.
     #[test]
     fn gross_halvings_are_left_out() {
-        let sample = |chi2, by_range, asymmetry| Sample { chi2, by_range, dof: 6, asymmetry };
-        let c =
-            pooled(&[sample(6.0, 12.0, 2.0), sample(5.0, 10.0, 3.0), sample(7.0, 14.0, 4.0), sample(600.0, 1.0, 90.0)]);
+        let sample = |chi2, by_range, asymmetry, blocks| Sample { chi2, by_range, dof: 6, asymmetry, blocks };
+        let c = pooled(&[
+            sample(6.0, 12.0, 2.0, Some((3.0, 9.0))),
+            sample(5.0, 10.0, 3.0, Some((6.0, 3.0))),
+            sample(7.0, 14.0, 4.0, None),
+            sample(600.0, 1.0, 90.0, Some((300.0, 300.0))),
+        ]);
         assert_eq!((c.left_out, c.dof, c.matched), (1, 18, 4));
         assert!((c.variance_scale - 1.0).abs() < 1e-12);
         assert!((c.range_scale - 2.0).abs() < 1e-12);
         assert!((c.asymmetry - 3.0).abs() < 1e-12);
+        // The blocks from the kept samples that have them, over 3.
+        let (rotation, translation) = c.blocks.expect("blocks");
+        assert!((rotation - 1.5).abs() < 1e-12 && (translation - 2.0).abs() < 1e-12, "{:?}", c.blocks);
         let none = pooled(&[]);
-        assert_eq!((none.variance_scale, none.dof), (1.0, 0));
+        assert_eq!((none.variance_scale, none.dof, none.blocks), (1.0, 0, None));
+    }
+
+    /// A covariance scaled by blocks about a point: sampled errors whose
+    /// rotation is stretched by √fr and whose motion at the point by √ft
+    /// (ω' = √fr·ω, v' = √ft·(v − c×ω) + c×ω') have it as their covariance
+    /// (Monte Carlo), and judged against the unscaled covariance their
+    /// blocks' mean χ² is 3·fr and 3·ft — what the calibration measures
+    /// is what the links take. Equal factors scale the covariance alone,
+    /// and the scaling is the same in every frame (the adjoint).
+    #[test]
+    fn a_covariance_scaled_by_blocks_about_a_point_is_what_its_errors_have() {
+        use rand_distr::{Distribution, StandardNormal};
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let l = Matrix6::from_fn(|r, c| if r >= c { 0.3 + 0.1 * (r as f64) - 0.07 * (c as f64) } else { 0.0 })
+            + Matrix6::from_diagonal(&Vector6::new(0.01, 0.02, 0.015, 0.5, 0.4, 0.6));
+        let cov = l * l.transpose() * 1e-4;
+        let c = Point3::new(40.0, -25.0, 3.0);
+        let (fr, ft) = (2.5, 0.6);
+        let scaled = by_blocks(&cov, &c, fr, ft);
+        let n = 40_000;
+        let mut sum = Matrix6::zeros();
+        let (mut rotation, mut translation) = (0.0, 0.0);
+        for _ in 0..n {
+            let z = Vector6::from_fn(|_, _| StandardNormal.sample(&mut rng));
+            let xi = l * z * 1e-2;
+            let w = xi.fixed_rows::<3>(0).into_owned();
+            let at_c = xi.fixed_rows::<3>(3) - c.coords.cross(&w);
+            let w2 = w * fr.sqrt();
+            let v2 = at_c * ft.sqrt() + c.coords.cross(&w2);
+            let stretched = Vector6::new(w2.x, w2.y, w2.z, v2.x, v2.y, v2.z);
+            sum += stretched * stretched.transpose();
+            let (r, t) = blocks_chi2(&stretched, &cov, &c).expect("blocks");
+            rotation += r;
+            translation += t;
+        }
+        let sampled = sum / n as f64;
+        for i in 0..6 {
+            for j in 0..6 {
+                let tolerance = 0.03 * (scaled[(i, i)] * scaled[(j, j)]).sqrt();
+                assert!((sampled[(i, j)] - scaled[(i, j)]).abs() < tolerance, "({i}, {j}): {sampled} against {scaled}");
+            }
+        }
+        let (rotation, translation) = (rotation / (3 * n) as f64, translation / (3 * n) as f64);
+        assert!(
+            (rotation / fr - 1.0).abs() < 0.03 && (translation / ft - 1.0).abs() < 0.03,
+            "{rotation} {translation}"
+        );
+
+        let same = by_blocks(&cov, &c, 1.7, 1.7);
+        assert!((same - cov * 1.7).amax() < 1e-12 * cov.amax());
+        let t = Isometry3::new(Vector3::new(3.0e5, 5.8e6, 120.0), Vector3::new(0.2, -0.4, 1.1));
+        let ad = crate::se3::adjoint(&t);
+        let moved = by_blocks(&(ad * cov * ad.transpose()), &(t * c), fr, ft);
+        let expected = ad * scaled * ad.transpose();
+        assert!((moved - expected).amax() < 1e-9 * expected.amax(), "{moved} against {expected}");
     }
 
     /// Enough halvings for the calibration's degrees of freedom, within

@@ -894,6 +894,9 @@ pub fn register_set<S: AsRef<[Point3<f32>]> + Sync>(
     let mut calibrated = config.clone();
     calibrated.link.multiview.icp.noise_scale *= noise.map_or(1.0, |n| n.variance_scale);
     calibrated.link.range_scale *= noise.map_or(1.0, |n| n.range_scale);
+    if let Some(n) = noise {
+        calibrated.link.range_blocks = (n.rotation_scale / n.range_scale, n.translation_scale / n.range_scale);
+    }
     calibrated.link.asymmetry = noise.map(|n| n.asymmetry).filter(|a| *a > 0.0).or(config.link.asymmetry);
     calibrated.link.calibration_dof = noise.map_or(config.link.calibration_dof, |n| n.dof);
     let config = &calibrated;
@@ -1793,7 +1796,7 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
             })
         })
         .collect();
-    let covariance = placed_covariances(n, &links, &config.link.step_information(), config.link.range_scale);
+    let covariance = placed_covariances(n, &links, &config.link.step_information(), &config.link);
     Ok(SetResult {
         world_from_scan: poses,
         covariance,
@@ -1831,7 +1834,7 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
 /// the modes without a link graph), plus its partners' — until the
 /// verification gives the pairs' own ([`verified`]). A match's own is
 /// graph mode's link model ([`crate::links`]): its covariance by pair
-/// (`range_scale`, the calibration's factor on it) plus its edges' pull
+/// (`range_scale` and `range_blocks`, the calibration's factors on it) plus its edges' pull
 /// δδᵀ, and along what it cannot see the start's step (`step`, an
 /// information); without the covariance by pair (point-to-point), its
 /// information held by `step` where it sees nothing. (No variance factor:
@@ -1846,14 +1849,18 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
 /// optimistic on chains of partial overlaps (mean NEES 86–1,100 on
 /// wedges); with the link model, calibrated, their mean NEES on real
 /// scans' parts came within 1.6× of 6 (BENCHMARKS).
-fn placed_covariances(n: usize, links: &[SetLink], step: &Matrix6<f64>, range_scale: f64) -> Vec<Matrix6<f64>> {
+fn placed_covariances(n: usize, links: &[SetLink], step: &Matrix6<f64>, link: &LinkConfig) -> Vec<Matrix6<f64>> {
     let mut covariance = vec![Matrix6::zeros(); n];
     for l in links {
         if let Some(m) = &l.result {
             covariance[l.source] = match m.range_covariance {
                 // Nothing of it along the blind directions (projected
                 // out): there the start's step's variance.
-                Some(c) => c * range_scale + step_within(&m.unobservable, step) + m.edge_bias * m.edge_bias.transpose(),
+                Some(c) => {
+                    crate::links::range_noise(&c, m, link)
+                        + step_within(&m.unobservable, step)
+                        + m.edge_bias * m.edge_bias.transpose()
+                }
                 // The information's inverse along what it sees, the start's
                 // step σ along what it cannot.
                 None => m.covariance_held(step),

@@ -375,8 +375,7 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
                     target_from_source: r.target_from_source,
                     information: r.information,
                 }),
-                edge_covariance: used
-                    .map(|r| crate::links::link_noise(&r.information, r.range_covariance, config.range_scale)),
+                edge_covariance: used.map(|r| crate::links::link_noise(r, config)),
                 pull: l.result.as_ref().map_or_else(Pull::default, Pull::of),
             };
             check.consistent = check.judged();

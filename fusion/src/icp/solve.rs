@@ -86,6 +86,10 @@ pub struct IcpResult {
     /// mean of 5.4 ([`crate::links`], [`crate::noise::Shares::asymmetry`]).
     /// Zero one way.
     pub asymmetry: Vector6<f64>,
+    /// The source's centroid where the estimate puts it (target frame):
+    /// where the covariance's rotation and translation are told apart
+    /// ([`crate::noise::by_blocks`]).
+    pub source_centroid: Point3<f64>,
 }
 
 impl IcpResult {
@@ -415,6 +419,7 @@ fn align_impl(
         edge_lean,
         range_covariance,
         asymmetry,
+        source_centroid: estimate * super::degeneracy::centroid(source),
     })
 }
 

@@ -145,6 +145,18 @@ pub struct NoiseReport {
     /// pair, which the reported covariances carry
     /// (`variance_scale` calibrates graph mode's link weights).
     pub range_scale: f64,
+    /// The same for the covariance by pair's rotation alone, about each
+    /// match's source centroid (where the split is the same in every
+    /// frame): the halves' mean χ² of the rotation against its own 3×3
+    /// block, over 3, carried on to the scans' density as `range_scale`
+    /// is, from the halvings without blind directions (`range_scale`
+    /// where none is). Every covariance by pair of a match without blind
+    /// directions takes it on its rotation about its source's centroid,
+    /// `translation_scale` on its translation there.
+    pub rotation_scale: f64,
+    /// The same for the translation about the source's centroid
+    /// (`rotation_scale`).
+    pub translation_scale: f64,
     /// How far a halving's two ways disagree by the scans' noise alone:
     /// the halves' mean ΔᵀC⁻¹Δ, Δ half the difference of the steps each
     /// way alone would take (one the first half's points on the second's
@@ -170,6 +182,12 @@ pub struct SharesReport {
     pub variance_scale: f64,
     /// Σχ²/Σdof against the covariance by pair.
     pub range_scale: f64,
+    /// The mean χ² of the rotation about the source's centroid against its
+    /// own block of the covariance by pair, over 3, from the shares without
+    /// blind directions; null when none is.
+    pub rotation_scale: Option<f64>,
+    /// The same for the translation about the source's centroid.
+    pub translation_scale: Option<f64>,
     /// The mean ΔᵀC⁻¹Δ of their two ways against their covariance by pair
     /// (not calibrated).
     pub asymmetry: f64,

@@ -195,7 +195,7 @@ fn the_3dtk_set_lands_on_the_references_from_its_odometry() {
     // The noise calibration: the halves' factors carried on by their step
     // from the quarters', between 1 and 2.
     let noise = &v["noise"];
-    for key in ["variance_scale", "range_scale"] {
+    for key in ["variance_scale", "range_scale", "rotation_scale", "translation_scale"] {
         let (h, q) =
             (noise["halves"][key].as_f64().expect("halves"), noise["quarters"][key].as_f64().expect("quarters"));
         let carried = h * (h / q).clamp(1.0, 2.0);

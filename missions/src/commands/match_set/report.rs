@@ -87,6 +87,8 @@ pub(super) fn report(
             halvings: n.halvings,
             left_out: n.left_out,
             range_scale: n.range_scale,
+            rotation_scale: n.rotation_scale,
+            translation_scale: n.translation_scale,
             asymmetry: n.asymmetry,
             halves: shares_report(&n.halves),
             quarters: shares_report(&n.quarters),
@@ -234,6 +236,8 @@ fn shares_report(s: &fusion::noise::Shares) -> SharesReport {
     SharesReport {
         variance_scale: s.variance_scale,
         range_scale: s.range_scale,
+        rotation_scale: s.blocks.map(|b| b.0),
+        translation_scale: s.blocks.map(|b| b.1),
         asymmetry: s.asymmetry,
         dof: s.dof,
         matched: s.matched,

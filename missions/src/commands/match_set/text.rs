@@ -53,10 +53,13 @@ pub(super) fn write_text(out: &mut dyn Write, scans: &[InputScan], report: &Matc
         writeln!(
             out,
             "covariances calibrated on the scans' halves and quarters: ×{:.2}, by pair ×{:.2} \
-             (halves ×{:.2}, ×{:.2}; quarters ×{:.2}, ×{:.2}; {} degrees of freedom, {:.3} s); \
+             (rotation ×{:.2}, translation ×{:.2} about each source's centroid; \
+             halves ×{:.2}, ×{:.2}; quarters ×{:.2}, ×{:.2}; {} degrees of freedom, {:.3} s); \
              the two ways' disagreement by noise alone {:.2}",
             n.variance_scale,
             n.range_scale,
+            n.rotation_scale,
+            n.translation_scale,
             n.halves.variance_scale,
             n.halves.range_scale,
             n.quarters.variance_scale,
