@@ -17,8 +17,9 @@
 //!   scan thinned on a voxel grid keeps its points about a cell apart
 //!   wherever its scanner's lay nearer). Fitted for the viewpoint, the
 //!   axis, the two steps and the floor, from the range's viewpoint and
-//!   the origin about each of the frame's axes; fitted again without the
-//!   floor where it holds up fewer than a twentieth of the points.
+//!   the origin about each of the frame's axes; from those starts again
+//!   without the floor where the best start's holds up fewer than a
+//!   twentieth of its points, the kind kept refitted on more.
 //!
 //! The turning model is taken where it explains the farther spacing (≥
 //! [`MIN_ACROSS_EXPLAINED`]) and the nearer at least as well as the range
