@@ -1835,7 +1835,7 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
 /// verification gives the pairs' own ([`verified`]). A match's own is
 /// graph mode's link model ([`crate::links`]): its covariance by pair
 /// (`range_scale` and `range_blocks`, the calibration's factors on it) plus its edges' pull
-/// δδᵀ, and along what it cannot see the start's step (`step`, an
+/// δδᵀ (beyond its noise: [`crate::links::beyond_noise`]), and along what it cannot see the start's step (`step`, an
 /// information); without the covariance by pair (point-to-point), its
 /// information held by `step` where it sees nothing. (No variance factor:
 /// the verification's, which judges these matches, replaces these
@@ -1857,9 +1857,10 @@ fn placed_covariances(n: usize, links: &[SetLink], step: &Matrix6<f64>, link: &L
                 // Nothing of it along the blind directions (projected
                 // out): there the start's step's variance.
                 Some(c) => {
+                    let bias = crate::links::Pull::of(m, link).bias;
                     crate::links::range_noise(&c, m, link)
                         + step_within(&m.unobservable, step)
-                        + m.edge_bias * m.edge_bias.transpose()
+                        + bias * bias.transpose()
                 }
                 // The information's inverse along what it sees, the start's
                 // step σ along what it cannot.

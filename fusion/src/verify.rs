@@ -376,7 +376,7 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
                     information: r.information,
                 }),
                 edge_covariance: used.map(|r| crate::links::link_noise(r, config)),
-                pull: l.result.as_ref().map_or_else(Pull::default, Pull::of),
+                pull: l.result.as_ref().map_or_else(Pull::default, |r| Pull::of(r, config)),
             };
             check.consistent = check.judged();
             check

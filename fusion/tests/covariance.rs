@@ -302,6 +302,86 @@ fn the_edges_pull_is_where_the_covered_match_lands() {
     assert!(r.edge_bias.norm() < 0.1 * moved.norm(), "pull where the target covers the source: {}", r.edge_bias);
 }
 
+/// An edge's pull that is nothing but noise scatters as
+/// `IcpResult::edge_bias_chi2` says: a flat corner (floor and two walls)
+/// whose source runs 2 m on past the target's floor and one wall, the
+/// planes continuing — the pairs beyond the edge lie on the surface, so
+/// the pull is only their noise and the covered pairs' (σ 4 mm inside,
+/// 1 mm beyond: the pairs' variances differ, as the covariance by pair
+/// allows). Over 240 draws of the source's samples and noise, its χ²
+/// against what that noise would scatter it by averages 6, as χ²₆ does
+/// (6.43; without the covered pairs' share of the noise 430, without the
+/// beyond pairs' 13, the two fits' sandwich covariances' difference 3.5).
+/// On the curved corner of the test above, where the pairs beyond the
+/// edge meet the floor's tangent and not the floor, it is far beyond
+/// (200).
+#[test]
+fn an_edges_pull_of_noise_alone_has_the_chi2_of_its_noise() {
+    use rayon::prelude::*;
+    let corner = |n: usize, to: f64, sigma: [f64; 2], rng: &mut ChaCha8Rng| -> Vec<Point3<f32>> {
+        let (inside, beyond) = (Normal::new(0.0, sigma[0]).expect("σ"), Normal::new(0.0, sigma[1]).expect("σ"));
+        (0..n)
+            .map(|i| {
+                let (a, b) = (rng.random_range(0.0..1.0), rng.random_range(0.0..1.0));
+                let mut p = match i % 3 {
+                    0 => Vector3::new(a * to, 4.0 * b, 0.0),
+                    1 => Vector3::new(0.0, 4.0 * a, 2.4 * b),
+                    _ => Vector3::new(a * to, 0.0, 2.4 * b),
+                };
+                let noise = if p.x > 4.0 { beyond.sample(rng) } else { inside.sample(rng) };
+                p[[2, 0, 1][i % 3]] += noise;
+                Point3::from(p.cast::<f32>())
+            })
+            .collect()
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let mut target = Target::new(&corner(30_000, 4.0, [0.0, 0.0], &mut rng), 10).expect("target");
+    target.orient_normals_towards(&Point3::new(2.0, 2.0, 1.0));
+    let config = IcpConfig {
+        max_correspondence_m: 0.5,
+        max_iterations: 100,
+        translation_tolerance_m: 1e-9,
+        rotation_tolerance_rad: 1e-9,
+        edge_bias: true,
+        range_noise: true,
+        ..IcpConfig::default()
+    };
+    let start = Isometry3::translation(0.01, -0.01, 0.005);
+    let chi2: Vec<f64> = (0..240u64)
+        .into_par_iter()
+        .map(|k| {
+            let mut rng = ChaCha8Rng::seed_from_u64(1_000 + k);
+            let source = corner(6_000, 6.0, [0.004, 0.001], &mut rng);
+            let r = align(&source, &target, &start, &config).expect("icp");
+            assert!(r.edge_bias.norm() > 0.0, "pairs beyond the edge pull");
+            r.edge_bias_chi2
+        })
+        .collect();
+    let mean = chi2.iter().sum::<f64>() / chi2.len() as f64;
+    // χ²₆ has variance 12: the mean of 240 has σ 0.22.
+    assert!((mean - 6.0).abs() < 0.9, "mean χ² of a pull of noise alone {mean}");
+    // Beyond its noise: the curved corner's pull.
+    let f = |a: f64, b: f64| 0.06 * (1.3 * a).sin() + 0.04 * (0.9 * b).cos();
+    let curved = |n: usize, floor_to: f64, rng: &mut ChaCha8Rng| -> Vec<Point3<f32>> {
+        (0..n)
+            .map(|i| {
+                let (a, b) = (rng.random_range(0.0..4.0), rng.random_range(0.0..4.0));
+                let p = match i % 3 {
+                    0 => Point3::new(a * floor_to / 4.0, b, f(a * floor_to / 4.0, b)),
+                    1 => Point3::new(f(a, b), a, b * 0.6),
+                    _ => Point3::new(a, f(b, a), b * 0.6),
+                };
+                p.cast::<f32>()
+            })
+            .collect()
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let mut target = Target::new(&curved(30_000, 4.0, &mut rng), 10).expect("target");
+    target.orient_normals_towards(&Point3::new(2.0, 2.0, 1.0));
+    let r = align(&curved(9_000, 6.0, &mut rng), &target, &start, &config).expect("icp");
+    assert!(r.edge_bias_chi2 > 100.0, "the curved floor's pull against its noise: χ² {}", r.edge_bias_chi2);
+}
+
 /// A set placed scan by scan (`pairwise`: each scan on the one before)
 /// reports each scan's covariance from its match's covariance by pair,
 /// calibrated on its scans' halves and quarters, plus its partner's, which

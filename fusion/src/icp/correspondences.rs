@@ -33,6 +33,11 @@ pub(crate) struct Sums {
     /// zero from [`accumulate`].
     pub(crate) zone_h: Matrix6<f64>,
     pub(crate) zone_b: Vector6<f64>,
+    /// With [`IcpConfig::range_noise`] too: the share of `scores` of the
+    /// pairs beyond the edge, and of the edge's zone ([`edge_zone`]) —
+    /// what the edge's pull would scatter by were it the pairs' noise.
+    pub(crate) edge_scores: Matrix6<f64>,
+    pub(crate) zone_scores: Matrix6<f64>,
     /// Point-to-plane with [`IcpConfig::line_ratio`]: the share of `h` of
     /// the pairs whose partner lies on one scan line (its middle share
     /// below the ratio: [`Target::middle_shares`](super::Target::middle_shares)),
@@ -65,6 +70,8 @@ impl Sums {
         self.edge_b += o.edge_b;
         self.zone_h += o.zone_h;
         self.zone_b += o.zone_b;
+        self.edge_scores += o.edge_scores;
+        self.zone_scores += o.zone_scores;
         self.line_h += o.line_h;
         self.scores += o.scores;
         self
@@ -90,6 +97,8 @@ impl Sums {
             edge_b: 0.5 * (self.edge_b + a.transpose() * back.edge_b),
             zone_h: 0.5 * (self.zone_h + a.transpose() * back.zone_h * a),
             zone_b: 0.5 * (self.zone_b + a.transpose() * back.zone_b),
+            edge_scores: 0.5 * (self.edge_scores + a.transpose() * back.edge_scores * a),
+            zone_scores: 0.5 * (self.zone_scores + a.transpose() * back.zone_scores * a),
             line_h: 0.5 * (self.line_h + a.transpose() * back.line_h * a),
             ..self
         }
@@ -266,6 +275,9 @@ pub(crate) fn accumulate(
                         }
                         if config.range_noise {
                             s.scores += (w * res * res) * h;
+                            if edge {
+                                s.edge_scores += (w * res * res) * h;
+                            }
                         }
                         s.sq += res * res;
                     }
@@ -350,8 +362,8 @@ struct ZonePair {
 /// back faces and the distance as [`accumulate`] takes them), those within
 /// [`EDGE_ZONE_SPACINGS`] target spacings (the median distance of the
 /// edge's samples to their nearest neighbours) of a pair beyond the edge
-/// ([`Target::beyond`]), summed into `zone_h` / `zone_b` (the rest of the
-/// sums zero). Zero when no pair lies beyond the edge. Pairs whose
+/// ([`Target::beyond`]), summed into `zone_h` / `zone_b` / `zone_scores`
+/// (the rest of the sums zero). Zero when no pair lies beyond the edge. Pairs whose
 /// normals disagree are left out as [`accumulate`] leaves them (`own`).
 pub(crate) fn edge_zone(
     source: &[Point3<f32>],
@@ -406,7 +418,8 @@ pub(crate) fn edge_zone(
         })
         .map(|&ZonePair { res, row, .. }| {
             let w = config.kernel.weight(res);
-            Sums { zone_h: w * row * row.transpose(), zone_b: w * res * row, ..Sums::default() }
+            let h = w * row * row.transpose();
+            Sums { zone_h: h, zone_b: w * res * row, zone_scores: (w * res * res) * h, ..Sums::default() }
         })
         .collect::<Vec<Sums>>()
         .into_iter()

@@ -64,6 +64,17 @@ pub struct IcpResult {
     /// the links' misfit is it ([`crate::links`]). Zero otherwise, or
     /// when no pair lies beyond the edge.
     pub edge_lean: Vector6<f64>,
+    /// With [`IcpConfig::range_noise`] too: [`edge_bias`](Self::edge_bias)'s
+    /// square against what the pairs' noise alone would scatter it by (its
+    /// covariance were each pair's score's variance its own squared
+    /// residual, as in [`range_covariance`](Self::range_covariance)): a
+    /// pull of nothing but noise has a mean of 6 less the blind
+    /// directions; infinite without the scores, zero with no pull. The
+    /// link graph takes only the pull's square beyond it
+    /// ([`crate::links::beyond_noise`]).
+    pub edge_bias_chi2: f64,
+    /// The same for [`edge_lean`](Self::edge_lean).
+    pub edge_lean_chi2: f64,
     /// With [`IcpConfig::range_noise`] (point-to-plane): the estimate's
     /// covariance with each pair's variance its own squared residual,
     /// H⁻¹·B·H⁻¹ ([`IcpConfig::range_noise`]), not scaled by
@@ -268,12 +279,15 @@ fn align_impl(
     let mut forward = 0;
     let mut start_rmse_m = None;
     let mut unobservable = Vec::new();
-    // Only with blind directions asked for: the analysis runs about the
+    // With blind directions asked for, the analysis runs about the
     // source's centroid (where the estimate puts it in the target's frame:
     // the same verdict in every frame), rotation made comparable with
     // translation by the source's RMS radius about it (at least 1 mm).
-    let (centre, lever_arm_m) =
-        config.degeneracy_ratio.map_or((Point3::origin(), 1.0), |_| super::degeneracy::centroid_and_lever_arm(source));
+    // The centroid is the result's too (`source_centroid`).
+    let (centre, lever_arm_m) = match config.degeneracy_ratio {
+        Some(_) => super::degeneracy::centroid_and_lever_arm(source),
+        None => (super::degeneracy::centroid(source), 1.0),
+    };
     // Each way's points' own normals, for the normal agreement: the
     // source's model and the target's.
     let own = reverse.as_ref().and_then(|r| own_model(config, source, r.model));
@@ -370,6 +384,7 @@ fn align_impl(
         }
         sums.zone_h = z.zone_h;
         sums.zone_b = z.zone_b;
+        sums.zone_scores = z.zone_scores;
     }
     let rmse_m = sums.rmse();
     let prior_information = prior.map_or_else(Matrix6::zeros, |p| p.information);
@@ -398,8 +413,14 @@ fn align_impl(
         }
         None => measured,
     };
-    let edge_bias = without(&sums, &sums.edge_h, &sums.edge_b, &unobservable);
-    let edge_lean = without(&sums, &(sums.edge_h + sums.zone_h), &(sums.edge_b + sums.zone_b), &unobservable);
+    let (edge_bias, edge_bias_chi2) = without(&sums, &sums.edge_h, &sums.edge_b, &sums.edge_scores, &unobservable);
+    let (edge_lean, edge_lean_chi2) = without(
+        &sums,
+        &(sums.edge_h + sums.zone_h),
+        &(sums.edge_b + sums.zone_b),
+        &(sums.edge_scores + sums.zone_scores),
+        &unobservable,
+    );
     let range_covariance = (config.range_noise && config.method == Method::PointToPlane && sums.n > 0).then(|| {
         let p = projector_off(&unobservable);
         p * sandwich(&sums) * p
@@ -416,10 +437,12 @@ fn align_impl(
         trace,
         unobservable,
         edge_bias,
+        edge_bias_chi2,
         edge_lean,
+        edge_lean_chi2,
         range_covariance,
         asymmetry,
-        source_centroid: estimate * super::degeneracy::centroid(source),
+        source_centroid: estimate * centre,
     })
 }
 
@@ -436,18 +459,41 @@ fn sandwich(sums: &Sums) -> Matrix6<f64> {
 }
 
 /// The step the last pass's `sums` would take without some of their
-/// pairs (theirs `edge_h`, `edge_b`): H_c⁺(−b_c) − H⁺(−b), the rest's
+/// pairs (theirs `edge_h`, `edge_b`): δ = H_c⁺(−b_c) − H⁺(−b), the rest's
 /// normal equations (H_c, b_c: the sums less those pairs') against all
 /// pairs', the `unobservable` directions projected out — without the
 /// pairs beyond the edge, [`IcpResult::edge_bias`]; without those and the
 /// edge's zone, [`IcpResult::edge_lean`]. Zero when nothing is left out.
-fn without(sums: &Sums, edge_h: &Matrix6<f64>, edge_b: &Vector6<f64>, unobservable: &[Vector6<f64>]) -> Vector6<f64> {
+/// And δᵀV⁺δ with V what the pairs' noise alone would scatter δ by:
+/// δ = (H⁺ − H_c⁺)·b_c + H⁺·b_e (b_e the left-out pairs' share of b), so
+/// with each pair's score's variance its own squared residual (the
+/// covariance by pair's model: `edge_scores` the left-out pairs' share of
+/// `scores`, B_c the rest) V = (H⁺ − H_c⁺)·B_c·(H⁺ − H_c⁺)ᵀ + H⁺·B_e·H⁺;
+/// infinite without the scores ([`IcpConfig::range_noise`] off), zero
+/// where δ is.
+fn without(
+    sums: &Sums,
+    edge_h: &Matrix6<f64>,
+    edge_b: &Vector6<f64>,
+    edge_scores: &Matrix6<f64>,
+    unobservable: &[Vector6<f64>],
+) -> (Vector6<f64>, f64) {
     if *edge_h == Matrix6::zeros() {
-        return Vector6::zeros();
+        return (Vector6::zeros(), 0.0);
     }
     let (covered, all) = (pseudo_inverse(&(sums.h - edge_h)), pseudo_inverse(&sums.h));
-    let d = projector_off(unobservable) * (-(covered * (sums.b - edge_b)) + all * sums.b);
-    if d.iter().all(|v| v.is_finite()) { d } else { Vector6::zeros() }
+    let p = projector_off(unobservable);
+    let d = p * (-(covered * (sums.b - edge_b)) + all * sums.b);
+    if !d.iter().all(|v| v.is_finite()) {
+        return (Vector6::zeros(), 0.0);
+    }
+    if sums.scores == Matrix6::zeros() {
+        return (d, f64::INFINITY);
+    }
+    let m = all - covered;
+    let v = p * (m * (sums.scores - edge_scores) * m.transpose() + all * edge_scores * all) * p;
+    let chi2 = (d.transpose() * pseudo_inverse(&v) * d)[0];
+    (d, if chi2.is_finite() { chi2 } else { f64::INFINITY })
 }
 
 /// [`IcpResult::asymmetry`] from the last pass's sums each way, `forward`
