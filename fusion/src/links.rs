@@ -1170,9 +1170,9 @@ impl Pull {
 /// by (`chi2`, from the covariance by pair's model, which the data's
 /// calibration scales by `scale`: χ²/`scale`) on `dof` k degrees of
 /// freedom. A covariance takes δ's square as the pull's, but δ is
-/// measured with the pairs' noise, E[δδᵀ] = ββᵀ + V for a pull β: its
-/// square beyond the noise, χ² − k against E[χ²] = k + βᵀV⁺β, is what the
-/// pull adds (a positive-part estimate, as `sampling_own`'s). On a
+/// measured with the pairs' noise, δδᵀ averaging ββᵀ + V for a pull β:
+/// its square beyond the noise, χ² − k against a mean χ² of k + βᵀV⁺β, is
+/// what the pull adds (a positive-part estimate, as `sampling_own`'s). On a
 /// street's LiDAR wedges half the pulls were much of them noise (χ²
 /// 7–11 against 6) and the links' covariances 1.23× pessimistic (now
 /// 1.10×); a real room's wedges, whose edges lean by more (χ² 20–110),
