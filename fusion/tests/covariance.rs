@@ -219,6 +219,41 @@ fn noise_that_differs_by_surface_is_reported_by_pair() {
     }
 }
 
+/// A corner of three curved faces, `n` samples at random: the floor z =
+/// f(x, y) out to x = `floor_to`, walls at x = 0 and y = 0 (4 m long).
+fn curved_corner(n: usize, floor_to: f64, rng: &mut ChaCha8Rng) -> Vec<Point3<f32>> {
+    let f = |a: f64, b: f64| 0.06 * (1.3 * a).sin() + 0.04 * (0.9 * b).cos();
+    (0..n)
+        .map(|i| {
+            let (a, b) = (rng.random_range(0.0..4.0), rng.random_range(0.0..4.0));
+            let p = match i % 3 {
+                0 => Point3::new(a * floor_to / 4.0, b, f(a * floor_to / 4.0, b)),
+                1 => Point3::new(f(a, b), a, b * 0.6),
+                _ => Point3::new(a, f(b, a), b * 0.6),
+            };
+            p.cast::<f32>()
+        })
+        .collect()
+}
+
+/// A corner's target: normals towards the room's inside.
+fn corner_target(points: &[Point3<f32>]) -> Target {
+    let mut target = Target::new(points, 10).expect("target");
+    target.orient_normals_towards(&Point3::new(2.0, 2.0, 1.0));
+    target
+}
+
+/// ICP run to its fixed point (tolerances 1e-9, 0.5 m reach).
+fn to_convergence() -> IcpConfig {
+    IcpConfig {
+        max_correspondence_m: 0.5,
+        max_iterations: 100,
+        translation_tolerance_m: 1e-9,
+        rotation_tolerance_rad: 1e-9,
+        ..IcpConfig::default()
+    }
+}
+
 /// Where a source runs on beyond the target's edge, its pairs there pull
 /// the match: `IcpResult::edge_bias`, the linearised step of the fit
 /// without them, is where the match without them (`only_covered`) lands;
@@ -228,33 +263,11 @@ fn noise_that_differs_by_surface_is_reported_by_pair() {
 #[test]
 fn the_edges_pull_is_where_the_covered_match_lands() {
     let mut rng = ChaCha8Rng::seed_from_u64(5);
-    // A corner of three curved faces: the floor z = f(x, y), walls at x = 0 and y = 0.
-    let f = |a: f64, b: f64| 0.06 * (1.3 * a).sin() + 0.04 * (0.9 * b).cos();
-    let corner = |n: usize, floor_to: f64, rng: &mut ChaCha8Rng| -> Vec<Point3<f32>> {
-        (0..n)
-            .map(|i| {
-                let (a, b) = (rng.random_range(0.0..4.0), rng.random_range(0.0..4.0));
-                let p = match i % 3 {
-                    0 => Point3::new(a * floor_to / 4.0, b, f(a * floor_to / 4.0, b)),
-                    1 => Point3::new(f(a, b) + 0.0, a, b * 0.6),
-                    _ => Point3::new(a, f(b, a) + 0.0, b * 0.6),
-                };
-                p.cast::<f32>()
-            })
-            .collect()
-    };
-    let mut target = Target::new(&corner(30_000, 4.0, &mut rng), 10).expect("target");
-    target.orient_normals_towards(&Point3::new(2.0, 2.0, 1.0));
-    let base = IcpConfig {
-        max_correspondence_m: 0.5,
-        max_iterations: 100,
-        translation_tolerance_m: 1e-9,
-        rotation_tolerance_rad: 1e-9,
-        ..IcpConfig::default()
-    };
+    let target = corner_target(&curved_corner(30_000, 4.0, &mut rng));
+    let base = to_convergence();
     let start = Isometry3::translation(0.01, -0.01, 0.005);
     // The source's floor runs on to x = 6, two metres past the target's.
-    let beyond = corner(9_000, 6.0, &mut rng);
+    let beyond = curved_corner(9_000, 6.0, &mut rng);
     let all = align(&beyond, &target, &start, &IcpConfig { edge_bias: true, ..base }).expect("icp");
     let covered = align(&beyond, &target, &start, &IcpConfig { only_covered: true, ..base }).expect("icp");
     let moved = left_error(&covered.target_from_source, &all.target_from_source);
@@ -297,7 +310,7 @@ fn the_edges_pull_is_where_the_covered_match_lands() {
     // pairs still count as beyond, where the faces meet and where random
     // samples leave a gap on one side).
     let inside: Vec<Point3<f32>> =
-        corner(9_000, 4.0, &mut rng).into_iter().filter(|p| p.x < 3.7 && p.y < 3.7 && p.z < 2.1).collect();
+        curved_corner(9_000, 4.0, &mut rng).into_iter().filter(|p| p.x < 3.7 && p.y < 3.7 && p.z < 2.1).collect();
     let r = align(&inside, &target, &start, &IcpConfig { edge_bias: true, ..base }).expect("icp");
     assert!(r.edge_bias.norm() < 0.1 * moved.norm(), "pull where the target covers the source: {}", r.edge_bias);
 }
@@ -335,17 +348,8 @@ fn an_edges_pull_of_noise_alone_has_the_chi2_of_its_noise() {
             .collect()
     };
     let mut rng = ChaCha8Rng::seed_from_u64(11);
-    let mut target = Target::new(&corner(30_000, 4.0, [0.0, 0.0], &mut rng), 10).expect("target");
-    target.orient_normals_towards(&Point3::new(2.0, 2.0, 1.0));
-    let config = IcpConfig {
-        max_correspondence_m: 0.5,
-        max_iterations: 100,
-        translation_tolerance_m: 1e-9,
-        rotation_tolerance_rad: 1e-9,
-        edge_bias: true,
-        range_noise: true,
-        ..IcpConfig::default()
-    };
+    let target = corner_target(&corner(30_000, 4.0, [0.0, 0.0], &mut rng));
+    let config = IcpConfig { edge_bias: true, range_noise: true, ..to_convergence() };
     let start = Isometry3::translation(0.01, -0.01, 0.005);
     let chi2: Vec<f64> = (0..240u64)
         .into_par_iter()
@@ -361,24 +365,9 @@ fn an_edges_pull_of_noise_alone_has_the_chi2_of_its_noise() {
     // χ²₆ has variance 12: the mean of 240 has σ 0.22.
     assert!((mean - 6.0).abs() < 0.9, "mean χ² of a pull of noise alone {mean}");
     // Beyond its noise: the curved corner's pull.
-    let f = |a: f64, b: f64| 0.06 * (1.3 * a).sin() + 0.04 * (0.9 * b).cos();
-    let curved = |n: usize, floor_to: f64, rng: &mut ChaCha8Rng| -> Vec<Point3<f32>> {
-        (0..n)
-            .map(|i| {
-                let (a, b) = (rng.random_range(0.0..4.0), rng.random_range(0.0..4.0));
-                let p = match i % 3 {
-                    0 => Point3::new(a * floor_to / 4.0, b, f(a * floor_to / 4.0, b)),
-                    1 => Point3::new(f(a, b), a, b * 0.6),
-                    _ => Point3::new(a, f(b, a), b * 0.6),
-                };
-                p.cast::<f32>()
-            })
-            .collect()
-    };
     let mut rng = ChaCha8Rng::seed_from_u64(5);
-    let mut target = Target::new(&curved(30_000, 4.0, &mut rng), 10).expect("target");
-    target.orient_normals_towards(&Point3::new(2.0, 2.0, 1.0));
-    let r = align(&curved(9_000, 6.0, &mut rng), &target, &start, &config).expect("icp");
+    let target = corner_target(&curved_corner(30_000, 4.0, &mut rng));
+    let r = align(&curved_corner(9_000, 6.0, &mut rng), &target, &start, &config).expect("icp");
     assert!(r.edge_bias_chi2 > 100.0, "the curved floor's pull against its noise: χ² {}", r.edge_bias_chi2);
 }
 
