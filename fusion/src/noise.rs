@@ -319,12 +319,11 @@ struct Sample {
 }
 
 /// ξ = (ω, v) (left, its frame) and its covariance `cov` about the point
-/// `c` rather than the frame's origin: v − c × ω, the motion there. As a
-/// matrix: `A = [I 0; −[c]× I]`.
+/// `c` rather than the frame's origin: v − c × ω, the motion there — ξ in
+/// the frame moved to `c`, the adjoint of the translation by −c:
+/// `A = [I 0; −[c]× I]`.
 fn about(c: &Point3<f64>) -> Matrix6<f64> {
-    let mut a = Matrix6::identity();
-    a.fixed_view_mut::<3, 3>(3, 0).copy_from(&(-c.coords.cross_matrix()));
-    a
+    crate::se3::adjoint(&Isometry3::translation(-c.x, -c.y, -c.z))
 }
 
 /// The χ² of `xi`'s rotation and of its translation about `c`, each

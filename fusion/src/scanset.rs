@@ -1834,16 +1834,16 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
 /// the modes without a link graph), plus its partners' — until the
 /// verification gives the pairs' own ([`verified`]). A match's own is
 /// graph mode's link model ([`crate::links`]): its covariance by pair
-/// (`range_scale` and `range_blocks`, the calibration's factors on it) plus its edges' pull
-/// δδᵀ (beyond its noise: [`crate::links::beyond_noise`]), and along what it cannot see the start's step (`step`, an
-/// information); without the covariance by pair (point-to-point), its
-/// information held by `step` where it sees nothing. (No variance factor:
-/// the verification's, which judges these matches, replaces these
-/// covariances whole.) A
-/// scan is placed on its partners, which are uncertain themselves: to
-/// first order (independent errors, world-frame left perturbations) a
-/// partner's error moves the scan with it, so its covariance adds to the
-/// match's — the mean over several partners (a metascan's), in scan order
+/// (`range_scale` and `range_blocks`, the calibration's factors on it)
+/// plus its edges' pull δδᵀ (beyond its noise:
+/// [`crate::links::beyond_noise`]), and along what it cannot see the
+/// start's step (`step`, an information); without the covariance by
+/// pair (point-to-point), its information held by `step` where it sees
+/// nothing. (No variance factor: the verification's, which judges these
+/// matches, replaces these covariances whole.) A scan is placed on its
+/// partners, which are uncertain themselves: to first order
+/// (independent errors, world-frame left perturbations) a partner's
+/// error moves the scan with it, so its covariance adds to the match's — the mean over several partners (a metascan's), in scan order
 /// (a later partner, in simultaneous mode, with its own match's alone).
 /// The match's alone made the single-strategy modes' covariances 10–100×
 /// optimistic on chains of partial overlaps (mean NEES 86–1,100 on
