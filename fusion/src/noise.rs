@@ -282,7 +282,7 @@ fn shares<S: AsRef<[Point3<f32>]> + Sync>(
 /// quarters misled the step to full density: on the 3DTK set's scans
 /// the quarters' factor was 6.2 where the halves' was 1.6 (dealt by this
 /// hash, 1.8 and 1.8; BENCHMARKS.md, "Halves dealt at random").
-fn share(key: u64, bits: u32) -> u64 {
+pub(crate) fn share(key: u64, bits: u32) -> u64 {
     let mut z = key.wrapping_add(0x9E37_79B9_7F4A_7C15);
     z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);

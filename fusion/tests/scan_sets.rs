@@ -7,6 +7,8 @@ use std::path::PathBuf;
 
 use fusion::scanset::{Mode, SetConfig, register_set};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use scanner::io::{from_3dtk_axes, read, read_3dtk_pose, read_matrix4};
 
 fn data(rel: &str) -> PathBuf {
@@ -381,8 +383,11 @@ fn the_verifications_matches_share_the_thirds_footprints_and_not_a_wedges() {
     assert_eq!((checked.shared[0], checked.shared[2]), (1.0, 1.0), "wedges: {:?}", checked.shared);
 }
 
-/// Disjoint thirds of 3DTK scan 1 (every third point), each under a known
-/// transform: (the transforms, the thirds in their own frames).
+/// Disjoint thirds of 3DTK scan 1 (each point dealt to one at random),
+/// each under a known transform: (the transforms, the thirds in their own
+/// frames). Not every third point: thirds interleaved along the scan lines
+/// are far more alike than two scans' samples — they left 0.80× the RMS
+/// residual of two random halves at their true poses.
 fn thirds_of_a_3dtk_scan() -> (Vec<Isometry3<f64>>, Vec<Vec<Point3<f32>>>) {
     let points = threedtk(1);
     let truth: Vec<Isometry3<f64>> = (0..3)
@@ -394,27 +399,26 @@ fn thirds_of_a_3dtk_scan() -> (Vec<Isometry3<f64>>, Vec<Vec<Point3<f32>>>) {
             )
         })
         .collect();
-    let shares: Vec<Vec<Point3<f32>>> = (0..3u64)
-        .map(|k| {
-            points
-                .iter()
-                .enumerate()
-                .filter(|(i, _)| *i as u64 % 3 == k)
-                .map(|(_, p)| (truth[k as usize].inverse() * p.cast::<f64>()).cast::<f32>())
-                .collect()
-        })
-        .collect();
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let mut shares: Vec<Vec<Point3<f32>>> = vec![Vec::new(); 3];
+    for p in &points {
+        let k = rng.random_range(0..3);
+        shares[k].push((truth[k].inverse() * p.cast::<f64>()).cast::<f32>());
+    }
     (truth, shares)
 }
 
 /// The verification's residual against the data's noise: each check
 /// reports its match's RMS residual and the pair's noise floor (two random
-/// halves of each scan matched at the identity). Disjoint thirds of one
-/// real scan registered under known transforms leave about the floor
-/// (measured 1.30–1.32×: a third is sparser than the floor's halves); the
-/// three 3DTK scans, taken from different places, leave several times it
-/// at their right poses (measured 4.4–5.3×: other samplings, incidence and
-/// occlusions) — which is why the ratio is reported, not judged.
+/// halves of each scan matched at the identity). Disjoint random thirds
+/// of one real scan registered under known transforms leave a little
+/// less than the floor (measured 0.81–0.82×: the floor's halves are
+/// halves of each third, sparser than the thirds); the three 3DTK scans,
+/// taken from different places, leave several times it at their right
+/// poses (measured 2.8–3.3×: other samplings, incidence and occlusions)
+/// — which is why the ratio is reported, not judged. (With the floor's
+/// halves drawn by two multiplicative hashes, which shared 29 % of the
+/// points, and the thirds every third point, 1.30–1.32× and 4.4–5.3×.)
 #[test]
 fn the_checks_report_the_residual_against_the_noise_floor() {
     let (truth, shares) = thirds_of_a_3dtk_scan();
@@ -422,8 +426,8 @@ fn the_checks_report_the_residual_against_the_noise_floor() {
     assert_eq!(r.checks.len(), 3, "every pair overlaps");
     for c in &r.checks {
         let ratio = c.rmse_m.expect("matched") / c.noise_m;
-        assert!(c.noise_m > 0.005 && c.noise_m < 0.02, "floor {} m", c.noise_m);
-        assert!((0.8..1.6).contains(&ratio), "{}←{}: {ratio}", c.target, c.source);
+        assert!(c.noise_m > 0.005 && c.noise_m < 0.03, "floor {} m", c.noise_m);
+        assert!((0.6..1.1).contains(&ratio), "{}←{}: {ratio}", c.target, c.source);
     }
     let scans: Vec<Vec<Point3<f32>>> = (0..3).map(threedtk).collect();
     let starts: Vec<Isometry3<f64>> =
@@ -431,7 +435,7 @@ fn the_checks_report_the_residual_against_the_noise_floor() {
     let r = register_set(&scans, &starts, &SetConfig::default(), &mut |_, _, _, _| ()).expect("registers");
     for c in &r.checks {
         let ratio = c.rmse_m.expect("matched") / c.noise_m;
-        assert!((3.0..7.0).contains(&ratio), "{}←{}: {ratio}", c.target, c.source);
+        assert!((2.0..5.0).contains(&ratio), "{}←{}: {ratio}", c.target, c.source);
     }
 }
 
