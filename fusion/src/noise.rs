@@ -155,15 +155,16 @@ pub fn at_full_density(halves: f64, quarters: f64) -> f64 {
     halves * (halves / quarters).clamp(1.0, DENSITY_STEP_MAX)
 }
 
-/// Each scan dealt into two halves by a hash of its points' indices
-/// ([`share`]; [`halvings`] times, each time another salt), the second half turned
-/// about the scanner (`turned`), the halves reduced as `config` reduces
-/// the scans and matched from near that turn (`off`) — both ways when
-/// `both_ways` (point-to-plane) — with `config`'s ICP settings and no
-/// noise scale. Each halving's error ξ against the turn gives χ² = ξᵀ·I·ξ
-/// with I its reported information, whose mean is the observed degrees
-/// of freedom when I is honest — and the same against its covariance by
-/// pair ([`crate::icp::IcpResult::range_covariance`]: `range_scale`). A
+/// Each scan dealt into two halves by a mixing hash of its points'
+/// indices (`share`; [`halvings`] times, each time another salt), the
+/// second half turned about the scanner (`turned`), the halves reduced as
+/// `config` reduces the scans and matched from near that turn (`off`) —
+/// both ways when `both_ways` (point-to-plane) — with `config`'s ICP
+/// settings and no noise scale. Each halving's error ξ against the turn
+/// gives χ² = ξᵀ·I·ξ with I its reported information, whose mean is the
+/// observed degrees of freedom when I is honest — and the same against
+/// its covariance by pair
+/// ([`crate::icp::IcpResult::range_covariance`]: `range_scale`). A
 /// half that cannot be matched (too few points, no more pairs than
 /// `min_pairs`) is passed over. The same again with two quarters of each
 /// scan (halves of a half): the factors are carried from the halves' to

@@ -386,9 +386,9 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
 }
 
 /// The point-to-plane RMS residual between two random halves of `points`
-/// (each point dealt to one half by a hash of its index,
-/// [`crate::noise::share`]), reduced and matched as `config` matches
-/// scans, at the identity: what the data's noise and sampling leave of a
+/// (each point dealt to one half by a mixing hash of its index,
+/// `noise::share`), reduced and matched as `config` matches scans, at
+/// the identity: what the data's noise and sampling leave of a
 /// registration that is exactly right. Zero when a half is too small to
 /// match. (Until session 72 each half was drawn by a multiplicative hash
 /// of its own: the two shared 29 % of the points — the same samples with
