@@ -590,7 +590,8 @@ mod tests {
 
     /// The shares are dealt as at random along a scan's order: a point's
     /// next neighbour falls in its share as often as chance has it (1/2,
-    /// 1/4), where the multiplicative hash interleaved them (0.37, 0.12),
+    /// 1/4), where the multiplicative hash interleaved them (0.37 and 0.12
+    /// on average over the salts of three scans' four halvings),
     /// and each share holds its part of the points.
     #[test]
     fn consecutive_points_fall_in_the_same_share_as_often_as_at_random() {
