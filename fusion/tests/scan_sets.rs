@@ -386,8 +386,8 @@ fn the_verifications_matches_share_the_thirds_footprints_and_not_a_wedges() {
 /// Disjoint thirds of 3DTK scan 1 (each point dealt to one at random),
 /// each under a known transform: (the transforms, the thirds in their own
 /// frames). Not every third point: thirds interleaved along the scan lines
-/// are a little more alike than two scans' samples (at their true poses
-/// an RMS residual of 15.0 mm, dealt at random 15.6–15.9 mm).
+/// are a little more alike than two scans' samples (registered, a pair's
+/// RMS residual 15.0 mm; dealt at random 15.6–16.0 mm).
 fn thirds_of_a_3dtk_scan() -> (Vec<Isometry3<f64>>, Vec<Vec<Point3<f32>>>) {
     let points = threedtk(1);
     let truth: Vec<Isometry3<f64>> = (0..3)
