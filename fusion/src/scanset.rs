@@ -1843,8 +1843,9 @@ fn register_in_first_frame<S: AsRef<[Point3<f32>]> + Sync>(
 /// matches, replaces these covariances whole.) A scan is placed on its
 /// partners, which are uncertain themselves: to first order
 /// (independent errors, world-frame left perturbations) a partner's
-/// error moves the scan with it, so its covariance adds to the match's — the mean over several partners (a metascan's), in scan order
-/// (a later partner, in simultaneous mode, with its own match's alone).
+/// error moves the scan with it, so its covariance adds to the match's —
+/// the mean over several partners (a metascan's), in scan order (a later
+/// partner, in simultaneous mode, with its own match's alone).
 /// The match's alone made the single-strategy modes' covariances 10–100×
 /// optimistic on chains of partial overlaps (mean NEES 86–1,100 on
 /// wedges); with the link model, calibrated, their mean NEES on real

@@ -397,10 +397,10 @@ pub fn check_pairs<S: AsRef<[Point3<f32>]> + Sync>(
 /// 1.21× on the PCL room pair's, 1.69× on small_gicp's pair's.)
 pub fn noise_floor(points: &[Point3<f32>], config: &LinkConfig) -> f64 {
     let mv = &config.multiview;
-    let half = |k: u64| -> Vec<Point3<f32>> {
-        points.iter().enumerate().filter(|(i, _)| crate::noise::share(*i as u64, 1) == k).map(|(_, p)| *p).collect()
-    };
-    let (a, b) = (half(0), half(1));
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    for (i, p) in points.iter().enumerate() {
+        if crate::noise::share(i as u64, 1) == 0 { a.push(*p) } else { b.push(*p) }
+    }
     let floor = || -> Result<f64> {
         let source = scanner::reduced_points(&a, mv.source_voxel_m)?;
         let model = scanner::reduced_points(&b, mv.target_voxel_m)?;
