@@ -29,7 +29,10 @@ source, NEES_CUT=shares or NEES_CUT=wedges one way of cutting (what is
 not run is still drawn: every run of a seed has the same parts), NEES_VERBOSE=1 prints every part (with its departure from where the
 verified pairs agree, in the modes without a link graph),
 NEES_CHECKS=1 every verified pair (its RMS residual against the noise floor, and its true error),
-NEES_AXES=1 the mean square error over the mean variance along each world axis, NEES_KEEP=DIR keeps each trial's inputs, NEES_PARTS=K deals the shares
+NEES_AXES=1 the mean square error over the mean variance along each world axis,
+NEES_EIG=1 the errors' mean z² along each eigendirection of the trials'
+joint covariance (smallest variance first; 1 each when honest) and how
+much of each direction turns the parts, NEES_KEEP=DIR keeps each trial's inputs, NEES_PARTS=K deals the shares
 into K parts (4; 2 is one link alone), NEES_ARGS="--only-covered" adds
 arguments to every `match`, NEES_VIEWPOINTS=1 writes the parts as PCD with
 the scanner's position (VIEWPOINT) so that the verification tests free
@@ -186,6 +189,8 @@ def main():
             variants = {}
             exits = {m: [] for m in modes}
             silent = {m: 0 for m in modes}
+            # mode → each trial's z² along its joint covariance's eigendirections.
+            eigen = {}
             for trial in range(trials):
                 parts = cut(rng)
                 truths = [np.eye(4)] + [random_pose(rng, up, 45, 2, 0.5) for _ in parts[1:]]
@@ -223,6 +228,11 @@ def main():
                         rows_ = np.concatenate([np.arange(6 * i, 6 * i + 6) for i in kept])
                         e = np.concatenate([xi(np.array(v["scans"][i]["world_from_scan"]), truths[i]) for i in kept])
                         joint[mode].append((e @ np.linalg.solve(big[np.ix_(rows_, rows_)], e), len(kept)))
+                        if os.environ.get("NEES_EIG") and len(kept) == len(parts) - 1:
+                            lam, vec = np.linalg.eigh(big[np.ix_(rows_, rows_)])
+                            # Each eigendirection's z², and its share that turns the parts.
+                            turns = (vec.reshape(len(kept), 6, -1)[:, :3, :] ** 2).sum(axis=(0, 1))
+                            eigen.setdefault(mode, []).append(((vec.T @ e) ** 2 / lam, turns))
                         scales = os.environ.get("NEES_DEPARTURE_SCALES")
                         if scales and v["scans"][kept[0]].get("departure") is not None:
                             # The reported joint covariance is the adjustment's plus ξξᵀ.
@@ -278,6 +288,12 @@ def main():
                     if m == mode:
                         total, poses = per_part(nees)
                         print(f"{'':41} {what:32} joint NEES per part {total / poses:8.2f}")
+                if eigen.get(mode):
+                    # Smallest variance first: the errors' z² along each, and how much of each is a turn.
+                    z2 = np.mean([z for z, _ in eigen[mode]], axis=0)
+                    turns = np.mean([r for _, r in eigen[mode]], axis=0)
+                    print(f"{'':41} along the joint covariance's eigendirections, z²: " + " ".join(f"{x:.2f}" for x in z2))
+                    print(f"{'':41} their share that turns the parts:           " + " ".join(f"{x:.2f}" for x in turns))
                 if os.environ.get("NEES_AXES"):
                     # Per axis of the world (ω x y z, v x y z): the errors' mean square over the reported variance.
                     ratio = [np.mean([e[k] ** 2 for e, _, _ in rows]) / np.mean([c[k, k] for _, c, _ in rows]) for k in range(6)]

@@ -10,6 +10,7 @@ mod hostile;
 mod journal_v1;
 mod journal_v2;
 mod malformed;
+mod match_covariance;
 mod match_set;
 mod montecarlo;
 mod network;

@@ -9,11 +9,11 @@ use nalgebra::{Isometry3, Matrix4, Point3, UnitQuaternion};
 use serde_json::Value;
 use tests::{Edit, cps_survey, workspace};
 
-fn data(rel: &str) -> OsString {
+pub(super) fn data(rel: &str) -> OsString {
     workspace().join("data").join(rel).into_os_string()
 }
 
-fn pose(v: &Value) -> Isometry3<f64> {
+pub(super) fn pose(v: &Value) -> Isometry3<f64> {
     let m: Vec<Vec<f64>> = serde_json::from_value(v.clone()).expect("4×4");
     rigid(&Matrix4::from_fn(|r, c| m[r][c]))
 }
@@ -997,7 +997,7 @@ fn write_wedge(
 
 /// `points` (world coordinates) in the frame of `world_from_part`, written
 /// as binary PLY to `path`.
-fn write_part<'a>(
+pub(super) fn write_part<'a>(
     path: &Path,
     points: impl Iterator<Item = &'a Point3<f32>>,
     world_from_part: &Isometry3<f64>,
@@ -1087,7 +1087,7 @@ fn bench_wedges(
 const STREET: &str = "small_gicp_pair/target.ply";
 
 /// One entry of an `--init-poses` file: `file` at `world_from_scan` (4×4).
-fn init_entry(file: &str, world_from_scan: &Matrix4<f64>) -> Value {
+pub(super) fn init_entry(file: &str, world_from_scan: &Matrix4<f64>) -> Value {
     let rows: Vec<Vec<f64>> = (0..4).map(|r| (0..4).map(|c| world_from_scan[(r, c)]).collect()).collect();
     serde_json::json!({ "file": file, "world_from_scan": rows })
 }
