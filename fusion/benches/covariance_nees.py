@@ -5,7 +5,8 @@ its points dealt at random into disjoint shares (no point is in two
 parts, so each keeps its own noise), or wedges by azimuth (the first at a
 random azimuth each trial: fixed cuts gave the same parts every trial) that
 overlap their neighbours, each point of an overlap dealt to one of its
-wedges (NEES_WEDGES=shared keeps it in both, as before session 29) — and
+wedges by a hash of its index (NEES_DEAL=random deals it at random;
+NEES_WEDGES=shared keeps it in both, as before session 29) — and
 each part is put in a frame of its own
 under a known random transform (turned up to ±45° about the vertical and
 ±2° about the others, moved up to 0.5 m). The starts are off by 0.1 m and
@@ -105,6 +106,13 @@ def wedges(xyz, up, k, width_deg, first_deg=0.0):
     # same noise in both wedges). Not the index modulo their number: the
     # street's LiDAR stores its beams interleaved, and one wedge got the
     # low beams of the overlap, the other the high — no common surface.
+    if os.environ.get("NEES_DEAL") == "random":
+        # Each overlap point to one of its wedges at random (by a generator
+        # of its own, so that the trials' draws stay the same).
+        u = np.random.default_rng(len(xyz)).random(len(xyz))
+        pick = np.floor(u * np.maximum(inside.sum(axis=0), 1)).astype(np.int64)
+        owner = inside & (np.cumsum(inside, axis=0) - 1 == pick)
+        return [xyz[owner[j]] for j in range(k)]
     count = inside.sum(axis=0).astype(np.uint64)
     h = (np.arange(len(xyz), dtype=np.uint64) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(32)
     pick = ((h * np.maximum(count, np.uint64(1))) >> np.uint64(32)).astype(np.int64)
