@@ -8,10 +8,19 @@
 //! the automatic schedule) registers them; every trial's parts but the
 //! first (the frame) are judged together against their reported joint
 //! covariance (`--joint-covariance`): χ² with 6 degrees of freedom per
-//! part when the covariance is honest. Over the trials the sum is χ² with
-//! 6 per part in all, and its 95 % interval is narrow enough to refuse a
-//! covariance 1.25× off in scale (per part [4.92, 7.18] on 36 parts) —
-//! the calibration on the scans' halves and quarters scales these parts'
+//! part when the covariance is honest, and over the trials χ² with 6 per
+//! part in all.
+//!
+//! What is claimed, and so asserted, is the bench's: within 1.22× of
+//! honest — the sum within the χ² interval of a covariance up to 1.22×
+//! too wide or too narrow (per part [4.03, 8.76] on 36 parts: an honest
+//! covariance made 1.6× too wide or narrow fails). Not honest exactly:
+//! over seven draws of twelve trials each (seeds 1–14) the hall scan's
+//! shares were 4.94–7.60 per part (5.83 on average, one draw beyond the
+//! interval of an honest covariance), the room's 4.72–5.68 (5.23: 0.87×,
+//! pessimistic, three draws below it), as the bench has them (5.85 and
+//! 5.39 over eight seeds of eight trials).
+//! The calibration on the scans' halves and quarters scaled these parts'
 //! covariances by 1.2–3.1 (the hall scan's: 1.5 typically) and 0.7–2.4
 //! (the room's).
 
@@ -48,6 +57,10 @@ fn xi(estimate: &Isometry3<f64>, truth: &Isometry3<f64>) -> [f64; 6] {
     let v = d.translation.vector;
     [w.x, w.y, w.z, v.x, v.y, v.z]
 }
+
+/// How far from honest the covariances are claimed to be, at most: a
+/// factor on their scale (README, docs/match.md).
+const WITHIN: f64 = 1.22;
 
 /// 95 % interval of χ² with `dof` degrees of freedom (Wilson–Hilferty:
 /// good to a fraction of a percent here).
@@ -105,9 +118,8 @@ fn joint_nees(label: &str, points: &[Point3<f32>], trials: usize, seed: u64, dir
 }
 
 /// Random shares of the 3DTK hall scan and of the PCL room scan, twelve
-/// trials each: the joint NEES per part within the χ² interval (measured
-/// 5.91 and 5.43; on the bench over eight seeds of eight trials 5.85 and
-/// 5.39, 6 when honest).
+/// trials each (the first two seeds): the joint NEES per part within
+/// [`WITHIN`] of honest (measured 5.91 and 5.43; 6 when honest).
 #[test]
 fn the_covariances_of_a_real_scans_parts_are_honest() {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -121,12 +133,8 @@ fn the_covariances_of_a_real_scans_parts_are_honest() {
     for (label, points, seed) in [("hall", &hall, 1), ("room", &room, 2)] {
         let (total, parts) = joint_nees(label, points, 12, seed, dir.path());
         let (lo, hi) = chi2_interval(6.0 * parts as f64);
+        let (lo, hi) = (lo / WITHIN / parts as f64, hi * WITHIN / parts as f64);
         let per_part = total / parts as f64;
-        assert!(
-            (lo..=hi).contains(&total),
-            "{label}: joint NEES per part {per_part:.2} outside [{:.2}, {:.2}]",
-            lo / parts as f64,
-            hi / parts as f64
-        );
+        assert!((lo..=hi).contains(&per_part), "{label}: joint NEES per part {per_part:.2} outside [{lo:.2}, {hi:.2}]");
     }
 }
