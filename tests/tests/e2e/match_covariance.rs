@@ -28,13 +28,15 @@ use std::f64::consts::PI;
 use std::ffi::OsString;
 use std::path::Path;
 
+use fusion::se3::left_difference;
 use nalgebra::{DMatrix, DVector, Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
+use planner::montecarlo::nees_interval;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde_json::Value;
 use tests::cps_survey;
 
-use super::match_set::{data, init_entry, pose, write_part};
+use super::match_set::{data, pose, write_parts};
 
 /// A random pose as the bench draws it: turned up to `turn_deg` about z
 /// (the scans' up) after a tilt up to `tilt_deg` about a random axis,
@@ -48,27 +50,9 @@ fn random_pose(rng: &mut ChaCha8Rng, turn_deg: f64, tilt_deg: f64, move_m: f64) 
     Isometry3::from_parts(shift, turn * tilt)
 }
 
-/// ξ = (ω, v) with estimate = exp(ξ)·truth (left, world axes), as the
-/// bench takes it: ω the turn's rotation vector, v the translation of
-/// estimate·truth⁻¹.
-fn xi(estimate: &Isometry3<f64>, truth: &Isometry3<f64>) -> [f64; 6] {
-    let d = estimate * truth.inverse();
-    let w = d.rotation.scaled_axis();
-    let v = d.translation.vector;
-    [w.x, w.y, w.z, v.x, v.y, v.z]
-}
-
 /// How far from honest the covariances are claimed to be, at most: a
 /// factor on their scale (README, docs/match.md).
 const WITHIN: f64 = 1.22;
-
-/// 95 % interval of χ² with `dof` degrees of freedom (Wilson–Hilferty:
-/// good to a fraction of a percent here).
-fn chi2_interval(dof: f64) -> (f64, f64) {
-    let z = 1.959_964;
-    let at = |s: f64| dof * (1.0 - 2.0 / (9.0 * dof) + s * z * (2.0 / (9.0 * dof)).sqrt()).powi(3);
-    (at(-1.0), at(1.0))
-}
 
 /// `trials` trials of `points` dealt into four shares (seeded by `seed`),
 /// each registered by `match` at the defaults in `dir`: the trials' joint
@@ -90,16 +74,8 @@ fn joint_nees(label: &str, points: &[Point3<f32>], trials: usize, seed: u64, dir
         let at = dir.join(format!("{label}-{trial}"));
         std::fs::create_dir_all(&at).expect("dir");
         let mut args: Vec<OsString> = vec!["match".into()];
-        let mut entries = Vec::new();
-        for (k, (truth, start)) in truths.iter().zip(&starts).enumerate() {
-            let name = format!("part{k}.ply");
-            let share = points.iter().zip(&owner).filter(|&(_, &o)| o == k).map(|(p, _)| p);
-            args.push(write_part(&at.join(&name), share, truth));
-            entries.push(init_entry(&name, &start.to_homogeneous()));
-        }
-        let init = at.join("init.json");
-        std::fs::write(&init, serde_json::to_string(&entries).expect("JSON")).expect("init");
-        args.extend(["--init-poses".into(), init.into_os_string(), "--joint-covariance".into(), "--json".into()]);
+        args.extend(write_parts(&at, points, |i, k| owner[i] == k, &truths, &starts));
+        args.extend(["--joint-covariance".into(), "--json".into()]);
         args.extend(["--out".into(), at.join("out").into_os_string()]);
         let run = cps_survey(args);
         assert_eq!(run.code, 0, "{label} trial {trial}: {}", run.stderr);
@@ -108,8 +84,11 @@ fn joint_nees(label: &str, points: &[Point3<f32>], trials: usize, seed: u64, dir
         let rows: Vec<Vec<f64>> = serde_json::from_value(v["joint_covariance"].clone()).expect("joint covariance");
         // Scans 1–3 (scan 0 is the frame: its rows are zero).
         let c = DMatrix::from_fn(18, 18, |r, s| rows[6 + r][6 + s]);
-        let e =
-            DVector::from_iterator(18, (1..4).flat_map(|k| xi(&pose(&v["scans"][k]["world_from_scan"]), &truths[k])));
+        // ξ as the bench takes it (left, world axes; v the translation of
+        // estimate·truth⁻¹).
+        let xi: Vec<_> =
+            (1..4).map(|k| left_difference(&pose(&v["scans"][k]["world_from_scan"]), &truths[k])).collect();
+        let e = DVector::from_fn(18, |r, _| xi[r / 6][r % 6]);
         let solved = c.cholesky().expect("a positive definite joint covariance").solve(&e);
         total += e.dot(&solved);
         parts += 3;
@@ -132,8 +111,8 @@ fn the_covariances_of_a_real_scans_parts_are_honest() {
     let room = scanner::io::read(Path::new(&data("pcl_room_scans/room_scan1.pcd"))).expect("room scan").points;
     for (label, points, seed) in [("hall", &hall, 1), ("room", &room, 2)] {
         let (total, parts) = joint_nees(label, points, 12, seed, dir.path());
-        let (lo, hi) = chi2_interval(6.0 * parts as f64);
-        let (lo, hi) = (lo / WITHIN / parts as f64, hi * WITHIN / parts as f64);
+        let (lo, hi) = nees_interval(6, parts);
+        let (lo, hi) = (lo / WITHIN, hi * WITHIN);
         let per_part = total / parts as f64;
         assert!((lo..=hi).contains(&per_part), "{label}: joint NEES per part {per_part:.2} outside [{lo:.2}, {hi:.2}]");
     }

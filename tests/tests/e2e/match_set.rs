@@ -997,7 +997,7 @@ fn write_wedge(
 
 /// `points` (world coordinates) in the frame of `world_from_part`, written
 /// as binary PLY to `path`.
-pub(super) fn write_part<'a>(
+fn write_part<'a>(
     path: &Path,
     points: impl Iterator<Item = &'a Point3<f32>>,
     world_from_part: &Isometry3<f64>,
@@ -1069,25 +1069,39 @@ fn bench_wedges(
         let pick = (((i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 32) * count) >> 32;
         inside[i][..k].iter().filter(|&&x| x).count() as u64 == pick
     };
+    (write_parts(dir, &scan.points, owner, &truths, &starts), truths)
+}
+
+/// The parts of `points` (world coordinates; part `k` holds point `i`
+/// where `owner(i, k)`), each written as `partK.ply` into `dir` in the
+/// frame of its truth, with an `--init-poses` file of `starts`: the
+/// inputs of a `match` (the PLYs, `--init-poses` and its file).
+pub(super) fn write_parts(
+    dir: &Path,
+    points: &[Point3<f32>],
+    owner: impl Fn(usize, usize) -> bool,
+    truths: &[Isometry3<f64>],
+    starts: &[Isometry3<f64>],
+) -> Vec<OsString> {
     let mut inputs: Vec<OsString> = Vec::new();
     let mut entries = Vec::new();
-    for (k, (truth, start)) in truths.iter().zip(&starts).enumerate() {
+    for (k, (truth, start)) in truths.iter().zip(starts).enumerate() {
         let name = format!("part{k}.ply");
-        let wedge = scan.points.iter().enumerate().filter(|&(i, _)| owner(i, k)).map(|(_, p)| p);
-        inputs.push(write_part(&dir.join(&name), wedge, truth));
+        let part = points.iter().enumerate().filter(|&(i, _)| owner(i, k)).map(|(_, p)| p);
+        inputs.push(write_part(&dir.join(&name), part, truth));
         entries.push(init_entry(&name, &start.to_homogeneous()));
     }
     let init = dir.join("init.json");
     std::fs::write(&init, serde_json::to_string(&entries).expect("JSON")).expect("init");
     inputs.extend(["--init-poses".into(), init.into_os_string()]);
-    (inputs, truths)
+    inputs
 }
 
 /// small_gicp's street frame (an HDL-32E's), under the shared data.
 const STREET: &str = "small_gicp_pair/target.ply";
 
 /// One entry of an `--init-poses` file: `file` at `world_from_scan` (4×4).
-pub(super) fn init_entry(file: &str, world_from_scan: &Matrix4<f64>) -> Value {
+fn init_entry(file: &str, world_from_scan: &Matrix4<f64>) -> Value {
     let rows: Vec<Vec<f64>> = (0..4).map(|r| (0..4).map(|c| world_from_scan[(r, c)]).collect()).collect();
     serde_json::json!({ "file": file, "world_from_scan": rows })
 }
