@@ -535,6 +535,13 @@ pub struct Restart {
     /// (at least one) lands where it does (seed 71's: kept, corroborated,
     /// exit 0).
     pub repeated: bool,
+    /// True when the result before the [`further`](Self::further)
+    /// restarts — the schedule's, or the restart's where it was kept — has
+    /// links that disagree beyond [`GROSS_VARIANCE_FACTOR`]: the further
+    /// restarts then run, and one the scans agree with better, however
+    /// slightly, whose links do not disagree so and that the verification
+    /// names nothing of is kept, as in place of a named result.
+    pub disagreeing_links: bool,
     /// The scans the result moved from their starts beyond the finest
     /// stage's reach (its correspondence distance), where the scans agree
     /// with the result not clearly better than with their starts
@@ -562,11 +569,12 @@ pub struct Restart {
     /// first after the pipe's restart, [`degeneracy_ratio`](Self::degeneracy_ratio)
     /// —, …, the last with the finest stage alone), run in turn while the result is not
     /// to be trusted — the verification names some of its scans, the
-    /// restart left some [`undecided`](Self::undecided), or the scans
+    /// restart left some [`undecided`](Self::undecided), the scans
     /// agree no better there than at their starts
     /// ([`starts_disagreement_m2`](Self::starts_disagreement_m2); not
     /// clearly better, [`SUPPORT_RATIO`], where it moved a scan beyond
-    /// the finest stage's reach) — and
+    /// the finest stage's reach), or its links disagree beyond
+    /// [`GROSS_VARIANCE_FACTOR`] ([`disagreeing_links`](Self::disagreeing_links)) — and
     /// the schedule has more than two stages: a restart's second stage can
     /// drag scans as the schedule's first did. One is kept, in place of all before
     /// it, when the scans agree [`RESTART_RATIO`] times better there than
@@ -719,6 +727,22 @@ pub enum Trigger {
 /// the restart costs its finer stages once more and is kept only by the
 /// disagreement rule ([`RESTART_RATIO`]).
 pub const RESTART_VARIANCE_FACTOR: f64 = 1.0;
+
+/// A result whose links disagree beyond this variance factor σ̂₀² is in
+/// doubt as a named one is ([`Restart::disagreeing_links`]): the further
+/// restarts run, and one the scans agree with better, however slightly,
+/// whose links do not disagree so and that the verification names
+/// nothing of takes its place. Measured (session 74): right registrations
+/// give 0.03–0.8 on parts of one scan's shares, 1–17 on a room's wedges
+/// (the NEES bench's seed 103, graph mode, eight trials), 273 on the
+/// 3DTK set's three viewpoints in every mode (370–470 as first
+/// measured); the room's wedges of seed 103's trial 3, which the
+/// schedule's second stage dragged 29–89 mm and 0.1–0.5° off (the
+/// restart without the first stage landing there too): 37,116, their σ
+/// 0.47–0.68 m carrying it, exit 0 — the schedule without its first two
+/// stages landed them within 8 mm, σ̂₀² 14, the scans agreeing 1.12×
+/// better (under the restart's 1.5×).
+pub const GROSS_VARIANCE_FACTOR: f64 = 1000.0;
 
 /// The restart is kept when the first registration's poses put points in
 /// another scanner's free space and the verification names none of the
@@ -1130,6 +1154,7 @@ fn restart_after_failure<S: AsRef<[Point3<f32>]> + Sync>(
         undecided: Vec::new(),
         corroborated: false,
         repeated: false,
+        disagreeing_links: false,
         unsupported,
         further: Vec::new(),
         degeneracy_ratio: None,
@@ -1358,10 +1383,15 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
         (Some(r), Some(a)) if kept => (a, largest_move(&r.world_from_scan), doubtful(&r.world_from_scan, a)),
         _ => (before, moved_m, doubtful(&first.world_from_scan, before)),
     };
+    // Whether a result's links disagree grossly ([`GROSS_VARIANCE_FACTOR`]),
+    // and the result so far's: in doubt as a named one is.
+    let gross = |r: &SetResult| r.variance_factor.is_some_and(|f| f > GROSS_VARIANCE_FACTOR);
+    let mut current_gross = if kept { second.as_ref().is_some_and(gross) } else { gross(&first) };
+    let disagreeing_links = current_gross;
     // (The pipe's restart kept: held by the starts along what its matches
     // find blind, the scans' agreement no evidence there.)
     let mut doubted = !(kept && pipe_first.is_some())
-        && (in_doubt(&current_named, current_doubtful) || !undecided.is_empty() || rescued);
+        && (in_doubt(&current_named, current_doubtful) || !undecided.is_empty() || rescued || current_gross);
     // The restart only repeated the schedule's long move ([`Restart::repeated`]):
     // the further restarts run until one lands there too or is kept.
     let repeated = trigger == Trigger::Moved
@@ -1426,9 +1456,13 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
                 // axis in graph mode, agreed 1.05× better than where the
                 // finest stage alone left them, within 29 mm of the truth
                 // and of their σ there).
+                // Its links disagreeing grossly, it gives way alike to a
+                // better agreement whose links do not.
+                let f_gross = gross(&f);
                 let rescue = (!current_named.is_empty() && a < best)
                     || (rescued && RESCUE_RATIO * a < best)
-                    || (only_held && a <= RESTART_RATIO * best);
+                    || (only_held && a <= RESTART_RATIO * best)
+                    || (current_gross && !f_gross && a < best);
                 let f_moved = largest_move(&f.world_from_scan);
                 let nearer = keeps_nearer_starts(current_doubtful, a, best, f_moved, current_moved);
                 let (f, named) = if impossible || rescue || nearer || best > RESTART_RATIO * a {
@@ -1462,7 +1496,8 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
                     current_named = report.untrusted.clone().unwrap_or_default();
                     only_held = f_only_held;
                     rescued = by_rescue;
-                    doubted = by_rescue || in_doubt(&current_named, current_doubtful);
+                    current_gross = f_gross;
+                    doubted = by_rescue || in_doubt(&current_named, current_doubtful) || current_gross;
                     (kept, undecided, alone) = (false, Vec::new(), Some(f));
                 } else if checking {
                     landed.push(Some((f.world_from_scan.clone(), away)));
@@ -1586,6 +1621,7 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
         untrusted: (Some(named), named_after),
         corroborated: !undecided.is_empty() && reached_again > 0 && !strayed,
         repeated,
+        disagreeing_links,
         undecided,
         unsupported: Vec::new(),
         further,
@@ -2106,6 +2142,7 @@ mod tests {
             undecided: vec![(2, 1.94, 0.03), (3, 1.93, 0.03)],
             corroborated,
             repeated: false,
+            disagreeing_links: false,
             unsupported: Vec::new(),
             further: Vec::new(),
             degeneracy_ratio: None,

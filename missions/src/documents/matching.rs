@@ -411,6 +411,14 @@ pub struct RestartReport {
     /// far), and one that lands apart with a better agreement leaves the
     /// scans `undecided` (docs/match.md; session 60).
     pub repeated: bool,
+    /// True when the result before the `further` restarts (the
+    /// schedule's, or the restart's where `kept`) has links that disagree
+    /// beyond a variance factor of 1,000 (`variance_factor`; right
+    /// registrations measured up to 470): the further restarts run,
+    /// and one the scans agree with better, however slightly, whose links
+    /// do not disagree so and that the verification names nothing of is
+    /// kept (session 74; docs/match.md). Added in session 74.
+    pub disagreeing_links: bool,
     /// The scans the result moved from their starts beyond the finest
     /// stage's reach (its `max_correspondence_m`), where the scans agree
     /// with the result not clearly better than with their starts (the
@@ -426,8 +434,9 @@ pub struct RestartReport {
     /// first after the pipe's restart, `degeneracy_ratio` —, …, the last
     /// with the finest stage alone), run in turn while the result is not
     /// to be trusted — the verification names scans of it, the restart
-    /// left some `undecided`, or its disagreement is no less than
-    /// `starts_disagreement_m2` — and the schedule has more than two
+    /// left some `undecided`, its disagreement is no less than
+    /// `starts_disagreement_m2`, or its links disagree grossly
+    /// (`disagreeing_links`) — and the schedule has more than two
     /// stages: a restart's second stage can drag scans as the schedule's
     /// first did. One kept replaces every registration before it; they go
     /// on while it is not to be trusted either. Last, when the result is

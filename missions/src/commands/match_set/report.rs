@@ -127,6 +127,7 @@ pub(super) fn report(
                 .collect(),
             corroborated: x.corroborated,
             repeated: x.repeated,
+            disagreeing_links: x.disagreeing_links,
             unsupported: x.unsupported.iter().map(|&(scan, moved_m)| UnsupportedReport { scan, moved_m }).collect(),
             further: x
                 .further

@@ -541,9 +541,17 @@ fn write_restart(out: &mut dyn Write, scans: &[InputScan], r: &RestartReport) ->
         writeln!(
             out,
             "  not to be trusted (scans named, or the scans agree no better than at their starts, {:.3e} m² a \
-             point{}):",
+             point{}{}):",
             r.starts_disagreement_m2.unwrap_or(f64::NAN),
-            if r.repeated { "; or the restart only repeated the schedule's long move" } else { "" }
+            if r.repeated { "; or the restart only repeated the schedule's long move" } else { "" },
+            if r.disagreeing_links {
+                format!(
+                    "; or its links disagree beyond a variance factor of {}",
+                    fusion::scanset::GROSS_VARIANCE_FACTOR
+                )
+            } else {
+                String::new()
+            }
         )?;
     }
     for (k, f) in r.further.iter().enumerate() {
@@ -786,6 +794,7 @@ mod tests {
             undecided: Vec::new(),
             corroborated: false,
             repeated: false,
+            disagreeing_links: false,
             unsupported: Vec::new(),
             further,
             degeneracy_ratio: ratio,
