@@ -1387,7 +1387,9 @@ fn restart_if_dragged<S: AsRef<[Point3<f32>]> + Sync>(
     // and the result so far's: in doubt as a named one is.
     let gross = |r: &SetResult| r.variance_factor.is_some_and(|f| f > GROSS_VARIANCE_FACTOR);
     let mut current_gross = if kept { second.as_ref().is_some_and(gross) } else { gross(&first) };
-    let disagreeing_links = current_gross;
+    // (Reported where it sets the further restarts off: not after the
+    // pipe's restart, kept.)
+    let disagreeing_links = current_gross && !(kept && pipe_first.is_some());
     // (The pipe's restart kept: held by the starts along what its matches
     // find blind, the scans' agreement no evidence there.)
     let mut doubted = !(kept && pipe_first.is_some())

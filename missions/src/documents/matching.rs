@@ -417,7 +417,7 @@ pub struct RestartReport {
     /// registrations measured up to 470): the further restarts run,
     /// and one the scans agree with better, however slightly, whose links
     /// do not disagree so and that the verification names nothing of is
-    /// kept (session 74; docs/match.md). Added in session 74.
+    /// kept (session 74; docs/match.md).
     pub disagreeing_links: bool,
     /// The scans the result moved from their starts beyond the finest
     /// stage's reach (its `max_correspondence_m`), where the scans agree
